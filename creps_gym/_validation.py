@@ -1,0 +1,98 @@
+"""Input checking shared by the optimisers and the environments (numpy only).
+
+Every check raises a ``TypeError`` or ``ValueError`` whose message names the argument, what was expected
+and what was received, so that bad input never turns into a silent NaN further down.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["as_float_array", "check_finite", "check_positive_int", "check_probability_like"]
+
+
+def _shape_text(shape: Sequence[int | None]) -> str:
+    return (
+        "(" + ", ".join("n" if d is None else str(d) for d in shape) + ("," if len(shape) == 1 else "") + ")"
+    )
+
+
+def as_float_array(
+    value: Any,
+    name: str,
+    shape: Sequence[int | None] | None = None,
+    *,
+    finite: bool = True,
+) -> NDArray[np.float64]:
+    """Convert ``value`` to a float64 array and check its shape and values.
+
+    Parameters
+    ----------
+    value : array_like
+        The user's input.
+    name : str
+        Argument name used in error messages.
+    shape : sequence of int or None, optional
+        Expected shape; ``None`` entries match any length.
+    finite : bool
+        Reject NaN and infinity.
+
+    Returns
+    -------
+    numpy.ndarray
+        A float64 array (a copy only when a conversion was needed).
+    """
+    if isinstance(value, (str, bytes)) or value is None:
+        raise TypeError(f"{name}: expected an array of real numbers, got {type(value).__name__}")
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(
+            f"{name}: expected an array of real numbers, got {type(value).__name__} ({exc})"
+        ) from None
+    if np.iscomplexobj(value):
+        raise TypeError(f"{name}: expected real numbers, got a complex array")
+    if shape is not None:
+        ok = array.ndim == len(shape) and all(
+            e is None or e == a for e, a in zip(shape, array.shape, strict=True)
+        )
+        if not ok:
+            raise ValueError(f"{name}: expected shape {_shape_text(shape)}, got {array.shape}")
+    if finite:
+        check_finite(array, name)
+    return array
+
+
+def check_finite(array: NDArray[np.float64], name: str) -> None:
+    """Raise ``ValueError`` naming the first non-finite entry of ``array``."""
+    if not np.isfinite(array).all():
+        bad = np.argwhere(~np.isfinite(array))[0]
+        where = tuple(int(i) for i in bad)
+        raise ValueError(
+            f"{name}: expected finite values, got {array[where] if where else array} at index {where}"
+        )
+
+
+def check_positive_int(value: Any, name: str, minimum: int = 1) -> int:
+    """Return ``value`` as an int, or raise if it is not an integer ``>= minimum``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name}: expected an integer >= {minimum}, got {type(value).__name__} {value!r}")
+    if value < minimum:
+        raise ValueError(f"{name}: expected an integer >= {minimum}, got {value}")
+    return int(value)
+
+
+def check_probability_like(value: Any, name: str, low: float, high: float, *, open_low: bool = True) -> float:
+    """Return ``value`` as a float inside ``(low, high]`` (or ``[low, high]``), else raise."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}: expected a real number, got {type(value).__name__} {value!r}")
+    number = float(value)
+    inside = (low < number if open_low else low <= number) and number <= high
+    if not np.isfinite(number) or not inside:
+        bracket = "(" if open_low else "["
+        raise ValueError(f"{name}: expected a value in {bracket}{low}, {high}], got {value!r}")
+    return number

@@ -1,0 +1,64 @@
+"""Ask/tell optimisers: CREPS and CREPS-CMA (plus adapters for pycma, nevergrad and optuna).
+
+Returns are maximised. Optimisers never see an environment: ``ask(contexts) -> params``,
+``tell(contexts, params, returns)``, ``recommend(contexts) -> params``.
+"""
+
+from creps_gym.optimizers.base import AskTellOptimizer, ContextualOptimizer, load_state, save_state
+from creps_gym.optimizers.creps import (
+    CREPS,
+    CREPSConfig,
+    solve_dual,
+    weighted_ml_fit,
+    weighted_sample_covariance,
+)
+from creps_gym.optimizers.creps_cma import (
+    CREPSCMA,
+    CREPSCMAConfig,
+    interpolation_factor,
+    regularised_covariance,
+)
+from creps_gym.optimizers.features import (
+    AffineFeatures,
+    BaselineFeatures,
+    FeatureMap,
+    QuadraticFeatures,
+    RBFFeatures,
+    make_features,
+    register_feature_map,
+)
+from creps_gym.optimizers.registry import (
+    describe_optimizers,
+    make_optimizer,
+    optimizer_names,
+    register_optimizer,
+    restore_optimizer,
+)
+
+__all__ = [
+    "CREPS",
+    "CREPSCMA",
+    "AffineFeatures",
+    "AskTellOptimizer",
+    "BaselineFeatures",
+    "CREPSCMAConfig",
+    "CREPSConfig",
+    "ContextualOptimizer",
+    "FeatureMap",
+    "QuadraticFeatures",
+    "RBFFeatures",
+    "describe_optimizers",
+    "interpolation_factor",
+    "load_state",
+    "make_features",
+    "make_optimizer",
+    "optimizer_names",
+    "register_feature_map",
+    "register_optimizer",
+    "regularised_covariance",
+    "restore_optimizer",
+    "save_state",
+    "solve_dual",
+    "weighted_ml_fit",
+    "weighted_sample_covariance",
+]

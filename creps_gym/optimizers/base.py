@@ -1,0 +1,277 @@
+"""The ask/tell protocol shared by every creps_gym optimiser and adapter.
+
+``ask(contexts (n, z)) -> params (n, p)``, ``tell(contexts, params, returns (n,))`` and
+``recommend(contexts) -> params``. Returns are **maximised**. Optimisers never see an environment.
+
+Protocol rules (enforced by :class:`ContextualOptimizer`, documented for users):
+
+* ``tell`` consumes the batch of the last ``ask``. Telling with no pending ask, or telling the same batch
+  twice, raises ``RuntimeError``.
+* By default every told row ``(context, params)`` must be a row that ``ask`` returned, bit for bit, in any
+  order, each at most once; at least two rows must be told (a subset is fine: a failed episode may be left
+  out). Rows the optimiser did not ask for are *external* samples: they are accepted only with
+  ``tell(..., allow_external=True)``, after the same shape and finiteness checks, much as pycma's ``tell``
+  accepts injected solutions. External rows are counted in the diagnostics.
+* A rejected call raises before anything changes, so the optimiser is left exactly as it was.
+
+Checkpoints are ``.npz`` files holding the arrays plus one JSON document (``__state__.json``), never
+pickle. A restored optimiser continues with bit-identical asks.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym._validation import as_float_array
+
+__all__ = [
+    "AskTellOptimizer",
+    "ContextualOptimizer",
+    "load_state",
+    "save_state",
+]
+
+Array = NDArray[np.float64]
+JSON_KEY = "__state__.json"
+
+
+@runtime_checkable
+class AskTellOptimizer(Protocol):
+    """What the runner needs from an optimiser. Returns are maximised."""
+
+    n_params: int
+    n_context_dims: int
+
+    def ask(self, contexts: Array) -> Array:
+        """Parameters (n, p) to evaluate under contexts (n, z)."""
+
+    def tell(self, contexts: Array, params: Array, returns: Array) -> None:
+        """Update from the evaluated batch."""
+
+    def recommend(self, contexts: Array) -> Array:
+        """The current best guess (the mean policy), shape (n, p)."""
+
+    @property
+    def diagnostics(self) -> Mapping[str, float]:
+        """Scalars describing the last update."""
+
+    def stop(self) -> dict[str, Any]:
+        """The optimiser's own stop criteria that are met (empty if it should go on)."""
+
+    def state_dict(self) -> dict[str, Any]:
+        """Arrays and JSON-serialisable values that restore the optimiser exactly."""
+
+
+def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
+    """Write a state dict atomically to ``path`` (``.npz``): arrays as entries, the rest as one JSON document.
+
+    The file is written to a temporary name in the same folder and renamed, so a crash never leaves a
+    half-written checkpoint behind.
+    """
+    path = Path(path)
+    arrays = {k: np.asarray(v) for k, v in state.items() if isinstance(v, np.ndarray)}
+    if JSON_KEY in arrays:
+        raise ValueError(f"state: the key {JSON_KEY!r} is reserved")
+    meta = {k: v for k, v in state.items() if not isinstance(v, np.ndarray)}
+    payload = json.dumps(meta, sort_keys=True, allow_nan=True).encode()
+    arrays[JSON_KEY] = np.frombuffer(payload, dtype=np.uint8)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            np.savez(stream, **arrays)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def load_state(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Read a state dict written by :func:`save_state` (never unpickles anything)."""
+    with np.load(Path(path), allow_pickle=False) as data:
+        if JSON_KEY not in data.files:
+            raise ValueError(f"path: expected a creps_gym checkpoint with a {JSON_KEY!r} entry, got {path}")
+        state: dict[str, Any] = json.loads(data[JSON_KEY].tobytes().decode())
+        state.update({k: data[k].copy() for k in data.files if k != JSON_KEY})
+    return state
+
+
+class ContextualOptimizer(ABC):
+    """Base class with the protocol bookkeeping; subclasses implement the maths.
+
+    Subclasses implement :meth:`_sample`, :meth:`_update`, :meth:`recommend`, :meth:`_state` and
+    :meth:`_from_state`, and set ``n_params`` and ``n_context_dims`` in ``__init__``.
+    """
+
+    kind: ClassVar[str] = "base"
+    n_params: int
+    n_context_dims: int
+
+    def __init__(self) -> None:
+        self._pending: tuple[Array, Array] | None = None
+        self._pending_index: dict[bytes, int] = {}
+        self._diagnostics: dict[str, float] = {}
+        self.iteration = 0
+        self.evaluations = 0
+
+    # -- protocol --------------------------------------------------------------------------------------
+    def ask(self, contexts: Any) -> Array:
+        """Sample parameters for each context.
+
+        Parameters
+        ----------
+        contexts : array_like, shape (n, z)
+
+        Returns
+        -------
+        ndarray, shape (n, p)
+        """
+        contexts = self._check_contexts(contexts, "contexts")
+        params = self._sample(contexts)
+        self._pending = (contexts.copy(), params.copy())
+        rows = np.concatenate([contexts, params], axis=1)
+        self._pending_index = {row.tobytes(): i for i, row in enumerate(rows)}
+        return params
+
+    def tell(self, contexts: Any, params: Any, returns: Any, *, allow_external: bool = False) -> None:
+        """Update the search distribution from an evaluated batch (returns are maximised).
+
+        Parameters
+        ----------
+        contexts : array_like, shape (n, z)
+        params : array_like, shape (n, p)
+        returns : array_like, shape (n,)
+        allow_external : bool
+            Accept rows that the last ``ask`` did not return (see the module docstring).
+
+        Raises
+        ------
+        RuntimeError
+            No pending ``ask`` (and ``allow_external`` is False), the batch was told already, or a row was
+            not asked.
+        ValueError, TypeError
+            Shapes, non-finite values, or fewer than two samples.
+        """
+        contexts = self._check_contexts(contexts, "contexts")
+        n = contexts.shape[0]
+        params = as_float_array(params, "params", (n, self.n_params))
+        returns = as_float_array(returns, "returns", (n,))
+        if n < 2:
+            raise ValueError(f"returns: expected at least 2 samples per tell, got {n}")
+        external = self._count_external(contexts, params, allow_external)
+        self._update(contexts, params, returns)
+        self._pending, self._pending_index = None, {}
+        self._diagnostics["external_samples"] = float(external)
+        self.iteration += 1
+        self.evaluations += n
+
+    @property
+    def diagnostics(self) -> dict[str, float]:
+        """Scalars describing the last update (empty before the first ``tell``)."""
+        return dict(self._diagnostics)
+
+    def stop(self) -> dict[str, Any]:
+        """Stop criteria that are met; empty while the optimiser should continue."""
+        return {}
+
+    @abstractmethod
+    def recommend(self, contexts: Any) -> Array:
+        """The mean policy's parameters for contexts (n, z): shape (n, p)."""
+
+    # -- checkpoints -------------------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to continue bit-identically: arrays plus JSON-serialisable values."""
+        state = self._state()
+        state.update(
+            kind=self.kind,
+            iteration=self.iteration,
+            evaluations=self.evaluations,
+            diagnostics=self._diagnostics,
+        )
+        if self._pending is not None:
+            state["pending_contexts"], state["pending_params"] = self._pending
+        return state
+
+    @classmethod
+    def from_state_dict(cls, state: Mapping[str, Any]) -> ContextualOptimizer:
+        """Rebuild an optimiser from :meth:`state_dict` output."""
+        if state.get("kind") != cls.kind:
+            raise ValueError(f"state: expected a {cls.kind!r} checkpoint, got {state.get('kind')!r}")
+        optimizer = cls._from_state(state)
+        optimizer.iteration = int(state["iteration"])
+        optimizer.evaluations = int(state["evaluations"])
+        optimizer._diagnostics = {k: float(v) for k, v in dict(state["diagnostics"]).items()}
+        if "pending_contexts" in state:
+            contexts, params = np.asarray(state["pending_contexts"]), np.asarray(state["pending_params"])
+            optimizer._pending = (contexts, params)
+            rows = np.concatenate([contexts, params], axis=1)
+            optimizer._pending_index = {row.tobytes(): i for i, row in enumerate(rows)}
+        return optimizer
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write a checkpoint (``.npz`` with an embedded JSON document) atomically."""
+        return save_state(self.state_dict(), path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> ContextualOptimizer:
+        """Restore an optimiser written by :meth:`save`."""
+        return cls.from_state_dict(load_state(path))
+
+    # -- subclass hooks ----------------------------------------------------------------------------------
+    @abstractmethod
+    def _sample(self, contexts: Array) -> Array: ...
+
+    @abstractmethod
+    def _update(self, contexts: Array, params: Array, returns: Array) -> None:
+        """Update the distribution; must validate everything before mutating state."""
+
+    @abstractmethod
+    def _state(self) -> dict[str, Any]: ...
+
+    @classmethod
+    @abstractmethod
+    def _from_state(cls, state: Mapping[str, Any]) -> ContextualOptimizer: ...
+
+    # -- helpers -----------------------------------------------------------------------------------------
+    def _check_contexts(self, contexts: Any, name: str) -> Array:
+        contexts = as_float_array(contexts, name, (None, self.n_context_dims))
+        if contexts.shape[0] < 1:
+            raise ValueError(f"{name}: expected at least one row, got shape {contexts.shape}")
+        return contexts
+
+    def _count_external(self, contexts: Array, params: Array, allow_external: bool) -> int:
+        """Check the told rows against the pending ask; return how many were not asked."""
+        if self._pending is None and not allow_external:
+            raise RuntimeError(
+                "tell() without a pending ask(): the last batch was told already or nothing was asked; "
+                "pass allow_external=True to tell samples generated elsewhere"
+            )
+        rows = np.concatenate([contexts, params], axis=1)
+        seen: set[int] = set()
+        external = 0
+        for k, row in enumerate(rows):
+            index = self._pending_index.get(row.tobytes())
+            if index is None:
+                if not allow_external:
+                    raise RuntimeError(
+                        f"tell(): row {k} (contexts[{k}], params[{k}]) was not returned by the last ask(); "
+                        "pass allow_external=True to tell external samples"
+                    )
+                external += 1
+            elif index in seen:
+                raise RuntimeError(f"tell(): row {k} repeats asked sample {index}; each sample is told once")
+            else:
+                seen.add(index)
+        return external

@@ -1,0 +1,344 @@
+"""Contextual Relative Entropy Policy Search (CREPS).
+
+Reference: A. Abdolmaleki, D. Simões, N. Lau, L. P. Reis, G. Neumann, "Contextual Direct Policy Search With
+Regularized Covariance Matrix Estimation", J. Intell. Robot. Syst. (2019), doi:10.1007/s10846-018-0968-4,
+Algorithm 2 with Σ = S; the places where the text is ambiguous are read as in ``shared/notes/algorithm.md``.
+
+One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N(Aᵀϕ(s), Σ):
+
+1. Weights (Eqs. 8–9): minimise the dual g(η, w) = ηε + φ̂ᵀw + η log((1/N) Σ_k exp((R_k − φ(s_k)ᵀw)/η)) over
+   η > 0 and w, with baseline features φ(s) = [s, s²]; then d_k ∝ exp((R_k − φ(s_k)ᵀw)/η), Σ_k d_k = 1.
+2. Mean (Eq. 7): A = (ΦᵀDΦ + ridge·I)⁻¹ΦᵀDU with mean features ϕ(s) (affine [1, s] by default).
+3. Covariance (Eq. 12): S = Σ_k d_k (θ_k − Aᵀϕ(s_k))(θ_k − Aᵀϕ(s_k))ᵀ / Z with Z = 1 − Σ_k d_k², and Σ = S.
+
+The dual is solved in :mod:`creps_gym.optimizers.dual`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg
+
+from creps_gym._validation import as_float_array, check_probability_like
+from creps_gym.optimizers.base import ContextualOptimizer
+from creps_gym.optimizers.dual import DualSolution, solve_dual
+from creps_gym.optimizers.features import FeatureMap, make_features
+
+__all__ = [
+    "CREPS",
+    "CREPSConfig",
+    "DualSolution",
+    "solve_dual",
+    "spd_factor",
+    "weighted_ml_fit",
+    "weighted_sample_covariance",
+]
+
+Array = NDArray[np.float64]
+
+
+def weighted_ml_fit(mean_features: Array, params: Array, weights: Array, ridge: float) -> Array:
+    """Weighted ridge maximum-likelihood fit of the mean coefficients, Eq. (7).
+
+    Parameters
+    ----------
+    mean_features : ndarray, shape (N, m)   ϕ(s_k)
+    params : ndarray, shape (N, p)          θ_k
+    weights : ndarray, shape (N,)           d_k, summing to one
+    ridge : float
+        Ridge relative to the mean diagonal of ΦᵀDΦ, so it does not depend on the feature scale.
+
+    Returns
+    -------
+    ndarray, shape (m, p)
+        A = (ΦᵀDΦ + λ_ridge I)⁻¹ ΦᵀDU.
+    """
+    weighted = mean_features.T * weights
+    gram = weighted @ mean_features
+    gram.flat[:: gram.shape[0] + 1] += ridge * max(gram.trace() / gram.shape[0], 1e-300)
+    return linalg.solve(gram, weighted @ params, assume_a="pos", check_finite=False)
+
+
+def weighted_sample_covariance(params: Array, means: Array, weights: Array) -> Array:
+    """Weighted sample covariance with the unbiased normaliser, Eqs. (12) and (15).
+
+    S = Σ_k d_k (θ_k − m_k)(θ_k − m_k)ᵀ / Z with Z = 1 − Σ_k d_k², for weights summing to one.
+
+    Parameters
+    ----------
+    params, means : ndarray, shape (N, p)
+    weights : ndarray, shape (N,)
+    """
+    deviations = params - means
+    normaliser = 1.0 - float(weights @ weights)
+    if normaliser <= 1e-12:
+        normaliser = 1.0  # a single effective sample: Z is undefined, fall back to plain ML
+    return (deviations.T * weights) @ deviations / normaliser
+
+
+def spd_factor(cov: Array, floor: float = 1e-14) -> tuple[Array, Array, bool]:
+    """Symmetrise ``cov`` and return (Σ, lower Cholesky factor, repaired).
+
+    If the Cholesky factorisation fails (Σ lost positive-definiteness to round-off, or a sample covariance
+    from fewer samples than dimensions is singular), eigenvalues are clipped to ``floor · max eigenvalue``
+    (and to at least 1e-300) and Σ is rebuilt; ``repaired`` is then True.
+    """
+    cov = 0.5 * (cov + cov.T)
+    try:
+        return cov, np.linalg.cholesky(cov), False
+    except np.linalg.LinAlgError:
+        values, vectors = np.linalg.eigh(cov)
+        values = np.maximum(values, max(floor * values.max(), 1e-300))
+        cov = (vectors * values) @ vectors.T
+        cov = 0.5 * (cov + cov.T)
+        return cov, np.linalg.cholesky(cov), True
+
+
+def _initial_coefficients(value: Any, features: FeatureMap, n_params: int) -> Array:
+    array = as_float_array(value, "initial_mean")
+    if array.ndim == 0:
+        return features.constant_coefficients(np.full(n_params, float(array)))
+    if array.shape == (n_params,):
+        return features.constant_coefficients(array)
+    if array.shape == (features.n_features, n_params):
+        return array.copy()
+    raise ValueError(
+        f"initial_mean: expected a scalar, shape ({n_params},) or ({features.n_features}, {n_params}), "
+        f"got shape {array.shape}"
+    )
+
+
+def _initial_covariance(value: Any, n_params: int) -> Array:
+    array = as_float_array(value, "initial_cov")
+    if array.ndim == 0:
+        array = np.full(n_params, float(array))
+    if array.shape == (n_params,):
+        if (array <= 0).any():
+            raise ValueError(f"initial_cov: expected variances > 0, got min {array.min()}")
+        return np.diag(array)
+    if array.shape != (n_params, n_params):
+        raise ValueError(
+            f"initial_cov: expected a scalar, shape ({n_params},) or ({n_params}, {n_params}), "
+            f"got {array.shape}"
+        )
+    if not np.allclose(array, array.T, rtol=1e-10, atol=0.0):
+        raise ValueError("initial_cov: expected a symmetric matrix, got an asymmetric one")
+    try:
+        np.linalg.cholesky(array)
+    except np.linalg.LinAlgError:
+        raise ValueError(
+            "initial_cov: expected a symmetric positive-definite matrix, got one that is not"
+        ) from None
+    return array.copy()
+
+
+@dataclass(frozen=True, eq=False)
+class CREPSConfig:
+    """Configuration of :class:`CREPS`; validates itself on construction.
+
+    Parameters
+    ----------
+    n_params : int              p, the dimension of θ.
+    n_context_dims : int        z, the dimension of s (0 for a non-contextual problem).
+    epsilon : float             KL bound ε of the dual, 0 < ε; must be < log N at each ``tell``.
+    initial_mean : scalar, (p,) or (k, p)   initial mean (constant over contexts) or full coefficients A.
+    initial_cov : scalar, (p,) or (p, p)    initial covariance Σ: variance, variances or SPD matrix.
+    mean_features : str, dict or FeatureMap ϕ(s) of the mean; ``"affine"`` = [1, s].
+    baseline_features : str, dict or FeatureMap   φ(s) of the dual's baseline; ``"baseline"`` = [s, s²].
+    ridge : float               relative ridge of Eq. (7), ≥ 0 (kept tiny; see the notes).
+    seed : int or None          seed of the sampling Generator.
+    min_std, max_condition : float   stop criteria: √λ_max(Σ) < min_std, or cond(Σ) > max_condition.
+    """
+
+    n_params: int
+    n_context_dims: int
+    epsilon: float = 0.5
+    initial_mean: Any = 0.0
+    initial_cov: Any = 1.0
+    mean_features: Any = "affine"
+    baseline_features: Any = "baseline"
+    ridge: float = 1e-8
+    seed: int | None = None
+    min_std: float = 1e-12
+    max_condition: float = 1e14
+    mean_map: FeatureMap = field(init=False, repr=False)
+    baseline_map: FeatureMap = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        for name, minimum in (("n_params", 1), ("n_context_dims", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+                raise ValueError(f"{name}: expected an integer >= {minimum}, got {value!r}")
+        check_probability_like(self.epsilon, "epsilon", 0.0, 50.0)
+        check_probability_like(self.ridge, "ridge", 0.0, 1.0, open_low=False)
+        check_probability_like(self.min_std, "min_std", 0.0, np.inf, open_low=False)
+        check_probability_like(self.max_condition, "max_condition", 1.0, np.inf)
+        if self.seed is not None and (
+            isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer))
+        ):
+            raise TypeError(f"seed: expected an int or None, got {type(self.seed).__name__}")
+        object.__setattr__(self, "mean_map", make_features(self.mean_features, self.n_context_dims))
+        object.__setattr__(self, "baseline_map", make_features(self.baseline_features, self.n_context_dims))
+        object.__setattr__(
+            self, "initial_mean", _initial_coefficients(self.initial_mean, self.mean_map, self.n_params)
+        )
+        object.__setattr__(self, "initial_cov", _initial_covariance(self.initial_cov, self.n_params))
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-serialisable scalars and feature specs (the initial arrays are saved separately)."""
+        skip = {
+            "initial_mean",
+            "initial_cov",
+            "mean_map",
+            "baseline_map",
+            "mean_features",
+            "baseline_features",
+        }
+        data = {f.name: getattr(self, f.name) for f in fields(self) if f.init and f.name not in skip}
+        data["mean_features"] = self.mean_map.spec()
+        data["baseline_features"] = self.baseline_map.spec()
+        return data
+
+
+class CREPS(ContextualOptimizer):
+    """Contextual REPS with the maximum-likelihood covariance Σ = S (Eq. 12).
+
+    ``CREPS(n_params, n_context_dims, **options)`` or ``CREPS.from_config(config)``; see
+    :class:`CREPSConfig` for the options and :mod:`creps_gym.optimizers.base` for the protocol.
+    """
+
+    kind: ClassVar[str] = "creps"
+    config_class: ClassVar[type[CREPSConfig]] = CREPSConfig
+
+    def __init__(self, n_params: int, n_context_dims: int, **options: Any) -> None:
+        self._init_from_config(self.config_class(n_params=n_params, n_context_dims=n_context_dims, **options))
+
+    @classmethod
+    def from_config(cls, config: CREPSConfig) -> CREPS:
+        """Build from a config instance."""
+        if not isinstance(config, cls.config_class):
+            raise TypeError(f"config: expected {cls.config_class.__name__}, got {type(config).__name__}")
+        optimizer = cls.__new__(cls)
+        optimizer._init_from_config(config)
+        return optimizer
+
+    def _init_from_config(self, config: CREPSConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.n_params, self.n_context_dims = config.n_params, config.n_context_dims
+        self.rng = np.random.default_rng(config.seed)
+        self.coefficients = config.initial_mean.copy()
+        self.cov, self._chol, _ = spd_factor(config.initial_cov)
+        self._eta, self._w = 1.0, np.zeros(config.baseline_map.n_features)
+
+    # -- the distribution --------------------------------------------------------------------------------
+    def mean(self, contexts: Array) -> Array:
+        """Policy mean Aᵀϕ(s) for validated contexts (n, z): shape (n, p)."""
+        return self.config.mean_map(contexts) @ self.coefficients
+
+    def recommend(self, contexts: Any) -> Array:
+        return self.mean(self._check_contexts(contexts, "contexts"))
+
+    def _sample(self, contexts: Array) -> Array:
+        noise = self.rng.standard_normal((contexts.shape[0], self.n_params))
+        return self.mean(contexts) + noise @ self._chol.T
+
+    def _covariance_update(self, params: Array, old_means: Array, new_means: Array, weights: Array) -> tuple:
+        """CREPS: Σ = S computed around the new mean (Eq. 12); returns (Σ, interpolation factor)."""
+        return weighted_sample_covariance(params, new_means, weights), 1.0
+
+    def _update(self, contexts: Array, params: Array, returns: Array) -> None:
+        n = returns.shape[0]
+        if self.config.epsilon >= np.log(n):
+            raise ValueError(
+                f"epsilon: expected < log(N) = {np.log(n):.4f} for a batch of N={n} samples, "
+                f"got {self.config.epsilon}"
+            )
+        dual = solve_dual(
+            returns, self.config.baseline_map(contexts), self.config.epsilon, self._eta
+        )  # Eqs. (8)-(9)
+        phi = self.config.mean_map(contexts)
+        old_means = phi @ self.coefficients
+        coefficients = weighted_ml_fit(phi, params, dual.weights, self.config.ridge)  # Eq. (7)
+        cov, interpolation = self._covariance_update(params, old_means, phi @ coefficients, dual.weights)
+        cov, chol, repaired = spd_factor(cov)
+        if not (np.isfinite(coefficients).all() and np.isfinite(chol).all()):
+            raise RuntimeError(
+                "tell(): the update produced non-finite values; the optimiser was left unchanged"
+            )
+        self.coefficients, self.cov, self._chol = coefficients, cov, chol
+        if np.isfinite(dual.eta):
+            self._eta, self._w = dual.eta, dual.w
+        self._diagnostics = self._describe(dual, returns, interpolation, repaired)
+
+    @property
+    def diagnostics(self) -> dict[str, float]:
+        """η (return units), KL, ESS, λ, log det Σ, cond Σ, √λ_max(Σ), mean return, ... of the last update.
+
+        The eigenvalue-based entries are computed on first access (an O(p³) step a plain ask/tell loop skips).
+        """
+        if self._diagnostics and "cond_cov" not in self._diagnostics:
+            eigenvalues = np.linalg.eigvalsh(self.cov)
+            self._diagnostics["cond_cov"] = float(eigenvalues[-1] / eigenvalues[0])
+            self._diagnostics["max_std"] = float(np.sqrt(eigenvalues[-1]))
+        return dict(self._diagnostics)
+
+    def _describe(self, dual: DualSolution, returns: Array, interpolation: float, repaired: bool) -> dict:
+        scale = float(np.ptp(returns)) * float(
+            np.std((returns - returns.max()) / max(np.ptp(returns), 1e-300))
+        )
+        return {
+            "eta": dual.eta * scale if np.isfinite(dual.eta) else np.inf,  # in return units
+            "kl": dual.kl,
+            "ess": 1.0 / float(dual.weights @ dual.weights),
+            "interpolation": float(interpolation),
+            "logdet_cov": 2.0 * float(np.log(np.diag(self._chol)).sum()),
+            "mean_return": float(returns.mean()),
+            "dual_iterations": float(dual.iterations),
+            "cov_repaired": float(repaired),
+        }
+
+    def stop(self) -> dict[str, Any]:
+        """``min_std`` and ``max_condition`` criteria that are met (empty before the first update)."""
+        met: dict[str, Any] = {}
+        diagnostics = self.diagnostics
+        if not diagnostics:
+            return met
+        if diagnostics["max_std"] < self.config.min_std:
+            met["min_std"] = diagnostics["max_std"]
+        if diagnostics["cond_cov"] > self.config.max_condition:
+            met["max_condition"] = diagnostics["cond_cov"]
+        return met
+
+    # -- checkpoints ---------------------------------------------------------------------------------------
+    def _state(self) -> dict[str, Any]:
+        return {
+            "config": self.config.to_json(),
+            "rng": self.rng.bit_generator.state,
+            "initial_mean": self.config.initial_mean,
+            "initial_cov": self.config.initial_cov,
+            "coefficients": self.coefficients,
+            "cov": self.cov,
+            "dual_w": self._w,
+            "dual_eta": self._eta,
+        }
+
+    @classmethod
+    def _from_state(cls, state: Mapping[str, Any]) -> CREPS:
+        options = dict(state["config"])
+        config = cls.config_class(
+            initial_mean=np.asarray(state["initial_mean"]),
+            initial_cov=np.asarray(state["initial_cov"]),
+            **options,
+        )
+        optimizer = cls.from_config(config)
+        optimizer.rng.bit_generator.state = state["rng"]
+        optimizer.coefficients = np.asarray(state["coefficients"], dtype=np.float64)
+        optimizer.cov, optimizer._chol, _ = spd_factor(np.asarray(state["cov"], dtype=np.float64))
+        optimizer._w, optimizer._eta = np.asarray(state["dual_w"], dtype=np.float64), float(state["dual_eta"])
+        return optimizer

@@ -1,0 +1,93 @@
+"""CREPS with Covariance Matrix Adaptation (CREPS-CMA), old-mean and current-mean variants.
+
+Reference: A. Abdolmaleki, D. Simões, N. Lau, L. P. Reis, G. Neumann, "Contextual Direct Policy Search With
+Regularized Covariance Matrix Estimation", J. Intell. Robot. Syst. (2019), doi:10.1007/s10846-018-0968-4,
+sections 3.2.2 and 4, read as in ``shared/notes/algorithm.md``.
+
+The weights and the mean are those of CREPS (:mod:`creps_gym.optimizers.creps`). The covariance is a convex
+combination of the old covariance and the weighted sample covariance, CMA-ES's rank-μ update:
+
+    Σ = (1 − λ)·Σ_old + λ·S,     λ = min(1, φ_eff / n²),     φ_eff = 1 / Σ_k d_k²
+
+where n = dim θ. ``variant="old"`` (CREPS-CMA_Old, the default and the paper's recommendation) computes S
+around the *old* mean, the coefficients that generated the samples, so Σ learns the successful steps;
+``variant="current"`` (CREPS-CMA_Curr) computes S around the new mean. CREPS is the special case λ = 1 with
+the new mean. λ multiplies S as in Eqs. (13) and (16) (not Algorithm 2's last line): section 4 derives exactly
+this form with λ = 1/(1 + γ), and γ = 0, plain maximum likelihood, gives CREPS.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym.optimizers.creps import CREPS, CREPSConfig, weighted_sample_covariance
+
+__all__ = ["CREPSCMA", "CREPSCMAConfig", "interpolation_factor", "regularised_covariance"]
+
+Array = NDArray[np.float64]
+VARIANTS = ("old", "current")
+
+
+def interpolation_factor(weights: Array, n_params: int) -> float:
+    """λ = min(1, φ_eff / n²) with φ_eff = 1 / Σ_k d_k², Eq. (14).
+
+    Parameters
+    ----------
+    weights : ndarray, shape (N,)
+        Normalised sample weights d_k.
+    n_params : int
+        n = dim θ.
+    """
+    effective_samples = 1.0 / float(weights @ weights)
+    return min(1.0, effective_samples / n_params**2)
+
+
+def regularised_covariance(old_cov: Array, sample_cov: Array, interpolation: float) -> Array:
+    """Σ = (1 − λ)·Σ_old + λ·S, Eqs. (13) and (16).
+
+    Parameters
+    ----------
+    old_cov, sample_cov : ndarray, shape (p, p)
+    interpolation : float
+        λ in [0, 1].
+    """
+    return (1.0 - interpolation) * old_cov + interpolation * sample_cov
+
+
+@dataclass(frozen=True, eq=False)
+class CREPSCMAConfig(CREPSConfig):
+    """:class:`~creps_gym.optimizers.creps.CREPSConfig` plus ``variant``, ``"old"`` (default) or ``"current"``.
+
+    See :class:`~creps_gym.optimizers.creps.CREPSConfig` for the other fields.
+    """
+
+    variant: str = "old"
+
+    def __post_init__(self) -> None:
+        if self.variant not in VARIANTS:
+            raise ValueError(f"variant: expected one of {VARIANTS}, got {self.variant!r}")
+        super().__post_init__()
+
+
+class CREPSCMA(CREPS):
+    """CREPS-CMA: CREPS weights and mean with the regularised covariance update.
+
+    ``CREPSCMA(n_params, n_context_dims, variant="old", **options)``; see :class:`CREPSCMAConfig`.
+    """
+
+    kind: ClassVar[str] = "creps-cma"
+    config_class: ClassVar[type[CREPSConfig]] = CREPSCMAConfig
+    config: CREPSCMAConfig
+
+    def __init__(self, n_params: int, n_context_dims: int, variant: str = "old", **options: Any) -> None:
+        super().__init__(n_params, n_context_dims, variant=variant, **options)
+
+    def _covariance_update(self, params: Array, old_means: Array, new_means: Array, weights: Array) -> tuple:
+        centre = old_means if self.config.variant == "old" else new_means
+        sample_cov = weighted_sample_covariance(params, centre, weights)  # Eq. (15) old / Eq. (12) current
+        interpolation = interpolation_factor(weights, self.n_params)  # Eq. (14)
+        return regularised_covariance(self.cov, sample_cov, interpolation), interpolation  # Eq. (16) / (13)

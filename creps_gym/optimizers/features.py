@@ -1,0 +1,207 @@
+"""Context feature maps for contextual policy search.
+
+Two kinds of features appear in CREPS (Abdolmaleki et al., 2019, section 3):
+
+* the *mean features* ϕ(s) of the linear-Gaussian policy π(θ|s) = N(Aᵀϕ(s), Σ), affine ``[1, s]`` by
+  default (:class:`AffineFeatures`), with quadratic (:class:`QuadraticFeatures`) and normalised radial basis
+  functions (:class:`RBFFeatures`) also available;
+* the *baseline features* φ(s) = [s, s²] of the dual (:class:`BaselineFeatures`), element-wise squares and
+  no constant, because the dual depends on φ only through φ − φ̂.
+
+Every feature map is a small frozen object with ``__call__(contexts (n, z)) -> (n, k)``, ``n_features`` and a
+JSON-serialisable ``spec()``; :func:`make_features` rebuilds one from its spec, so optimiser checkpoints stay
+free of pickle. Users add their own map with :func:`register_feature_map`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "AffineFeatures",
+    "BaselineFeatures",
+    "FeatureMap",
+    "QuadraticFeatures",
+    "RBFFeatures",
+    "make_features",
+    "register_feature_map",
+]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class FeatureMap:
+    """Base class: a deterministic map from contexts (n, z) to features (n, k)."""
+
+    context_dim: int
+    name: ClassVar[str] = "base"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.context_dim, bool) or not isinstance(self.context_dim, (int, np.integer)):
+            raise TypeError(f"context_dim: expected an int >= 0, got {type(self.context_dim).__name__}")
+        if self.context_dim < 0:
+            raise ValueError(f"context_dim: expected an int >= 0, got {self.context_dim}")
+
+    @property
+    def n_features(self) -> int:
+        """Number of features k."""
+        raise NotImplementedError
+
+    def __call__(self, contexts: Array) -> Array:
+        raise NotImplementedError
+
+    def constant_coefficients(self, mean: Array) -> Array:
+        """Coefficients A (k, p) whose policy mean Aᵀϕ(s) equals ``mean`` (p,) for every context."""
+        coefficients = np.zeros((self.n_features, mean.shape[0]))
+        coefficients[0] = mean  # affine-type maps put the constant feature first
+        return coefficients
+
+    def spec(self) -> dict[str, Any]:
+        """JSON-serialisable description, inverse of :func:`make_features`."""
+        return {"name": self.name, "context_dim": int(self.context_dim)}
+
+
+@dataclass(frozen=True)
+class AffineFeatures(FeatureMap):
+    """ϕ(s) = [1, s]: a policy mean linear in the context (the paper's default)."""
+
+    name: ClassVar[str] = "affine"
+
+    @property
+    def n_features(self) -> int:
+        return 1 + self.context_dim
+
+    def __call__(self, contexts: Array) -> Array:
+        return np.concatenate([np.ones((contexts.shape[0], 1)), contexts], axis=1)
+
+
+@dataclass(frozen=True)
+class QuadraticFeatures(FeatureMap):
+    """ϕ(s) = [1, s, s²] with element-wise squares (no cross terms)."""
+
+    name: ClassVar[str] = "quadratic"
+
+    @property
+    def n_features(self) -> int:
+        return 1 + 2 * self.context_dim
+
+    def __call__(self, contexts: Array) -> Array:
+        return np.concatenate([np.ones((contexts.shape[0], 1)), contexts, contexts**2], axis=1)
+
+
+@dataclass(frozen=True)
+class BaselineFeatures(FeatureMap):
+    """φ(s) = [s, s²] for the dual's context baseline V(s) = φ(s)ᵀw (paper footnote 2; no constant)."""
+
+    name: ClassVar[str] = "baseline"
+
+    @property
+    def n_features(self) -> int:
+        return 2 * self.context_dim
+
+    def __call__(self, contexts: Array) -> Array:
+        return np.concatenate([contexts, contexts**2], axis=1)
+
+
+@dataclass(frozen=True)
+class RBFFeatures(FeatureMap):
+    """Normalised Gaussian radial basis functions: ϕ_i(s) = exp(−|s − c_i|²/(2h²)) / Σ_j exp(·).
+
+    Parameters
+    ----------
+    context_dim : int
+    centres : array_like, shape (k, z)
+        Centres c_i, for example a grid over the context box (see :meth:`grid`).
+    bandwidth : float
+        Width h > 0, in context units.
+    """
+
+    centres: Any = field(default=None)
+    bandwidth: float = 1.0
+    name: ClassVar[str] = "rbf"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        centres = np.asarray(self.centres, dtype=np.float64)
+        if centres.ndim != 2 or centres.shape[1] != self.context_dim or centres.shape[0] < 1:
+            raise ValueError(
+                f"centres: expected shape (k, {self.context_dim}) with k >= 1, got {np.shape(self.centres)}"
+            )
+        if not np.isfinite(centres).all():
+            raise ValueError("centres: expected finite values, got NaN or inf")
+        if not (
+            isinstance(self.bandwidth, (int, float)) and np.isfinite(self.bandwidth) and self.bandwidth > 0
+        ):
+            raise ValueError(f"bandwidth: expected a finite number > 0, got {self.bandwidth!r}")
+        centres.setflags(write=False)
+        object.__setattr__(self, "centres", centres)
+
+    @classmethod
+    def grid(cls, low: Any, high: Any, per_dim: int, bandwidth: float | None = None) -> RBFFeatures:
+        """Centres on a regular grid of ``per_dim`` points per context dimension over [low, high]."""
+        low, high = np.atleast_1d(np.asarray(low, float)), np.atleast_1d(np.asarray(high, float))
+        axes = [np.linspace(lo, hi, per_dim) for lo, hi in zip(low, high, strict=True)]
+        centres = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
+        if bandwidth is None:
+            bandwidth = float(np.max(high - low)) / max(per_dim - 1, 1)
+        return cls(context_dim=low.shape[0], centres=centres, bandwidth=float(bandwidth))
+
+    @property
+    def n_features(self) -> int:
+        return int(self.centres.shape[0])
+
+    def __call__(self, contexts: Array) -> Array:
+        sq_dist = ((contexts[:, None, :] - self.centres[None, :, :]) ** 2).sum(axis=2)
+        logits = -sq_dist / (2.0 * self.bandwidth**2)
+        logits -= logits.max(axis=1, keepdims=True)  # safe normalisation far from every centre
+        activations = np.exp(logits)
+        return activations / activations.sum(axis=1, keepdims=True)
+
+    def constant_coefficients(self, mean: Array) -> Array:
+        # Normalised RBFs sum to one, so equal rows give a constant mean.
+        return np.tile(mean, (self.n_features, 1))
+
+    def spec(self) -> dict[str, Any]:
+        return {**super().spec(), "centres": self.centres.tolist(), "bandwidth": float(self.bandwidth)}
+
+
+_REGISTRY: dict[str, type[FeatureMap]] = {
+    cls.name: cls for cls in (AffineFeatures, QuadraticFeatures, BaselineFeatures, RBFFeatures)
+}
+
+
+def register_feature_map(cls: type[FeatureMap]) -> type[FeatureMap]:
+    """Register a user :class:`FeatureMap` subclass (by its ``name``) so checkpoints can rebuild it."""
+    if not (isinstance(cls, type) and issubclass(cls, FeatureMap)):
+        raise TypeError(f"cls: expected a FeatureMap subclass, got {cls!r}")
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def make_features(spec: str | dict[str, Any] | FeatureMap, context_dim: int) -> FeatureMap:
+    """Build a feature map from a name (``"affine"``, ``"quadratic"``, ``"baseline"``), a spec dict or a map.
+
+    Raises
+    ------
+    ValueError
+        Unknown name, or a map whose ``context_dim`` differs from ``context_dim``.
+    """
+    if isinstance(spec, FeatureMap):
+        feature_map = spec
+    else:
+        kwargs = {"name": spec} if isinstance(spec, str) else dict(spec)
+        name = kwargs.pop("name", None)
+        if name not in _REGISTRY:
+            raise ValueError(f"features: expected one of {sorted(_REGISTRY)}, got {name!r}")
+        kwargs.setdefault("context_dim", context_dim)
+        feature_map = _REGISTRY[name](**kwargs)
+    if feature_map.context_dim != context_dim:
+        raise ValueError(
+            f"features: expected a map for context_dim={context_dim}, got one for {feature_map.context_dim}"
+        )
+    return feature_map

@@ -1,0 +1,171 @@
+"""The optimiser registry: every ask/tell optimiser the runner and the CLI know by name.
+
+Each entry has a one-line description, a factory with the common signature
+``factory(n_params, n_context_dims, seed, initial_mean, initial_cov, **options)`` and the class whose
+``from_state_dict`` restores a checkpoint. Classes are imported only when an entry is used, so listing the
+registry never imports an optional library. Users add their own with :func:`register_optimizer`.
+
+==================== =====================================================================================
+name                 optimiser
+==================== =====================================================================================
+``creps``            :class:`~creps_gym.optimizers.creps.CREPS`
+``creps-cma-old``    :class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``variant="old"``
+``creps-cma-current``:class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``variant="current"``
+``cma``              :class:`~creps_gym.optimizers.adapters.pycma.CMAAdapter`
+``nevergrad``        :class:`~creps_gym.optimizers.adapters.nevergrad.NevergradAdapter`
+``optuna``           :class:`~creps_gym.optimizers.adapters.optuna.OptunaAdapter`
+==================== =====================================================================================
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = [
+    "OptimizerEntry",
+    "describe_optimizers",
+    "make_optimizer",
+    "optimizer_class",
+    "optimizer_names",
+    "register_optimizer",
+    "restore_optimizer",
+]
+
+
+@dataclass(frozen=True)
+class OptimizerEntry:
+    """One registered optimiser.
+
+    Parameters
+    ----------
+    name : str
+        Registry name (what ``creps-gym run --optimizer`` takes).
+    description : str
+        One line shown by ``creps-gym list``.
+    target : str
+        ``"module:Class"`` of the optimiser class (imported lazily); it must take
+        ``(n_params, n_context_dims, *, initial_mean, initial_cov, seed, **options)`` and provide
+        ``from_state_dict``.
+    fixed : dict
+        Keyword arguments always passed (e.g. ``{"variant": "old"}``).
+    """
+
+    name: str
+    description: str
+    target: str
+    fixed: Mapping[str, Any] = field(default_factory=dict)
+
+    def load_class(self) -> Any:
+        """Import and return the optimiser class."""
+        module, _, attribute = self.target.partition(":")
+        return getattr(importlib.import_module(module), attribute)
+
+
+_REGISTRY: dict[str, OptimizerEntry] = {}
+
+
+def register_optimizer(
+    name: str, description: str, target: str, fixed: Mapping[str, Any] | None = None, *, replace: bool = False
+) -> OptimizerEntry:
+    """Add an optimiser to the registry (see :class:`OptimizerEntry` for the arguments).
+
+    Raises
+    ------
+    ValueError
+        ``name`` is taken (and ``replace`` is False) or ``target`` is not ``"module:Class"``.
+    """
+    if not isinstance(name, str) or not name:
+        raise TypeError(f"name: expected a non-empty str, got {name!r}")
+    if name in _REGISTRY and not replace:
+        raise ValueError(f"name: expected a name not yet registered, got {name!r} (pass replace=True)")
+    if not isinstance(target, str) or target.count(":") != 1:
+        raise ValueError(f"target: expected 'module:Class', got {target!r}")
+    entry = OptimizerEntry(name, description, target, dict(fixed or {}))
+    _REGISTRY[name] = entry
+    return entry
+
+
+def optimizer_names() -> list[str]:
+    """Registered optimiser names, in registration order."""
+    return list(_REGISTRY)
+
+
+def describe_optimizers() -> dict[str, str]:
+    """Name -> one-line description of every registered optimiser."""
+    return {name: entry.description for name, entry in _REGISTRY.items()}
+
+
+def _entry(name: str) -> OptimizerEntry:
+    if name not in _REGISTRY:
+        raise ValueError(f"optimizer: expected one of {optimizer_names()}, got {name!r}")
+    return _REGISTRY[name]
+
+
+def optimizer_class(name: str) -> Any:
+    """The class behind a registered name (imports it)."""
+    return _entry(name).load_class()
+
+
+def make_optimizer(
+    name: str,
+    n_params: int,
+    n_context_dims: int,
+    seed: int | None,
+    initial_mean: Any = 0.0,
+    initial_cov: Any = 1.0,
+    **options: Any,
+) -> Any:
+    """Build a registered optimiser.
+
+    Parameters
+    ----------
+    name : str
+        A name from :func:`optimizer_names`.
+    n_params, n_context_dims : int
+        Dimensions p of θ and z of the context.
+    seed : int or None
+        Seed of the optimiser's random stream.
+    initial_mean : float or array_like, shape (p,)
+        Initial mean (CREPS variants also accept coefficients (k, p)).
+    initial_cov : float or array_like, shape (p,) or (p, p)
+        Initial covariance (adapters accept only diagonal ones).
+    **options
+        Optimiser-specific keyword arguments (see each class).
+
+    Returns
+    -------
+    AskTellOptimizer
+    """
+    entry = _entry(name)
+    cls = entry.load_class()
+    clash = sorted(set(options) & set(entry.fixed))
+    if clash:
+        raise ValueError(f"options: expected no option fixed by {name!r} ({dict(entry.fixed)}), got {clash}")
+    kwargs = {"initial_mean": initial_mean, "initial_cov": initial_cov, "seed": seed}
+    return cls(n_params, n_context_dims, **kwargs, **entry.fixed, **options)
+
+
+def restore_optimizer(name: str, state: Mapping[str, Any]) -> Any:
+    """Rebuild a registered optimiser from its ``state_dict()``."""
+    return optimizer_class(name).from_state_dict(state)
+
+
+_DEFAULTS = (
+    ("creps", "Contextual REPS: KL-bounded weights, weighted ML mean and covariance (premature convergence)",
+     "creps_gym.optimizers.creps:CREPS", {}),
+    ("creps-cma-old", "CREPS-CMA, old-mean variant: rank-mu covariance around the sampling mean (Eq. 16)",
+     "creps_gym.optimizers.creps_cma:CREPSCMA", {"variant": "old"}),
+    ("creps-cma-current", "CREPS-CMA, current-mean variant: rank-mu covariance around the new mean (Eq. 13)",
+     "creps_gym.optimizers.creps_cma:CREPSCMA", {"variant": "current"}),
+    ("cma", "pycma CMA-ES (non-contextual: ignores the context; extra 'adapters')",
+     "creps_gym.optimizers.adapters.pycma:CMAAdapter", {}),
+    ("nevergrad", "nevergrad optimiser, TwoPointsDE by default (non-contextual; extra 'adapters')",
+     "creps_gym.optimizers.adapters.nevergrad:NevergradAdapter", {}),
+    ("optuna", "optuna TPE sampler, ask-and-tell (non-contextual; extra 'adapters')",
+     "creps_gym.optimizers.adapters.optuna:OptunaAdapter", {}),
+)  # fmt: skip
+for _name, _description, _target, _fixed in _DEFAULTS:
+    register_optimizer(_name, _description, _target, _fixed)

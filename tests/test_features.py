@@ -1,0 +1,85 @@
+"""Feature maps: values, shapes, specs and errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from creps_gym.optimizers import (
+    AffineFeatures,
+    BaselineFeatures,
+    FeatureMap,
+    QuadraticFeatures,
+    RBFFeatures,
+    make_features,
+    register_feature_map,
+)
+
+CONTEXTS = np.array([[1.0, 2.0], [-0.5, 3.0]])
+
+
+def test_affine_quadratic_and_baseline_values():
+    np.testing.assert_array_equal(AffineFeatures(2)(CONTEXTS), [[1, 1, 2], [1, -0.5, 3]])
+    np.testing.assert_array_equal(QuadraticFeatures(2)(CONTEXTS), [[1, 1, 2, 1, 4], [1, -0.5, 3, 0.25, 9]])
+    np.testing.assert_array_equal(BaselineFeatures(2)(CONTEXTS), [[1, 2, 1, 4], [-0.5, 3, 0.25, 9]])
+
+
+def test_rbf_features_are_normalised_and_peak_at_their_centre():
+    rbf = RBFFeatures.grid([0.0, 0.0], [3.0, 3.0], per_dim=3)
+    assert rbf.n_features == 9
+    values = rbf(np.array([[1.5, 1.5], [100.0, -100.0]]))  # far away: still finite and normalised
+    np.testing.assert_allclose(values.sum(axis=1), 1.0)
+    assert np.argmax(values[0]) == 4  # the grid's centre point (1.5, 1.5)
+    expected = np.exp(-((rbf.centres - 1.5) ** 2).sum(1) / (2 * 1.5**2))
+    np.testing.assert_allclose(values[0], expected / expected.sum())
+
+
+@pytest.mark.parametrize(
+    "feature_map", [AffineFeatures(2), QuadraticFeatures(2), RBFFeatures.grid([0, 0], [1, 1], 2)]
+)
+def test_spec_round_trips_through_json(feature_map):
+    rebuilt = make_features(json.loads(json.dumps(feature_map.spec())), 2)
+    np.testing.assert_array_equal(rebuilt(CONTEXTS), feature_map(CONTEXTS))
+
+
+def test_constant_coefficients_give_a_constant_mean():
+    for feature_map in (AffineFeatures(2), QuadraticFeatures(2), RBFFeatures.grid([0, 0], [3, 3], 3)):
+        coefficients = feature_map.constant_coefficients(np.array([1.0, -2.0]))
+        np.testing.assert_allclose(feature_map(CONTEXTS) @ coefficients, [[1, -2], [1, -2]])
+
+
+def test_user_feature_maps_can_be_registered():
+    class Cubic(FeatureMap):
+        name = "cubic-test"
+
+        @property
+        def n_features(self):
+            return 1 + self.context_dim
+
+        def __call__(self, contexts):
+            return np.column_stack([np.ones(len(contexts)), contexts**3])
+
+    register_feature_map(Cubic)
+    np.testing.assert_array_equal(make_features("cubic-test", 2)(CONTEXTS)[0], [1, 1, 8])
+    with pytest.raises(TypeError, match="expected a FeatureMap subclass"):
+        register_feature_map(dict)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: make_features("nope", 1), "features: expected one of .*got 'nope'"),
+        (lambda: make_features(AffineFeatures(3), 1), "expected a map for context_dim=1, got one for 3"),
+        (lambda: RBFFeatures(2, centres=np.zeros((3, 1))), r"centres: expected shape \(k, 2\)"),
+        (
+            lambda: RBFFeatures(1, centres=[[0.0]], bandwidth=0.0),
+            "bandwidth: expected a finite number > 0, got 0.0",
+        ),
+        (lambda: AffineFeatures(-1), "context_dim: expected an int >= 0, got -1"),
+    ],
+)
+def test_feature_errors(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()

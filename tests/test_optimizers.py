@@ -1,0 +1,368 @@
+"""CREPS and CREPS-CMA: convergence, the paper's qualitative claims, determinism, checkpoints, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from creps_gym.optimizers import CREPS, CREPSCMA, RBFFeatures, interpolation_factor, regularised_covariance
+from creps_gym.optimizers.creps import spd_factor, weighted_ml_fit, weighted_sample_covariance
+
+OPTIMIZERS = {
+    "creps": lambda **kw: CREPS(**kw),
+    "creps-cma-old": lambda **kw: CREPSCMA(variant="old", **kw),
+    "creps-cma-current": lambda **kw: CREPSCMA(variant="current", **kw),
+}
+
+
+class ContextualSphere:
+    """The paper's construction x = θ + A·s on the sphere; θ*(s) = −A·s and the regret is |x|²."""
+
+    def __init__(self, dim: int, context_dim: int, seed: int = 0) -> None:
+        self.matrix = np.random.default_rng(seed).uniform(-1, 1, (dim, context_dim))
+        self.dim, self.context_dim = dim, context_dim
+
+    def contexts(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        return rng.uniform(0, 3, (n, self.context_dim))
+
+    def regret(self, contexts: np.ndarray, params: np.ndarray) -> np.ndarray:
+        return ((params + contexts @ self.matrix.T) ** 2).sum(axis=1)
+
+
+def learn(name: str, problem: ContextualSphere, iterations: int, samples: int, seed: int = 0) -> float:
+    rng = np.random.default_rng(seed + 100)
+    optimizer = OPTIMIZERS[name](
+        n_params=problem.dim, n_context_dims=problem.context_dim, initial_mean=3.0, initial_cov=4.0, seed=seed
+    )
+    for _ in range(iterations):
+        contexts = problem.contexts(rng, samples)
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -problem.regret(contexts, params))
+    test = problem.contexts(np.random.default_rng(7), 50)
+    return float(problem.regret(test, optimizer.recommend(test)).mean())
+
+
+def test_creps_cma_old_solves_a_contextual_sphere_and_creps_stalls():
+    problem = ContextualSphere(dim=6, context_dim=2)
+    assert learn("creps-cma-old", problem, iterations=350, samples=40) < 1e-5
+    assert learn("creps", problem, iterations=350, samples=40) > 1e-2  # premature convergence (paper, Fig. 1)
+
+
+def test_current_mean_variant_also_converges_on_the_sphere():
+    assert (
+        learn("creps-cma-current", ContextualSphere(dim=6, context_dim=2), iterations=350, samples=40) < 1e-5
+    )
+
+
+@pytest.mark.parametrize("name", sorted(OPTIMIZERS))
+def test_same_seed_gives_bit_identical_runs(name):
+    problem = ContextualSphere(dim=5, context_dim=1)
+    assert learn(name, problem, 30, 20, seed=3) == learn(name, problem, 30, 20, seed=3)
+    assert learn(name, problem, 30, 20, seed=3) != learn(name, problem, 30, 20, seed=4)
+
+
+@pytest.mark.parametrize("name", sorted(OPTIMIZERS))
+@pytest.mark.parametrize("pending", [False, True])
+def test_checkpoint_round_trip_continues_bit_identically(name, pending, tmp_path):
+    problem = ContextualSphere(dim=5, context_dim=2)
+    rng = np.random.default_rng(0)
+    original = OPTIMIZERS[name](n_params=5, n_context_dims=2, initial_mean=1.0, initial_cov=2.0, seed=9)
+    for _ in range(12):
+        contexts = problem.contexts(rng, 20)
+        params = original.ask(contexts)
+        original.tell(contexts, params, -problem.regret(contexts, params))
+    contexts = problem.contexts(rng, 20)
+    asked = original.ask(contexts) if pending else None
+    original.save(tmp_path / "opt.npz")
+    restored = type(original).load(tmp_path / "opt.npz")
+    assert restored.diagnostics == original.diagnostics
+    assert restored.iteration == original.iteration == 12
+    if pending:  # the pending batch can be told to the restored optimiser
+        for optimizer in (original, restored):
+            optimizer.tell(contexts, asked, -problem.regret(contexts, asked))
+    for _ in range(3):
+        contexts = problem.contexts(rng, 20)
+        a, b = original.ask(contexts), restored.ask(contexts)
+        np.testing.assert_array_equal(a, b)
+        original.tell(contexts, a, -problem.regret(contexts, a))
+        restored.tell(contexts, b, -problem.regret(contexts, b))
+    np.testing.assert_array_equal(original.cov, restored.cov)
+
+
+def test_checkpoint_keeps_rbf_features_and_variant(tmp_path):
+    features = RBFFeatures.grid([0.0], [3.0], per_dim=4)
+    optimizer = CREPSCMA(3, 1, variant="current", mean_features=features, seed=1)
+    optimizer.save(tmp_path / "rbf.npz")
+    restored = CREPSCMA.load(tmp_path / "rbf.npz")
+    assert restored.config.variant == "current"
+    np.testing.assert_array_equal(restored.config.mean_map.centres, features.centres)
+    with pytest.raises(ValueError, match="expected a 'creps' checkpoint, got 'creps-cma'"):
+        CREPS.load(tmp_path / "rbf.npz")
+
+
+def test_interpolation_factor_and_regularised_covariance_follow_eq_13_14():
+    weights = np.full(50, 1 / 50)
+    assert interpolation_factor(weights, 15) == pytest.approx(50 / 225)
+    assert interpolation_factor(weights, 5) == 1.0  # min(1, φ_eff/n²)
+    old, sample = np.eye(2), np.diag([4.0, 0.0])
+    np.testing.assert_allclose(regularised_covariance(old, sample, 0.25), np.diag([1.75, 0.75]))
+
+
+@pytest.mark.parametrize("variant", ["old", "current"])
+def test_sample_covariance_is_centred_on_the_old_or_the_new_mean(variant):
+    """Equal returns give exactly uniform weights; then Eqs. (12)-(16) can be checked by hand."""
+    rng = np.random.default_rng(0)
+    n_params, n = 25, 400
+    initial_mean = rng.normal(size=n_params)
+    optimizer = CREPSCMA(n_params, 1, variant=variant, initial_mean=initial_mean, initial_cov=0.5, seed=0)
+    contexts = rng.uniform(0, 1, (n, 1))
+    params = optimizer.ask(contexts)
+    old_cov = optimizer.cov.copy()
+    optimizer.tell(contexts, params, np.full(n, 3.0))
+    if variant == "old":
+        centre = initial_mean
+    else:
+        phi = np.column_stack([np.ones(n), contexts])
+        centre = phi @ np.linalg.lstsq(phi, params, rcond=None)[0]
+    deviations = params - centre
+    expected_s = deviations.T @ deviations / n / (1 - 1 / n)  # Z = 1 - Σ d² with d = 1/N
+    lam = n / n_params**2  # φ_eff = N for uniform weights
+    assert optimizer.diagnostics["interpolation"] == pytest.approx(lam, rel=1e-12)
+    np.testing.assert_allclose(optimizer.cov, (1 - lam) * old_cov + lam * expected_s, rtol=1e-7, atol=1e-12)
+
+
+def test_weighted_ml_fit_recovers_a_linear_mean_and_covariance_helper_is_unbiased():
+    rng = np.random.default_rng(1)
+    contexts = rng.uniform(0, 3, (200, 2))
+    phi = np.column_stack([np.ones(200), contexts])
+    truth = rng.normal(size=(3, 4))
+    params = phi @ truth
+    weights = rng.uniform(0.5, 1.5, 200)
+    weights /= weights.sum()
+    np.testing.assert_allclose(weighted_ml_fit(phi, params, weights, ridge=1e-12), truth, atol=1e-8)
+    noise = rng.normal(size=(200, 4))
+    uniform = np.full(200, 1 / 200)
+    np.testing.assert_allclose(
+        weighted_sample_covariance(noise, np.zeros((200, 4)), uniform), noise.T @ noise / 199
+    )
+
+
+def test_spd_factor_repairs_a_singular_covariance():
+    singular = np.outer([1.0, 2.0, 3.0], [1.0, 2.0, 3.0])
+    cov, chol, repaired = spd_factor(singular)
+    assert repaired
+    np.testing.assert_allclose(chol @ chol.T, cov)
+    assert np.linalg.eigvalsh(cov).min() > 0
+
+
+def test_covariance_stays_spd_through_a_long_run_with_few_samples():
+    """p > N makes every CREPS sample covariance singular; the documented repair keeps Σ SPD."""
+    problem = ContextualSphere(dim=12, context_dim=1)
+    rng = np.random.default_rng(0)
+    optimizer = CREPS(12, 1, initial_mean=2.0, seed=0)
+    for _ in range(60):
+        contexts = problem.contexts(rng, 8)
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -problem.regret(contexts, params))
+        np.linalg.cholesky(optimizer.cov)
+    assert optimizer.diagnostics["cov_repaired"] == 1.0
+
+
+def test_diagnostics_report_the_documented_quantities():
+    problem = ContextualSphere(dim=4, context_dim=1)
+    optimizer = CREPSCMA(4, 1, seed=0)
+    contexts = problem.contexts(np.random.default_rng(0), 30)
+    params = optimizer.ask(contexts)
+    returns = -problem.regret(contexts, params)
+    optimizer.tell(contexts, params, returns)
+    d = optimizer.diagnostics
+    assert d["kl"] == pytest.approx(0.5, abs=1e-8)
+    assert 1 <= d["ess"] <= 30
+    assert d["interpolation"] == pytest.approx(min(1, d["ess"] / 16))
+    assert d["mean_return"] == pytest.approx(returns.mean())
+    assert d["logdet_cov"] == pytest.approx(np.linalg.slogdet(optimizer.cov)[1])
+    assert d["cond_cov"] == pytest.approx(np.linalg.cond(optimizer.cov))
+    assert d["eta"] > 0 and d["external_samples"] == 0
+
+
+def test_stop_reports_a_collapsed_distribution():
+    optimizer = CREPSCMA(3, 1, initial_cov=1e-30, min_std=1e-12, seed=0)
+    assert optimizer.stop() == {}
+    contexts = np.linspace(0, 1, 10)[:, None]
+    params = optimizer.ask(contexts)
+    optimizer.tell(contexts, params, -np.abs(params).sum(1))
+    assert "min_std" in optimizer.stop()
+
+
+# -- protocol misuse and bad input ---------------------------------------------------------------------------
+def fresh(**kw):
+    return CREPSCMA(3, 2, **{"seed": 0, **kw})
+
+
+def test_tell_without_ask_and_twice_raise_runtime_error():
+    optimizer = fresh()
+    contexts = np.zeros((4, 2))
+    with pytest.raises(RuntimeError, match="without a pending ask"):
+        optimizer.tell(contexts, np.zeros((4, 3)), np.zeros(4))
+    params = optimizer.ask(contexts + 0.5)
+    optimizer.tell(contexts + 0.5, params, np.arange(4.0))
+    with pytest.raises(RuntimeError, match="without a pending ask"):
+        optimizer.tell(contexts + 0.5, params, np.arange(4.0))
+
+
+def test_rows_that_were_not_asked_are_rejected_unless_external_is_allowed():
+    optimizer = fresh()
+    contexts = np.random.default_rng(0).uniform(size=(5, 2))
+    params = optimizer.ask(contexts)
+    forged = params.copy()
+    forged[2, 0] += 1e-9
+    with pytest.raises(RuntimeError, match=r"row 2 .* was not returned by the last ask"):
+        optimizer.tell(contexts, forged, np.arange(5.0))
+    repeated = np.vstack([params[:2], params[:1]])
+    with pytest.raises(RuntimeError, match="row 2 repeats asked sample 0"):
+        optimizer.tell(contexts[[0, 1, 0]], repeated, np.arange(3.0))
+    optimizer.tell(contexts, forged, np.arange(5.0), allow_external=True)
+    assert optimizer.diagnostics["external_samples"] == 1.0
+
+
+def test_a_subset_of_the_asked_rows_in_any_order_may_be_told():
+    optimizer = fresh()
+    contexts = np.random.default_rng(0).uniform(size=(6, 2))
+    params = optimizer.ask(contexts)
+    order = [4, 0, 3]
+    optimizer.tell(contexts[order], params[order], np.array([1.0, 2.0, 3.0]))
+    assert optimizer.evaluations == 3
+
+
+def snapshot(optimizer):
+    return {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in optimizer.state_dict().items()}
+
+
+def assert_unchanged(before, optimizer):
+    after = optimizer.state_dict()
+    assert before.keys() == after.keys()
+    for key, value in before.items():
+        if isinstance(value, np.ndarray):
+            np.testing.assert_array_equal(value, after[key])
+        else:
+            assert value == after[key], key
+
+
+@pytest.mark.parametrize(
+    ("contexts", "params", "returns", "error", "match"),
+    [
+        (
+            np.zeros((4, 3)),
+            np.zeros((4, 3)),
+            np.zeros(4),
+            ValueError,
+            r"contexts: expected shape \(n, 2\), got \(4, 3\)",
+        ),
+        (
+            np.zeros((4, 2)),
+            np.zeros((4, 2)),
+            np.zeros(4),
+            ValueError,
+            r"params: expected shape \(4, 3\), got \(4, 2\)",
+        ),
+        (
+            np.zeros((4, 2)),
+            np.zeros((4, 3)),
+            np.zeros(3),
+            ValueError,
+            r"returns: expected shape \(4,\), got \(3,\)",
+        ),
+        (
+            np.zeros((4, 2)),
+            np.zeros((4, 3)),
+            [0, 1, np.nan, 2],
+            ValueError,
+            "returns: expected finite values, got nan",
+        ),
+        (
+            np.zeros((4, 2)),
+            np.full((4, 3), np.inf),
+            np.zeros(4),
+            ValueError,
+            "params: expected finite values",
+        ),
+        (np.zeros((1, 2)), np.zeros((1, 3)), np.zeros(1), ValueError, "at least 2 samples per tell, got 1"),
+        (
+            np.zeros((4, 2)),
+            np.zeros((4, 3)),
+            "bad",
+            TypeError,
+            "returns: expected an array of real numbers, got str",
+        ),
+    ],
+)
+def test_bad_tell_input_raises_and_leaves_the_optimizer_unchanged(contexts, params, returns, error, match):
+    optimizer = fresh()
+    optimizer.ask(np.zeros((4, 2)))
+    before = snapshot(optimizer)
+    with pytest.raises(error, match=match):
+        optimizer.tell(contexts, params, returns)
+    assert_unchanged(before, optimizer)
+
+
+def test_epsilon_must_stay_below_log_n_at_tell_time():
+    optimizer = fresh(epsilon=2.0)
+    contexts = np.zeros((5, 2))
+    params = optimizer.ask(contexts)
+    before = snapshot(optimizer)
+    with pytest.raises(
+        ValueError, match=r"epsilon: expected < log\(N\) = 1.6094 for a batch of N=5 samples, got 2.0"
+    ):
+        optimizer.tell(contexts, params, np.arange(5.0))
+    assert_unchanged(before, optimizer)
+
+
+def test_ask_rejects_bad_contexts():
+    optimizer = fresh()
+    with pytest.raises(ValueError, match=r"contexts: expected shape \(n, 2\), got \(2,\)"):
+        optimizer.ask(np.zeros(2))
+    with pytest.raises(ValueError, match="contexts: expected finite values"):
+        optimizer.ask([[0.0, np.nan]])
+    with pytest.raises(ValueError, match="at least one row"):
+        optimizer.ask(np.zeros((0, 2)))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        (
+            {"initial_cov": np.eye(2)},
+            ValueError,
+            r"initial_cov: expected a scalar, shape \(3,\) or \(3, 3\), got \(2, 2\)",
+        ),
+        ({"initial_cov": -1.0}, ValueError, "initial_cov: expected variances > 0, got min -1.0"),
+        (
+            {"initial_mean": np.zeros(4)},
+            ValueError,
+            r"initial_mean: expected a scalar, shape \(3,\) or \(3, 3\)",
+        ),
+        ({"epsilon": 0.0}, ValueError, r"epsilon: expected a value in \(0.0, 50.0\], got 0.0"),
+        ({"variant": "newest"}, ValueError, "variant: expected one of .*'old', 'current'.*got 'newest'"),
+        ({"seed": 1.5}, TypeError, "seed: expected an int or None, got float"),
+        ({"mean_features": "cubic"}, ValueError, "features: expected one of .*got 'cubic'"),
+        ({"ridge": -1.0}, ValueError, r"ridge: expected a value in \[0.0, 1.0\], got -1.0"),
+    ],
+)
+def test_config_validation(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        fresh(**kwargs)
+
+
+def test_non_spd_initial_covariance_is_rejected():
+    with pytest.raises(ValueError, match="initial_cov: expected a symmetric positive-definite matrix"):
+        CREPS(2, 1, initial_cov=np.array([[1.0, 2.0], [2.0, 1.0]]))
+    with pytest.raises(ValueError, match="initial_cov: expected a symmetric matrix"):
+        CREPS(2, 1, initial_cov=np.array([[1.0, 0.5], [0.0, 1.0]]))
+
+
+def test_initial_mean_accepts_full_coefficients_and_rbf_constant_mean():
+    coefficients = np.arange(6.0).reshape(2, 3)
+    optimizer = CREPS(3, 1, initial_mean=coefficients)
+    np.testing.assert_array_equal(optimizer.recommend([[2.0]]), [[0.0 + 2 * 3, 1 + 2 * 4, 2 + 2 * 5]])
+    rbf = CREPS(3, 1, initial_mean=[1.0, 2.0, 3.0], mean_features=RBFFeatures.grid([0], [3], 5))
+    np.testing.assert_allclose(rbf.recommend([[0.3], [2.9]]), [[1, 2, 3], [1, 2, 3]])

@@ -366,3 +366,13 @@ def test_initial_mean_accepts_full_coefficients_and_rbf_constant_mean():
     np.testing.assert_array_equal(optimizer.recommend([[2.0]]), [[0.0 + 2 * 3, 1 + 2 * 4, 2 + 2 * 5]])
     rbf = CREPS(3, 1, initial_mean=[1.0, 2.0, 3.0], mean_features=RBFFeatures.grid([0], [3], 5))
     np.testing.assert_allclose(rbf.recommend([[0.3], [2.9]]), [[1, 2, 3], [1, 2, 3]])
+
+
+def test_non_contextual_problems_use_zero_context_dimensions():
+    """z = 0 turns CREPS-CMA into episodic REPS with a regularised covariance (a plain optimiser)."""
+    optimizer = CREPSCMA(4, 0, initial_mean=3.0, seed=0)
+    for _ in range(300):
+        contexts = np.zeros((20, 0))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -(params**2).sum(axis=1))
+    assert np.abs(optimizer.recommend(np.zeros((1, 0)))).max() < 1e-8

@@ -60,7 +60,7 @@ def regularised_covariance(old_cov: Array, sample_cov: Array, interpolation: flo
 
 @dataclass(frozen=True, eq=False)
 class CREPSCMAConfig(CREPSConfig):
-    """:class:`~creps_gym.optimizers.creps.CREPSConfig` plus ``variant``, ``"old"`` (default) or ``"current"``.
+    """CREPSConfig plus ``variant``: ``"old"`` (default) or ``"current"``.
 
     See :class:`~creps_gym.optimizers.creps.CREPSConfig` for the other fields.
     """

@@ -1,0 +1,32 @@
+"""The DMP-driven 5-link planar reacher (Abdolmaleki et al., 2019, section 5.2).
+
+``gymnasium.make("creps_gym/PlanarReacher-v0")`` gives :class:`PlanarReacherEnv`;
+``gymnasium.make_vec("creps_gym/PlanarReacher-v0", num_envs=n)`` the native
+:class:`PlanarReacherVectorEnv`, which rolls out the whole batch at once.
+"""
+
+from typing import Any
+
+from creps_gym.envs.reacher.planar import (
+    PlanarReacherEnv,
+    PlanarReacherVectorEnv,
+    end_effector,
+    forward_kinematics,
+)
+
+__all__ = [
+    "REGISTRATIONS",
+    "PlanarReacherEnv",
+    "PlanarReacherVectorEnv",
+    "end_effector",
+    "forward_kinematics",
+]
+
+REGISTRATIONS: list[dict[str, Any]] = [
+    {
+        "id": "creps_gym/PlanarReacher-v0",
+        "entry_point": "creps_gym.envs.reacher.planar:PlanarReacherEnv",
+        "vector_entry_point": "creps_gym.envs.reacher.planar:PlanarReacherVectorEnv",
+        "kwargs": {"position_weight": 1.0, "acceleration_weight": 1e-5},
+    },
+]

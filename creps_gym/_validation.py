@@ -12,7 +12,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["as_float_array", "check_finite", "check_positive_int", "check_probability_like"]
+__all__ = [
+    "as_float_array",
+    "check_finite",
+    "check_positive_int",
+    "check_probability_like",
+    "check_real_in_range",
+]
 
 
 def _shape_text(shape: Sequence[int | None]) -> str:
@@ -48,14 +54,17 @@ def as_float_array(
     """
     if isinstance(value, (str, bytes)) or value is None:
         raise TypeError(f"{name}: expected an array of real numbers, got {type(value).__name__}")
+    if not isinstance(value, np.ndarray) or value.dtype != np.float64:  # float64 arrays skip this check
+        kind = np.asarray(value).dtype.kind
+        if kind in "cUSVb":
+            what = {"c": "complex", "U": "string", "S": "bytes", "V": "structured", "b": "boolean"}[kind]
+            raise TypeError(f"{name}: expected an array of real numbers, got a {what} array")
     try:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise TypeError(
             f"{name}: expected an array of real numbers, got {type(value).__name__} ({exc})"
         ) from None
-    if np.iscomplexobj(value):
-        raise TypeError(f"{name}: expected real numbers, got a complex array")
     if shape is not None:
         ok = array.ndim == len(shape) and all(
             e is None or e == a for e, a in zip(shape, array.shape, strict=True)
@@ -86,13 +95,30 @@ def check_positive_int(value: Any, name: str, minimum: int = 1) -> int:
     return int(value)
 
 
-def check_probability_like(value: Any, name: str, low: float, high: float, *, open_low: bool = True) -> float:
-    """Return ``value`` as a float inside ``(low, high]`` (or ``[low, high]``), else raise."""
+def check_real_in_range(
+    value: Any,
+    name: str,
+    low: float,
+    high: float,
+    *,
+    low_inclusive: bool = False,
+    high_inclusive: bool = True,
+) -> float:
+    """Return ``value`` as a finite float in the interval between ``low`` and ``high``, else raise.
+
+    The bounds are open or closed as the flags say; the error message prints the interval accordingly.
+    """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name}: expected a real number, got {type(value).__name__} {value!r}")
     number = float(value)
-    inside = (low < number if open_low else low <= number) and number <= high
-    if not np.isfinite(number) or not inside:
-        bracket = "(" if open_low else "["
-        raise ValueError(f"{name}: expected a value in {bracket}{low}, {high}], got {value!r}")
+    above = low <= number if low_inclusive else low < number
+    below = number <= high if high_inclusive else number < high
+    if not (np.isfinite(number) and above and below):
+        interval = f"{'[' if low_inclusive else '('}{low}, {high}{']' if high_inclusive else ')'}"
+        raise ValueError(f"{name}: expected a finite value in {interval}, got {value!r}")
     return number
+
+
+def check_probability_like(value: Any, name: str, low: float, high: float, *, open_low: bool = True) -> float:
+    """Alias of :func:`check_real_in_range` for ``(low, high]`` (``[low, high]`` if not ``open_low``)."""
+    return check_real_in_range(value, name, low, high, low_inclusive=not open_low)

@@ -50,7 +50,11 @@ def test_constant_coefficients_give_a_constant_mean():
         np.testing.assert_allclose(feature_map(CONTEXTS) @ coefficients, [[1, -2], [1, -2]])
 
 
-def test_user_feature_maps_can_be_registered():
+def test_user_feature_maps_can_be_registered(monkeypatch):
+    from creps_gym.optimizers import features
+
+    monkeypatch.setattr(features, "_REGISTRY", dict(features._REGISTRY))  # leave the global registry clean
+
     class Cubic(FeatureMap):
         name = "cubic-test"
 
@@ -78,8 +82,22 @@ def test_user_feature_maps_can_be_registered():
             "bandwidth: expected a finite number > 0, got 0.0",
         ),
         (lambda: AffineFeatures(-1), "context_dim: expected an int >= 0, got -1"),
+        (
+            lambda: BaselineFeatures(1).constant_coefficients(np.ones(2)),
+            r"initial_mean: expected full coefficients of shape \(2, p\) for the 'baseline' feature map",
+        ),
     ],
 )
 def test_feature_errors(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_rbf_features_compare_and_hash_by_value():
+    rbf = RBFFeatures.grid([0.0], [1.0], per_dim=3)
+    assert rbf == RBFFeatures.grid([0.0], [1.0], per_dim=3) and hash(rbf) == hash(
+        RBFFeatures.grid([0], [1], 3)
+    )
+    assert rbf != RBFFeatures.grid([0.0], [1.0], per_dim=4) and rbf != AffineFeatures(1)
+    with pytest.raises(TypeError, match="bandwidth: expected a finite number > 0, got bool"):
+        RBFFeatures(1, centres=[[0.0]], bandwidth=True)

@@ -201,37 +201,37 @@ def fresh(**kw):
 
 def test_tell_without_ask_and_twice_raise_runtime_error():
     optimizer = fresh()
-    contexts = np.zeros((4, 2))
+    contexts = np.random.default_rng(0).uniform(size=(8, 2))
     with pytest.raises(RuntimeError, match="without a pending ask"):
-        optimizer.tell(contexts, np.zeros((4, 3)), np.zeros(4))
-    params = optimizer.ask(contexts + 0.5)
-    optimizer.tell(contexts + 0.5, params, np.arange(4.0))
+        optimizer.tell(contexts, np.zeros((8, 3)), np.zeros(8))
+    params = optimizer.ask(contexts)
+    optimizer.tell(contexts, params, np.arange(8.0))
     with pytest.raises(RuntimeError, match="without a pending ask"):
-        optimizer.tell(contexts + 0.5, params, np.arange(4.0))
+        optimizer.tell(contexts, params, np.arange(8.0))
 
 
 def test_rows_that_were_not_asked_are_rejected_unless_external_is_allowed():
     optimizer = fresh()
-    contexts = np.random.default_rng(0).uniform(size=(5, 2))
+    contexts = np.random.default_rng(0).uniform(size=(8, 2))
     params = optimizer.ask(contexts)
     forged = params.copy()
     forged[2, 0] += 1e-9
     with pytest.raises(RuntimeError, match=r"row 2 .* was not returned by the last ask"):
-        optimizer.tell(contexts, forged, np.arange(5.0))
-    repeated = np.vstack([params[:2], params[:1]])
-    with pytest.raises(RuntimeError, match="row 2 repeats asked sample 0"):
-        optimizer.tell(contexts[[0, 1, 0]], repeated, np.arange(3.0))
-    optimizer.tell(contexts, forged, np.arange(5.0), allow_external=True)
+        optimizer.tell(contexts, forged, np.arange(8.0))
+    rows = [0, 1, 2, 3, 4, 5, 0]
+    with pytest.raises(RuntimeError, match="row 6 repeats asked sample 0"):
+        optimizer.tell(contexts[rows], params[rows], np.arange(7.0))
+    optimizer.tell(contexts, forged, np.arange(8.0), allow_external=True)
     assert optimizer.diagnostics["external_samples"] == 1.0
 
 
 def test_a_subset_of_the_asked_rows_in_any_order_may_be_told():
     optimizer = fresh()
-    contexts = np.random.default_rng(0).uniform(size=(6, 2))
+    contexts = np.random.default_rng(0).uniform(size=(10, 2))
     params = optimizer.ask(contexts)
-    order = [4, 0, 3]
-    optimizer.tell(contexts[order], params[order], np.array([1.0, 2.0, 3.0]))
-    assert optimizer.evaluations == 3
+    order = [4, 0, 3, 9, 7, 1]
+    optimizer.tell(contexts[order], params[order], np.arange(6.0))
+    assert optimizer.evaluations == 6
 
 
 def snapshot(optimizer):
@@ -307,12 +307,23 @@ def test_bad_tell_input_raises_and_leaves_the_optimizer_unchanged(contexts, para
 
 def test_epsilon_must_stay_below_log_n_at_tell_time():
     optimizer = fresh(epsilon=2.0)
-    contexts = np.zeros((5, 2))
+    contexts = np.random.default_rng(0).uniform(size=(7, 2))
     params = optimizer.ask(contexts)
     before = snapshot(optimizer)
     with pytest.raises(
-        ValueError, match=r"epsilon: expected < log\(N\) = 1.6094 for a batch of N=5 samples, got 2.0"
+        ValueError, match=r"epsilon: expected < log\(N\) = 1.9459 for a batch of N=7 samples, got 2.0"
     ):
+        optimizer.tell(contexts, params, np.arange(7.0))
+    assert_unchanged(before, optimizer)
+
+
+def test_batches_the_baseline_interpolates_are_rejected():
+    """With N <= k + 1 the baseline [s, s²] explains any returns: no information, so a clear error."""
+    optimizer = fresh()  # z = 2, so k = 4 baseline features
+    contexts = np.random.default_rng(0).uniform(size=(5, 2))
+    params = optimizer.ask(contexts)
+    before = snapshot(optimizer)
+    with pytest.raises(ValueError, match=r"returns: expected more than k \+ 1 = 5 samples.*got N = 5"):
         optimizer.tell(contexts, params, np.arange(5.0))
     assert_unchanged(before, optimizer)
 
@@ -341,11 +352,11 @@ def test_ask_rejects_bad_contexts():
             ValueError,
             r"initial_mean: expected a scalar, shape \(3,\) or \(3, 3\)",
         ),
-        ({"epsilon": 0.0}, ValueError, r"epsilon: expected a value in \(0.0, 50.0\], got 0.0"),
+        ({"epsilon": 0.0}, ValueError, r"epsilon: expected a finite value in \(0.0, 50.0\], got 0.0"),
         ({"variant": "newest"}, ValueError, "variant: expected one of .*'old', 'current'.*got 'newest'"),
         ({"seed": 1.5}, TypeError, "seed: expected an int or None, got float"),
         ({"mean_features": "cubic"}, ValueError, "features: expected one of .*got 'cubic'"),
-        ({"ridge": -1.0}, ValueError, r"ridge: expected a value in \[0.0, 1.0\], got -1.0"),
+        ({"ridge": -1.0}, ValueError, r"ridge: expected a finite value in \[0.0, 1.0\], got -1.0"),
     ],
 )
 def test_config_validation(kwargs, error, match):
@@ -376,3 +387,107 @@ def test_non_contextual_problems_use_zero_context_dimensions():
         params = optimizer.ask(contexts)
         optimizer.tell(contexts, params, -(params**2).sum(axis=1))
     assert np.abs(optimizer.recommend(np.zeros((1, 0)))).max() < 1e-8
+
+
+@pytest.mark.parametrize(
+    "make_contexts",
+    [
+        lambda rng, n: np.full((n, 2), 1.3),  # a constant context
+        lambda rng, n: np.column_stack([rng.uniform(0, 3, n), np.full(n, 1.3)]),  # one dimension fixed
+        lambda rng, n: 1e5 + rng.uniform(0, 3, (n, 2)),  # a far-offset context box
+        lambda rng, n: rng.uniform(0, 3e7, (n, 2)),  # a huge context scale
+    ],
+    ids=["constant", "one-fixed-dimension", "offset-1e5", "scale-3e7"],
+)
+def test_learning_does_not_depend_on_where_or_how_large_the_context_box_is(make_contexts):
+    """Regression: constant or offset contexts once gave uniform weights (no learning) and a biased ridge."""
+    rng = np.random.default_rng(0)
+    optimizer = CREPSCMA(4, 2, initial_mean=3.0, initial_cov=1.0, seed=0)
+    for _ in range(200):
+        contexts = make_contexts(rng, 20)
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -(params**2).sum(axis=1))
+        assert optimizer.diagnostics["kl"] == pytest.approx(0.5, abs=1e-8)
+    test = make_contexts(np.random.default_rng(1), 10)
+    assert np.abs(optimizer.recommend(test)).max() < 1e-6
+
+
+def test_ridge_fit_is_invariant_to_offsetting_the_contexts():
+    rng = np.random.default_rng(3)
+    contexts = rng.uniform(0, 3, (30, 2))
+    params = rng.normal(size=(30, 4))
+    weights = rng.uniform(0.5, 1.5, 30)
+    weights /= weights.sum()
+    for offset in (0.0, 30.0, 1e3, 1e5):
+        phi = np.column_stack([np.ones(30), contexts + offset])
+        coefficients = weighted_ml_fit(phi, params, weights, ridge=1e-8, constant_column=0)
+        np.testing.assert_allclose(
+            phi @ coefficients, phi @ weighted_ml_fit(phi, params, weights, 0.0, 0), rtol=1e-6
+        )
+    reference = np.column_stack([np.ones(30), contexts])
+    shifted = np.column_stack([np.ones(30), contexts + 1e5])
+    np.testing.assert_allclose(
+        shifted @ weighted_ml_fit(shifted, params, weights, 1e-8, 0),
+        reference @ weighted_ml_fit(reference, params, weights, 1e-8, 0),
+        rtol=1e-6,
+        atol=1e-9,
+    )
+
+
+def test_identical_asked_rows_can_all_be_told():
+    """A collapsed distribution (σ below one ulp) asks identical rows; each may be told once."""
+    optimizer = CREPSCMA(3, 0, initial_mean=1.0, initial_cov=1e-40, seed=0)
+    contexts = np.zeros((10, 0))
+    params = optimizer.ask(contexts)
+    assert len({row.tobytes() for row in params}) == 1
+    optimizer.tell(contexts, params, np.arange(10.0))
+    params = optimizer.ask(contexts)
+    with pytest.raises(RuntimeError, match="row 10 repeats asked sample 0"):
+        optimizer.tell(np.zeros((11, 0)), np.vstack([params, params[:1]]), np.arange(11.0))
+
+
+def test_state_dict_is_a_snapshot_not_a_view():
+    optimizer = fresh()
+    contexts = np.random.default_rng(0).uniform(size=(8, 2))
+    params = optimizer.ask(contexts)
+    optimizer.tell(contexts, params, np.arange(8.0))
+    state = optimizer.state_dict()
+    state["cov"][0, 0] = 99.0
+    state["coefficients"][:] = 0.0
+    assert optimizer.cov[0, 0] != 99.0 and optimizer.coefficients.any()
+    keys = set(state["diagnostics"])
+    assert "cond_cov" in optimizer.diagnostics  # computes the lazy entries
+    assert set(state["diagnostics"]) == keys
+
+
+def test_numpy_scalars_in_the_config_still_save(tmp_path):
+    optimizer = CREPSCMA(np.int64(3), np.int64(1), epsilon=np.float32(0.5), seed=np.int64(3))
+    optimizer.save(tmp_path / "numpy.npz")
+    assert CREPSCMA.load(tmp_path / "numpy.npz").config.seed == 3
+
+
+def test_eta_diagnostic_is_the_temperature_in_return_units():
+    """Plugging the reported η into the raw dual (w fitted at that η) gives back KL = ε."""
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(0)
+    optimizer = CREPSCMA(4, 1, initial_mean=2.0, seed=0)
+    for _ in range(30):
+        contexts = rng.uniform(0, 3, (40, 1))
+        params = optimizer.ask(contexts)
+        returns = -((params - contexts) ** 2).sum(axis=1) * 1e3
+        optimizer.tell(contexts, params, returns)
+    eta = optimizer.diagnostics["eta"]
+    phi = np.column_stack([contexts, contexts**2])
+    phi = phi - phi.mean(axis=0)
+
+    def objective(w):
+        scaled = (returns - phi @ w) / eta
+        return eta * (np.log(np.mean(np.exp(scaled - scaled.max()))) + scaled.max())
+
+    w = minimize(objective, np.zeros(2), method="BFGS", options={"gtol": 1e-12}).x
+    scaled = (returns - phi @ w) / eta
+    weights = np.exp(scaled - scaled.max())
+    weights /= weights.sum()
+    # The η reported before a fix (scaled by std R instead of the residual's spread) gave 0.41 here.
+    assert np.log(40) + weights @ np.log(weights) == pytest.approx(0.5, abs=1e-3)

@@ -151,16 +151,16 @@ class ContextualEpisodicEnv(gym.Env[Array, Array]):
     # -- gymnasium API -----------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Array, dict]:
         """Start an episode. ``options={"context": s}`` sets the context (shape (z,)); else it is sampled."""
-        super().reset(seed=seed)
         options = {} if options is None else dict(options)
         unknown = set(options) - {"context"}
         if unknown:
             raise ValueError(f"options: expected only the key 'context', got unknown keys {sorted(unknown)}")
-        if "context" in options:
-            context = as_float_array(options["context"], "options['context']", (self.context_dim,))
-            context = self.check_contexts(context[None, :])[0]
-        else:
-            context = self.sample_contexts(self.np_random, 1)[0]
+        given = None
+        if "context" in options:  # validated before seeding, so a rejected reset changes nothing
+            given = as_float_array(options["context"], "options['context']", (self.context_dim,))
+            given = self.check_contexts(given[None, :])[0]
+        super().reset(seed=seed)
+        context = self.sample_contexts(self.np_random, 1)[0] if given is None else given
         self._context = context
         self._done = False
         self._last_params = None
@@ -246,8 +246,6 @@ class ContextualEpisodicVectorEnv(VectorEnv):
         """Reset all envs (or those in ``options["reset_mask"]``); returns contexts (n, z) and info."""
         if isinstance(seed, list):
             raise TypeError("seed: expected an int or None for a native vector env, got a list")
-        if seed is not None:
-            self._np_random, self._np_random_seed = seeding.np_random(seed)
         options = {} if options is None else dict(options)
         unknown = set(options) - {"context", "reset_mask"}
         if unknown:
@@ -273,7 +271,9 @@ class ContextualEpisodicVectorEnv(VectorEnv):
                     f"options['context']: expected shape ({count}, {self.model.context_dim}) for the envs "
                     f"being reset, got {contexts.shape}"
                 )
-        else:
+        if seed is not None:  # after validation, so a rejected reset changes nothing
+            self._np_random, self._np_random_seed = seeding.np_random(seed)
+        if "context" not in options:
             contexts = self._new_contexts(count)
         self._contexts[mask] = contexts
         self._active[mask] = True
@@ -293,7 +293,7 @@ class ContextualEpisodicVectorEnv(VectorEnv):
                 f"actions: expected shape ({self.num_envs}, {self.model.param_dim}), got {params.shape}"
             )
         returns, batch_info = self.model.evaluate(self._contexts, params)
-        returns = np.asarray(returns, dtype=np.float64)
+        returns = as_float_array(returns, f"{type(self.model).__name__}.evaluate() returns", (self.num_envs,))
         ones = np.ones(self.num_envs, dtype=bool)
         step_info: dict[str, Any] = {"context": self._contexts.copy(), "_context": ones.copy()}
         for key, value in batch_info.items():

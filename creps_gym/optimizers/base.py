@@ -13,6 +13,7 @@ Protocol rules (enforced by :class:`ContextualOptimizer`, documented for users):
   ``tell(..., allow_external=True)``, after the same shape and finiteness checks, much as pycma's ``tell``
   accepts injected solutions. External rows are counted in the diagnostics.
 * A rejected call raises before anything changes, so the optimiser is left exactly as it was.
+* A second ``ask`` before ``tell`` replaces the pending batch: only the latest asked rows can be told.
 
 Checkpoints are ``.npz`` files holding the arrays plus one JSON document (``__state__.json``), never
 pickle. A restored optimiser continues with bit-identical asks.
@@ -71,6 +72,30 @@ class AskTellOptimizer(Protocol):
         """Arrays and JSON-serialisable values that restore the optimiser exactly."""
 
 
+_NON_FINITE = {"inf": np.inf, "-inf": -np.inf, "nan": np.nan}
+
+
+def _encode_non_finite(value: Any) -> Any:
+    """Standard JSON has no inf/NaN: store non-finite floats as {"__float__": "inf"} (and back on load)."""
+    if isinstance(value, dict):
+        return {k: _encode_non_finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_encode_non_finite(v) for v in value]
+    if isinstance(value, (float, np.floating)) and not np.isfinite(value):
+        return {"__float__": str(float(value))}
+    return value
+
+
+def _decode_non_finite(value: Any) -> Any:
+    if isinstance(value, dict):
+        if set(value) == {"__float__"}:
+            return _NON_FINITE[value["__float__"]]
+        return {k: _decode_non_finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_decode_non_finite(v) for v in value]
+    return value
+
+
 def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
     """Write a state dict atomically to ``path`` (``.npz``): arrays as entries, the rest as one JSON document.
 
@@ -81,8 +106,8 @@ def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
     arrays = {k: np.asarray(v) for k, v in state.items() if isinstance(v, np.ndarray)}
     if JSON_KEY in arrays:
         raise ValueError(f"state: the key {JSON_KEY!r} is reserved")
-    meta = {k: v for k, v in state.items() if not isinstance(v, np.ndarray)}
-    payload = json.dumps(meta, sort_keys=True, allow_nan=True).encode()
+    meta = _encode_non_finite({k: v for k, v in state.items() if not isinstance(v, np.ndarray)})
+    payload = json.dumps(meta, sort_keys=True, allow_nan=False).encode()
     arrays[JSON_KEY] = np.frombuffer(payload, dtype=np.uint8)
     path.parent.mkdir(parents=True, exist_ok=True)
     handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
@@ -103,7 +128,7 @@ def load_state(path: str | os.PathLike[str]) -> dict[str, Any]:
     with np.load(Path(path), allow_pickle=False) as data:
         if JSON_KEY not in data.files:
             raise ValueError(f"path: expected a creps_gym checkpoint with a {JSON_KEY!r} entry, got {path}")
-        state: dict[str, Any] = json.loads(data[JSON_KEY].tobytes().decode())
+        state: dict[str, Any] = _decode_non_finite(json.loads(data[JSON_KEY].tobytes().decode()))
         state.update({k: data[k].copy() for k in data.files if k != JSON_KEY})
     return state
 
@@ -121,7 +146,7 @@ class ContextualOptimizer(ABC):
 
     def __init__(self) -> None:
         self._pending: tuple[Array, Array] | None = None
-        self._pending_index: dict[bytes, int] = {}
+        self._pending_index: dict[bytes, list[int]] = {}
         self._diagnostics: dict[str, float] = {}
         self.iteration = 0
         self.evaluations = 0
@@ -140,10 +165,15 @@ class ContextualOptimizer(ABC):
         """
         contexts = self._check_contexts(contexts, "contexts")
         params = self._sample(contexts)
-        self._pending = (contexts.copy(), params.copy())
-        rows = np.concatenate([contexts, params], axis=1)
-        self._pending_index = {row.tobytes(): i for i, row in enumerate(rows)}
+        self._set_pending(contexts.copy(), params.copy())
         return params
+
+    def _set_pending(self, contexts: Array, params: Array) -> None:
+        """Remember an asked batch; a second ``ask`` before ``tell`` replaces the first."""
+        self._pending = (contexts, params)
+        self._pending_index = {}
+        for i, row in enumerate(np.concatenate([contexts, params], axis=1)):
+            self._pending_index.setdefault(row.tobytes(), []).append(i)
 
     def tell(self, contexts: Any, params: Any, returns: Any, *, allow_external: bool = False) -> None:
         """Update the search distribution from an evaluated batch (returns are maximised).
@@ -198,10 +228,10 @@ class ContextualOptimizer(ABC):
             kind=self.kind,
             iteration=self.iteration,
             evaluations=self.evaluations,
-            diagnostics=self._diagnostics,
+            diagnostics=dict(self._diagnostics),
         )
         if self._pending is not None:
-            state["pending_contexts"], state["pending_params"] = self._pending
+            state["pending_contexts"], state["pending_params"] = (a.copy() for a in self._pending)
         return state
 
     @classmethod
@@ -214,10 +244,8 @@ class ContextualOptimizer(ABC):
         optimizer.evaluations = int(state["evaluations"])
         optimizer._diagnostics = {k: float(v) for k, v in dict(state["diagnostics"]).items()}
         if "pending_contexts" in state:
-            contexts, params = np.asarray(state["pending_contexts"]), np.asarray(state["pending_params"])
-            optimizer._pending = (contexts, params)
-            rows = np.concatenate([contexts, params], axis=1)
-            optimizer._pending_index = {row.tobytes(): i for i, row in enumerate(rows)}
+            contexts = np.array(state["pending_contexts"], dtype=np.float64)
+            optimizer._set_pending(contexts, np.array(state["pending_params"], dtype=np.float64))
         return optimizer
 
     def save(self, path: str | os.PathLike[str]) -> Path:
@@ -259,19 +287,24 @@ class ContextualOptimizer(ABC):
                 "pass allow_external=True to tell samples generated elsewhere"
             )
         rows = np.concatenate([contexts, params], axis=1)
-        seen: set[int] = set()
+        used: dict[
+            bytes, int
+        ] = {}  # how often each asked row was told; identical asked rows count separately
         external = 0
         for k, row in enumerate(rows):
-            index = self._pending_index.get(row.tobytes())
-            if index is None:
+            key = row.tobytes()
+            asked = self._pending_index.get(key)
+            if asked is None:
                 if not allow_external:
                     raise RuntimeError(
                         f"tell(): row {k} (contexts[{k}], params[{k}]) was not returned by the last ask(); "
                         "pass allow_external=True to tell external samples"
                     )
                 external += 1
-            elif index in seen:
-                raise RuntimeError(f"tell(): row {k} repeats asked sample {index}; each sample is told once")
-            else:
-                seen.add(index)
+                continue
+            used[key] = used.get(key, 0) + 1
+            if used[key] > len(asked):
+                raise RuntimeError(
+                    f"tell(): row {k} repeats asked sample {asked[0]}; each sample is told once"
+                )
         return external

@@ -24,9 +24,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from creps_gym._validation import as_float_array, check_probability_like
+from creps_gym._validation import as_float_array, check_real_in_range
 from creps_gym.optimizers.base import ContextualOptimizer
-from creps_gym.optimizers.dual import DualSolution, solve_dual
+from creps_gym.optimizers.dual import DUAL_KL_TOL, DualSolution, solve_dual
 from creps_gym.optimizers.features import FeatureMap, make_features
 
 __all__ = [
@@ -42,7 +42,9 @@ __all__ = [
 Array = NDArray[np.float64]
 
 
-def weighted_ml_fit(mean_features: Array, params: Array, weights: Array, ridge: float) -> Array:
+def weighted_ml_fit(
+    mean_features: Array, params: Array, weights: Array, ridge: float, constant_column: int | None = None
+) -> Array:
     """Weighted ridge maximum-likelihood fit of the mean coefficients, Eq. (7).
 
     Parameters
@@ -51,17 +53,40 @@ def weighted_ml_fit(mean_features: Array, params: Array, weights: Array, ridge: 
     params : ndarray, shape (N, p)          θ_k
     weights : ndarray, shape (N,)           d_k, summing to one
     ridge : float
-        Ridge relative to the mean diagonal of ΦᵀDΦ, so it does not depend on the feature scale.
+        Ridge of the regularised normal equations (ΦᵀDΦ + ridge·I)A = ΦᵀDU, relative to the features' scale.
+    constant_column : int, optional
+        Index of a constant feature (the 1 of ϕ(s) = [1, s]). The ridge then acts on the other columns after
+        weighted centring and standardising, and the intercept is not shrunk, so the fit does not depend on
+        where the context box lies (contexts in [1000, 1003] fit like contexts in [0, 3]). Without it, the
+        ridge is relative to the mean diagonal of ΦᵀDΦ.
 
     Returns
     -------
     ndarray, shape (m, p)
-        A = (ΦᵀDΦ + λ_ridge I)⁻¹ ΦᵀDU.
+        The coefficients A; Aᵀϕ(s) is the new mean.
     """
-    weighted = mean_features.T * weights
-    gram = weighted @ mean_features
-    gram.flat[:: gram.shape[0] + 1] += ridge * max(gram.trace() / gram.shape[0], 1e-300)
-    return linalg.solve(gram, weighted @ params, assume_a="pos", check_finite=False)
+    if constant_column is None:
+        weighted = mean_features.T * weights
+        gram = weighted @ mean_features
+        gram.flat[:: gram.shape[0] + 1] += ridge * max(gram.trace() / gram.shape[0], 1e-300)
+        return linalg.solve(gram, weighted @ params, assume_a="pos", check_finite=False)
+    others = np.delete(np.arange(mean_features.shape[1]), constant_column)
+    columns = mean_features[:, others]
+    centre = weights @ columns
+    centred = columns - centre
+    spread = np.sqrt(weights @ centred**2)
+    informative = spread > 1e-12 * (np.abs(centre) + spread)  # constant context dimensions carry nothing
+    standardised = np.where(informative, centred / np.where(informative, spread, 1.0), 0.0)
+    mean_params = weights @ params
+    weighted = standardised.T * weights
+    gram = weighted @ standardised
+    gram.flat[:: gram.shape[0] + 1] += ridge + (~informative)
+    slopes = linalg.solve(gram, weighted @ (params - mean_params), assume_a="pos", check_finite=False)
+    slopes /= np.where(informative, spread, 1.0)[:, None]
+    coefficients = np.empty((mean_features.shape[1], params.shape[1]))
+    coefficients[others] = slopes
+    coefficients[constant_column] = mean_params - centre @ slopes
+    return coefficients
 
 
 def weighted_sample_covariance(params: Array, means: Array, weights: Array) -> Array:
@@ -81,7 +106,7 @@ def weighted_sample_covariance(params: Array, means: Array, weights: Array) -> A
     return (deviations.T * weights) @ deviations / normaliser
 
 
-def spd_factor(cov: Array, floor: float = 1e-14) -> tuple[Array, Array, bool]:
+def spd_factor(cov: Array, floor: float = 1e-12) -> tuple[Array, Array, bool]:
     """Symmetrise ``cov`` and return (Σ, lower Cholesky factor, repaired).
 
     If the Cholesky factorisation fails (Σ lost positive-definiteness to round-off, or a sample covariance
@@ -174,16 +199,28 @@ class CREPSConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
                 raise ValueError(f"{name}: expected an integer >= {minimum}, got {value!r}")
-        check_probability_like(self.epsilon, "epsilon", 0.0, 50.0)
-        check_probability_like(self.ridge, "ridge", 0.0, 1.0, open_low=False)
-        check_probability_like(self.min_std, "min_std", 0.0, np.inf, open_low=False)
-        check_probability_like(self.max_condition, "max_condition", 1.0, np.inf)
-        if self.seed is not None and (
-            isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer))
+            object.__setattr__(self, name, int(value))  # numpy integers become plain ints (JSON checkpoints)
+        for name, low, high, low_inclusive in (
+            ("epsilon", 0.0, 50.0, False),
+            ("ridge", 0.0, 1.0, True),
+            ("min_std", 0.0, 1.0e300, True),
+            ("max_condition", 1.0, 1.0e300, False),
         ):
-            raise TypeError(f"seed: expected an int or None, got {type(self.seed).__name__}")
+            value = check_real_in_range(getattr(self, name), name, low, high, low_inclusive=low_inclusive)
+            object.__setattr__(self, name, value)
+        if self.seed is not None:
+            if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
+                raise TypeError(f"seed: expected an int or None, got {type(self.seed).__name__}")
+            object.__setattr__(self, "seed", int(self.seed))
         object.__setattr__(self, "mean_map", make_features(self.mean_features, self.n_context_dims))
         object.__setattr__(self, "baseline_map", make_features(self.baseline_features, self.n_context_dims))
+        for name, feature_map in (("mean_features", self.mean_map), ("baseline_features", self.baseline_map)):
+            width = feature_map(np.zeros((2, self.n_context_dims))).shape
+            if width != (2, feature_map.n_features):
+                raise ValueError(
+                    f"{name}: expected the map to return shape (n, {feature_map.n_features}) as its "
+                    f"n_features says, got {width[1:]} columns for n = 2"
+                )
         object.__setattr__(
             self, "initial_mean", _initial_coefficients(self.initial_mean, self.mean_map, self.n_params)
         )
@@ -234,7 +271,7 @@ class CREPS(ContextualOptimizer):
         self.rng = np.random.default_rng(config.seed)
         self.coefficients = config.initial_mean.copy()
         self.cov, self._chol, _ = spd_factor(config.initial_cov)
-        self._eta, self._w = 1.0, np.zeros(config.baseline_map.n_features)
+        self._eta = 1.0  # the dual's warm start, normalised units
 
     # -- the distribution --------------------------------------------------------------------------------
     def mean(self, contexts: Array) -> Array:
@@ -253,7 +290,12 @@ class CREPS(ContextualOptimizer):
         return weighted_sample_covariance(params, new_means, weights), 1.0
 
     def _update(self, contexts: Array, params: Array, returns: Array) -> None:
-        n = returns.shape[0]
+        n, k = returns.shape[0], self.config.baseline_map.n_features
+        if n <= k + 1:
+            raise ValueError(
+                f"returns: expected more than k + 1 = {k + 1} samples, since the dual's baseline φ(s) has "
+                f"k = {k} features and interpolates any smaller batch, got N = {n}"
+            )
         if self.config.epsilon >= np.log(n):
             raise ValueError(
                 f"epsilon: expected < log(N) = {np.log(n):.4f} for a batch of N={n} samples, "
@@ -264,7 +306,16 @@ class CREPS(ContextualOptimizer):
         )  # Eqs. (8)-(9)
         phi = self.config.mean_map(contexts)
         old_means = phi @ self.coefficients
-        coefficients = weighted_ml_fit(phi, params, dual.weights, self.config.ridge)  # Eq. (7)
+        try:
+            coefficients = weighted_ml_fit(  # Eq. (7)
+                phi, params, dual.weights, self.config.ridge, self.config.mean_map.constant_column
+            )
+        except linalg.LinAlgError:
+            raise RuntimeError(
+                f"tell(): the weighted mean regression (Eq. 7) is singular for this batch with ridge="
+                f"{self.config.ridge}; use a ridge > 0 or more varied contexts. The optimiser was left "
+                "unchanged"
+            ) from None
         cov, interpolation = self._covariance_update(params, old_means, phi @ coefficients, dual.weights)
         cov, chol, repaired = spd_factor(cov)
         if not (np.isfinite(coefficients).all() and np.isfinite(chol).all()):
@@ -272,8 +323,8 @@ class CREPS(ContextualOptimizer):
                 "tell(): the update produced non-finite values; the optimiser was left unchanged"
             )
         self.coefficients, self.cov, self._chol = coefficients, cov, chol
-        if np.isfinite(dual.eta):
-            self._eta, self._w = dual.eta, dual.w
+        if abs(dual.kl - self.config.epsilon) <= DUAL_KL_TOL:  # warm-start only from an active constraint
+            self._eta = dual.eta
         self._diagnostics = self._describe(dual, returns, interpolation, repaired)
 
     @property
@@ -284,21 +335,21 @@ class CREPS(ContextualOptimizer):
         """
         if self._diagnostics and "cond_cov" not in self._diagnostics:
             eigenvalues = np.linalg.eigvalsh(self.cov)
-            self._diagnostics["cond_cov"] = float(eigenvalues[-1] / eigenvalues[0])
+            self._diagnostics["cond_cov"] = float(
+                eigenvalues[-1] / max(eigenvalues[0], eigenvalues[-1] * 1e-300)
+            )
             self._diagnostics["max_std"] = float(np.sqrt(eigenvalues[-1]))
         return dict(self._diagnostics)
 
     def _describe(self, dual: DualSolution, returns: Array, interpolation: float, repaired: bool) -> dict:
-        scale = float(np.ptp(returns)) * float(
-            np.std((returns - returns.max()) / max(np.ptp(returns), 1e-300))
-        )
+        magnitude = float(np.abs(returns).max())
         return {
-            "eta": dual.eta * scale if np.isfinite(dual.eta) else np.inf,  # in return units
+            "eta": dual.eta * dual.return_scale,  # in return units (inf for uniform weights)
             "kl": dual.kl,
             "ess": 1.0 / float(dual.weights @ dual.weights),
             "interpolation": float(interpolation),
             "logdet_cov": 2.0 * float(np.log(np.diag(self._chol)).sum()),
-            "mean_return": float(returns.mean()),
+            "mean_return": float(np.mean(returns / magnitude) * magnitude) if magnitude > 0 else 0.0,
             "dual_iterations": float(dual.iterations),
             "cov_repaired": float(repaired),
         }
@@ -320,11 +371,10 @@ class CREPS(ContextualOptimizer):
         return {
             "config": self.config.to_json(),
             "rng": self.rng.bit_generator.state,
-            "initial_mean": self.config.initial_mean,
-            "initial_cov": self.config.initial_cov,
-            "coefficients": self.coefficients,
-            "cov": self.cov,
-            "dual_w": self._w,
+            "initial_mean": self.config.initial_mean.copy(),
+            "initial_cov": self.config.initial_cov.copy(),
+            "coefficients": self.coefficients.copy(),
+            "cov": self.cov.copy(),
             "dual_eta": self._eta,
         }
 
@@ -338,7 +388,7 @@ class CREPS(ContextualOptimizer):
         )
         optimizer = cls.from_config(config)
         optimizer.rng.bit_generator.state = state["rng"]
-        optimizer.coefficients = np.asarray(state["coefficients"], dtype=np.float64)
+        optimizer.coefficients = np.array(state["coefficients"], dtype=np.float64)
         optimizer.cov, optimizer._chol, _ = spd_factor(np.asarray(state["cov"], dtype=np.float64))
-        optimizer._w, optimizer._eta = np.asarray(state["dual_w"], dtype=np.float64), float(state["dual_eta"])
+        optimizer._eta = float(state["dual_eta"])
         return optimizer

@@ -39,13 +39,18 @@ _DEGENERATE = 1e-13  # residual spread (normalised units) under which returns co
 
 
 class DualSolution(NamedTuple):
-    """Result of :func:`solve_dual`; ``eta`` and ``w`` are in normalised return units."""
+    """Result of :func:`solve_dual`.
+
+    ``eta`` and ``w`` are in normalised units (``w`` on an orthonormal basis of the centred baseline
+    features); η in return units is ``eta * return_scale``.
+    """
 
     weights: Array  # (N,), >= 0, sums to 1
     eta: float
-    w: Array  # (k,)
+    w: Array  # (k',)
     kl: float  # KL(d || uniform)
     iterations: int
+    return_scale: float = 1.0
 
 
 def _solve_spd(matrix: Array, vector: Array) -> Array:
@@ -87,9 +92,10 @@ def _minimise_over_w(
             residual, weights, lme = _residual_softmax(r, features, eta, w)
             continue
         value = eta * lme
-        for _ in range(60):  # Armijo backtracking keeps the convex objective decreasing
+        for _ in range(30):  # Armijo backtracking keeps the convex objective decreasing
             candidate = w + step
-            res_c, d_c, lme_c = _residual_softmax(r, features, eta, candidate)
+            with np.errstate(over="ignore", invalid="ignore"):  # a rejected trial may overflow
+                res_c, d_c, lme_c = _residual_softmax(r, features, eta, candidate)
             if np.isfinite(lme_c) and eta * lme_c <= value - 1e-4 * float(mean_f @ step):
                 break
             step = step * 0.5
@@ -117,26 +123,43 @@ def _dkl_dlog_eta(features: Array, residual: Array, weights: Array, eta: float) 
     return -max(variance, 0.0) / eta**2
 
 
-def _normalise(returns: Array, baseline_features: Array) -> tuple[Array | None, Array]:
-    """Remove the least-squares baseline fit from the returns and scale the residual to unit spread.
+def _normalise(returns: Array, baseline_features: Array) -> tuple[Array | None, Array, float]:
+    """Normalise the returns and the baseline features; returns (r, F, scale) with R ≙ scale · r.
 
-    The weights are exactly invariant to R → aR + b (a > 0) and to R → R + φᵀv (w absorbs v), so this
-    changes nothing but the units of η and w. Afterwards w = 0 is the optimum for η → ∞, and η is O(1)
-    even when the baseline explains nearly all of the returns (the η → 0 valley of the raw problem).
-    Returns ``None`` for r when the residual vanishes (all-equal returns, or returns fully explained).
+    The weights are exactly invariant to R → aR + b (a > 0), to R → R + φᵀv (w absorbs v) and to any
+    invertible linear map of the centred features φ − φ̂, so this changes nothing but the units of η and w:
+
+    * F is an orthonormal basis (columns of norm √N) of the centred features, with directions at round-off
+      level dropped (a constant or offset context dimension then neither stalls nor biases the solve);
+    * r is the residual of the returns' least-squares fit on F, shifted to max 0 and scaled to unit standard
+      deviation. Then w = 0 is the optimum for η → ∞, and η is O(1) even when the baseline explains nearly all
+      of the returns (the η → 0 valley of the raw problem).
+
+    r is ``None`` when the residual vanishes (all-equal returns, or returns fully explained by the baseline).
     """
-    centred_r = returns - returns.mean()
-    features = baseline_features - baseline_features.mean(axis=0)
-    scale = float(np.abs(centred_r).max())
-    if scale == 0.0:
-        return None, features
-    residual = centred_r / scale
-    if features.shape[1]:  # lstsq copes with rank-deficient features (e.g. one context for all samples)
-        residual = residual - features @ np.linalg.lstsq(features, residual, rcond=None)[0]
-    spread = float(residual.std())
-    if spread <= _DEGENERATE:
-        return None, features
-    return (residual - residual.max()) / spread, features
+    n = returns.shape[0]
+    raw_scale = float(np.abs(baseline_features).max()) if baseline_features.size else 0.0
+    features = np.zeros((n, 0))
+    if raw_scale > 0.0:
+        basis, singular, _ = np.linalg.svd(
+            baseline_features - baseline_features.mean(axis=0), full_matrices=False
+        )
+        features = basis[:, singular > 1e-12 * raw_scale * np.sqrt(n)] * np.sqrt(n)
+    magnitude = float(np.abs(returns).max())
+    if magnitude == 0.0:
+        return None, features, 1.0
+    centred = returns / magnitude  # divide first: returns near ±1e308 must not overflow
+    centred = centred - centred.mean()
+    spread = float(np.abs(centred).max())
+    if spread == 0.0:
+        return None, features, 1.0
+    residual = centred / spread
+    if features.shape[1]:
+        residual = residual - features @ (features.T @ residual) / n
+    deviation = float(residual.std())
+    if deviation <= _DEGENERATE:
+        return None, features, 1.0
+    return (residual - residual.max()) / deviation, features, magnitude * spread * deviation
 
 
 def solve_dual(
@@ -153,7 +176,8 @@ def solve_dual(
     returns : ndarray, shape (N,)
         Returns R_k (maximised). Only their ranks and spacing matter: the result is invariant to R → aR + b.
     baseline_features : ndarray, shape (N, k)
-        φ(s_k); they are centred on their batch mean φ̂ inside, so a constant feature is not needed.
+        φ(s_k); centred on their batch mean φ̂ inside, so a constant feature is not needed (and a constant
+        context dimension is harmless).
     epsilon : float
         KL bound ε, 0 < ε < log N.
     eta0 : float
@@ -165,15 +189,15 @@ def solve_dual(
         Weights (N,) with KL(d ‖ uniform) = ε within ``DUAL_KL_TOL`` (or < ε at ``ETA_MIN``, see module
         docstring); all-equal returns, or returns fully explained by the baseline, give uniform weights.
     """
-    n, k = baseline_features.shape
+    n = baseline_features.shape[0]
     uniform = np.full(n, 1.0 / n)
-    r, features = _normalise(returns, baseline_features)
+    r, features, scale = _normalise(returns, baseline_features)
     if r is None:
-        return DualSolution(uniform, np.inf, np.zeros(k), 0.0, 0)
-    w = np.zeros(k)  # the exact large-η optimum after _normalise
+        return DualSolution(uniform, np.inf, np.zeros(features.shape[1]), 0.0, 0, scale)
+    w = np.zeros(features.shape[1])  # the exact large-η optimum after _normalise
     log_eta = float(np.log(np.clip(eta0, ETA_MIN, ETA_MAX))) if np.isfinite(eta0) else 0.0
     low, high = np.log(ETA_MIN), np.log(ETA_MAX)  # the root log η lies in (low, high)
-    best = DualSolution(uniform, np.inf, w, 0.0, 0)  # feasible (KL ≤ ε) solution with the smallest η
+    best = DualSolution(uniform, np.inf, w, 0.0, 0, scale)  # feasible (KL ≤ ε), with the smallest η
     for iteration in range(1, max_iter + 1):
         eta = float(np.exp(log_eta))
         w_eta, residual, weights, kl, converged = _minimise_over_w(r, features, eta, w)
@@ -182,7 +206,7 @@ def solve_dual(
         else:
             w, gap = w_eta, kl - epsilon
             if gap <= DUAL_KL_TOL and eta < best.eta:
-                best = DualSolution(weights, eta, w, kl, iteration)
+                best = DualSolution(weights, eta, w, kl, iteration, scale)
             if abs(gap) <= DUAL_KL_TOL:
                 break
             low, high = (log_eta, high) if gap > 0 else (low, log_eta)

@@ -40,6 +40,7 @@ class FeatureMap:
 
     context_dim: int
     name: ClassVar[str] = "base"
+    constant_column: ClassVar[int | None] = None  # index of a feature that is always 1, if any
 
     def __post_init__(self) -> None:
         if isinstance(self.context_dim, bool) or not isinstance(self.context_dim, (int, np.integer)):
@@ -56,9 +57,17 @@ class FeatureMap:
         raise NotImplementedError
 
     def constant_coefficients(self, mean: Array) -> Array:
-        """Coefficients A (k, p) whose policy mean Aᵀϕ(s) equals ``mean`` (p,) for every context."""
+        """Coefficients A (k, p) whose policy mean Aᵀϕ(s) equals ``mean`` (p,) for every context.
+
+        Raises ``ValueError`` for maps that cannot represent a constant (no constant feature).
+        """
+        if self.constant_column is None:
+            raise ValueError(
+                f"initial_mean: expected full coefficients of shape ({self.n_features}, p) for the "
+                f"{self.name!r} feature map, which has no constant feature; got a constant mean"
+            )
         coefficients = np.zeros((self.n_features, mean.shape[0]))
-        coefficients[0] = mean  # affine-type maps put the constant feature first
+        coefficients[self.constant_column] = mean
         return coefficients
 
     def spec(self) -> dict[str, Any]:
@@ -71,6 +80,7 @@ class AffineFeatures(FeatureMap):
     """ϕ(s) = [1, s]: a policy mean linear in the context (the paper's default)."""
 
     name: ClassVar[str] = "affine"
+    constant_column: ClassVar[int | None] = 0
 
     @property
     def n_features(self) -> int:
@@ -85,6 +95,7 @@ class QuadraticFeatures(FeatureMap):
     """ϕ(s) = [1, s, s²] with element-wise squares (no cross terms)."""
 
     name: ClassVar[str] = "quadratic"
+    constant_column: ClassVar[int | None] = 0
 
     @property
     def n_features(self) -> int:
@@ -108,7 +119,7 @@ class BaselineFeatures(FeatureMap):
         return np.concatenate([contexts, contexts**2], axis=1)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class RBFFeatures(FeatureMap):
     """Normalised Gaussian radial basis functions: ϕ_i(s) = exp(−|s − c_i|²/(2h²)) / Σ_j exp(·).
 
@@ -134,12 +145,14 @@ class RBFFeatures(FeatureMap):
             )
         if not np.isfinite(centres).all():
             raise ValueError("centres: expected finite values, got NaN or inf")
-        if not (
-            isinstance(self.bandwidth, (int, float)) and np.isfinite(self.bandwidth) and self.bandwidth > 0
-        ):
-            raise ValueError(f"bandwidth: expected a finite number > 0, got {self.bandwidth!r}")
+        bandwidth = self.bandwidth
+        if isinstance(bandwidth, (bool, np.bool_)) or not isinstance(bandwidth, (int, float, np.number)):
+            raise TypeError(f"bandwidth: expected a finite number > 0, got {type(bandwidth).__name__}")
+        if not (np.isfinite(bandwidth) and bandwidth > 0):
+            raise ValueError(f"bandwidth: expected a finite number > 0, got {bandwidth!r}")
         centres.setflags(write=False)
         object.__setattr__(self, "centres", centres)
+        object.__setattr__(self, "bandwidth", float(bandwidth))
 
     @classmethod
     def grid(cls, low: Any, high: Any, per_dim: int, bandwidth: float | None = None) -> RBFFeatures:
@@ -168,6 +181,14 @@ class RBFFeatures(FeatureMap):
 
     def spec(self) -> dict[str, Any]:
         return {**super().spec(), "centres": self.centres.tolist(), "bandwidth": float(self.bandwidth)}
+
+    def __eq__(
+        self, other: object
+    ) -> bool:  # by value: centres are an array, which dataclass eq cannot compare
+        return type(other) is type(self) and self.spec() == other.spec()  # type: ignore[attr-defined]
+
+    def __hash__(self) -> int:
+        return hash((self.context_dim, self.centres.tobytes(), self.bandwidth))
 
 
 _REGISTRY: dict[str, type[FeatureMap]] = {

@@ -88,8 +88,10 @@ def _minimise_over_w(
             converged = True
             break
         if decrement <= 1e-6 * eta:  # quadratic convergence region: the full step is safe
-            w = w + step
-            residual, weights, lme = _residual_softmax(r, features, eta, w)
+            res_c, d_c, lme_c = _residual_softmax(r, features, eta, w + step)
+            if not np.isfinite(lme_c):
+                break  # round-off at a tiny η: report "not converged" and let the outer loop back off
+            w, residual, weights, lme = w + step, res_c, d_c, lme_c
             continue
         value = eta * lme
         for _ in range(30):  # Armijo backtracking keeps the convex objective decreasing
@@ -189,6 +191,14 @@ def solve_dual(
         Weights (N,) with KL(d ‖ uniform) = ε within ``DUAL_KL_TOL`` (or < ε at ``ETA_MIN``, see module
         docstring); all-equal returns, or returns fully explained by the baseline, give uniform weights.
     """
+    with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
+        # Trial points near the non-smooth η → 0 limit may overflow; they are rejected by finiteness checks.
+        return _solve_dual(returns, baseline_features, epsilon, eta0, max_iter)
+
+
+def _solve_dual(
+    returns: Array, baseline_features: Array, epsilon: float, eta0: float, max_iter: int
+) -> DualSolution:
     n = baseline_features.shape[0]
     uniform = np.full(n, 1.0 / n)
     r, features, scale = _normalise(returns, baseline_features)

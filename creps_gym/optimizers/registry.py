@@ -45,8 +45,8 @@ class OptimizerEntry:
         Registry name (what ``creps-gym run --optimizer`` takes).
     description : str
         One line shown by ``creps-gym list``.
-    target : str
-        ``"module:Class"`` of the optimiser class (imported lazily); it must take
+    target : str or type
+        The optimiser class, or ``"module:Class"`` to import it lazily. The class must take
         ``(n_params, n_context_dims, *, initial_mean, initial_cov, seed, **options)`` and provide
         ``from_state_dict``.
     fixed : dict
@@ -55,11 +55,13 @@ class OptimizerEntry:
 
     name: str
     description: str
-    target: str
+    target: str | type
     fixed: Mapping[str, Any] = field(default_factory=dict)
 
     def load_class(self) -> Any:
         """Import and return the optimiser class."""
+        if not isinstance(self.target, str):
+            return self.target
         module, _, attribute = self.target.partition(":")
         return getattr(importlib.import_module(module), attribute)
 
@@ -68,7 +70,12 @@ _REGISTRY: dict[str, OptimizerEntry] = {}
 
 
 def register_optimizer(
-    name: str, description: str, target: str, fixed: Mapping[str, Any] | None = None, *, replace: bool = False
+    name: str,
+    description: str,
+    target: str | type,
+    fixed: Mapping[str, Any] | None = None,
+    *,
+    replace: bool = False,
 ) -> OptimizerEntry:
     """Add an optimiser to the registry (see :class:`OptimizerEntry` for the arguments).
 
@@ -81,8 +88,10 @@ def register_optimizer(
         raise TypeError(f"name: expected a non-empty str, got {name!r}")
     if name in _REGISTRY and not replace:
         raise ValueError(f"name: expected a name not yet registered, got {name!r} (pass replace=True)")
-    if not isinstance(target, str) or target.count(":") != 1:
-        raise ValueError(f"target: expected 'module:Class', got {target!r}")
+    if isinstance(target, str) and target.count(":") != 1:
+        raise ValueError(f"target: expected a class or 'module:Class', got {target!r}")
+    if not isinstance(target, (str, type)):
+        raise TypeError(f"target: expected a class or 'module:Class', got {type(target).__name__}")
     entry = OptimizerEntry(name, description, target, dict(fixed or {}))
     _REGISTRY[name] = entry
     return entry

@@ -1,0 +1,366 @@
+"""The ``creps-gym`` command line: list, run, resume, plot and export.
+
+Exit codes
+----------
+0
+    Success (including a run stopped by one of its stop conditions, or resuming a finished run).
+1
+    The run failed: an episode failed after its retries, or the env or optimiser raised.
+2
+    Usage error: unknown command, flag, env or optimiser, or a bad value (the message names the flag,
+    what was expected and what was given).
+3
+    Run-directory error: ``--out`` already holds a run, or ``resume``/``plot`` got a folder that is not
+    a run directory.
+4
+    An optional dependency is missing (e.g. ``pip install creps-gym[plot]`` for ``plot``).
+130
+    Interrupted (Ctrl-C); ``creps-gym resume DIR`` continues from the last checkpoint.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from collections.abc import Sequence
+from dataclasses import fields
+from typing import Any
+
+__all__ = ["EXIT_CODES", "build_parser", "main"]
+
+EXIT_CODES = {"ok": 0, "run_failed": 1, "usage": 2, "run_dir": 3, "missing_dependency": 4, "interrupted": 130}
+
+
+class UsageError(Exception):
+    """A bad command line (exit code 2)."""
+
+
+# -- argument types: each names what it expected and what it got --------------------------------------------
+def _integer(minimum: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}")
+        return value
+
+    return parse
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not 0 < value < math.inf:
+        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
+    return value
+
+
+def _numbers(text: str) -> float | list[float]:
+    try:
+        values = [float(part) for part in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a number or comma-separated numbers, got {text!r}"
+        ) from None
+    return values[0] if len(values) == 1 else values
+
+
+def _initial_mean(text: str) -> str | float | list[float]:
+    if text == "uniform":
+        return text
+    try:
+        return _numbers(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected 'uniform', a number or p comma-separated numbers, got {text!r}"
+        ) from None
+
+
+def _key_value(text: str) -> tuple[str, Any]:
+    key, sep, raw = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(
+            f"expected KEY=VALUE (VALUE in JSON or a plain string), got {text!r}"
+        )
+    try:
+        return key, json.loads(raw)
+    except json.JSONDecodeError:
+        return key, raw
+
+
+def _env_id(text: str) -> str:
+    import gymnasium as gym
+
+    import creps_gym
+
+    if text not in gym.registry:
+        raise argparse.ArgumentTypeError(f"expected one of {creps_gym.registered_ids()}, got {text!r}")
+    return text
+
+
+def _optimizer_name(text: str) -> str:
+    from creps_gym.optimizers.registry import optimizer_names
+
+    if text not in optimizer_names():
+        raise argparse.ArgumentTypeError(f"expected one of {optimizer_names()}, got {text!r}")
+    return text
+
+
+# -- parser -------------------------------------------------------------------------------------------------
+def _add_progress(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument(
+        "--progress",
+        dest="progress",
+        action="store_true",
+        default=None,
+        help="show the progress bar even when not on a terminal",
+    )
+    group.add_argument(
+        "--no-progress", dest="progress", action="store_false", help="never show the progress bar"
+    )
+    parser.add_argument("--no-plot", action="store_true", help="do not write learning_curve.png at the end")
+
+
+def _add_run(commands: Any) -> None:
+    from creps_gym.runner.config import BACKENDS, VECTOR_MODES
+
+    run = commands.add_parser(
+        "run", help="run an optimiser on an env", description="Run an optimiser on an env."
+    )
+    required = [
+        ("--env", _env_id, "registered env id (see `creps-gym list`)"),
+        ("--optimizer", _optimizer_name, "optimiser name (see `creps-gym list`)"),
+        ("--iterations", _integer(1), "maximum number of iterations"),
+        ("--samples", _integer(2), "episodes per iteration (>= 2)"),
+        ("--seed", _integer(0), "master seed (>= 0)"),
+        ("--out", str, "new run directory"),
+    ]
+    for flag, parse, text in required:
+        run.add_argument(flag, required=True, type=parse, help=text)
+    run.add_argument("--overwrite", action="store_true", help="replace a run already in --out (deletes it)")
+    run.add_argument("--backend", default="serial", choices=BACKENDS, help="where episodes run")
+    run.add_argument("--vector-mode", default="auto", choices=VECTOR_MODES, help="vector backend flavour")
+    optional = [
+        ("--workers", _integer(1), None, "vector sub-envs or Ray tasks per iteration"),
+        ("--retries", _integer(0), 2, "re-runs of a failed episode"),
+        ("--eval-every", _integer(1), 1, "evaluate the mean policy every N iterations"),
+        ("--eval-contexts", _integer(1), 16, "number of test contexts"),
+        ("--checkpoint-every", _integer(1), 10, "checkpoint every N iterations"),
+        ("--max-episodes", _integer(2), None, "episode budget"),
+        ("--target-regret", _positive_float, None, "stop once the mean regret is at most this"),
+        ("--max-time", _positive_float, None, "stop after this many seconds"),
+        (
+            "--initial-mean",
+            _initial_mean,
+            None,
+            "a number, p comma-separated numbers, or 'uniform' in the box",
+        ),
+        ("--initial-std", _numbers, None, "initial standard deviation(s); default: box width / 4"),
+    ]
+    for flag, parse, default, text in optional:
+        run.add_argument(flag, type=parse, default=default, help=f"{text} (default {default})")
+    for flag, text in (("--opt", "optimiser option, e.g. --opt epsilon=1.0"), ("--env-kwarg", "e.g. dim=5")):
+        run.add_argument(
+            flag,
+            action="append",
+            type=_key_value,
+            default=[],
+            metavar="KEY=VALUE",
+            help=f"{text}; VALUE is JSON or a string (repeatable)",
+        )
+    _add_progress(run)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``creps-gym`` argument parser."""
+    parser = argparse.ArgumentParser(
+        prog="creps-gym",
+        description="Contextual direct policy search on contextual episodic Gymnasium envs.",
+        epilog="Exit codes: 0 ok, 1 run failed, 2 usage error, 3 run-directory error, "
+        "4 missing optional dependency, 130 interrupted.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    commands.add_parser("list", help="list the envs and optimisers", description="List envs and optimisers.")
+    _add_run(commands)
+    resume = commands.add_parser("resume", help="continue a run from its last checkpoint")
+    resume.add_argument("run_dir", metavar="DIR")
+    _add_progress(resume)
+    plot = commands.add_parser("plot", help="plot learning curves of run directories")
+    plot.add_argument("run_dirs", nargs="+", metavar="DIR")
+    plot.add_argument("-o", "--output", required=True, metavar="FILE", help="image file, e.g. curves.png")
+    plot.add_argument("--title", help="figure title")
+    export = commands.add_parser("export", help="write run directories as one IOHanalyzer CSV")
+    export.add_argument("run_dirs", nargs="+", metavar="DIR")
+    export.add_argument("-o", "--output", required=True, metavar="FILE", help="CSV file")
+    return parser
+
+
+# -- commands -----------------------------------------------------------------------------------------------
+def _env_description(env_id: str) -> str:
+    import gymnasium as gym
+    from gymnasium.envs.registration import load_env_creator
+
+    try:
+        creator = load_env_creator(gym.spec(env_id).entry_point)
+    except Exception as exc:  # an env whose module cannot be imported is still listed
+        return f"(cannot import: {type(exc).__name__})"
+    lines = (getattr(creator, "__doc__", None) or "").strip().splitlines()
+    return lines[0] if lines else ""
+
+
+def _cmd_list(_: argparse.Namespace) -> int:
+    import creps_gym
+    from creps_gym.optimizers.registry import describe_optimizers
+
+    print("Environments:")
+    for env_id in creps_gym.registered_ids():
+        print(f"  {env_id:<34} {_env_description(env_id)}")
+    print("Optimizers:")
+    for name, description in describe_optimizers().items():
+        print(f"  {name:<34} {description}")
+    return 0
+
+
+_FLAGS = {"samples": "--samples", "optimizer_options": "--opt", "env_kwargs": "--env-kwarg"}
+
+
+def _as_usage_error(exc: Exception, args: argparse.Namespace) -> UsageError:
+    """Name the flag in a configuration error (``'eval_every: ...'`` -> ``'argument --eval-every: ...'``).
+
+    Errors about an optimiser option or an env keyword argument name ``--opt`` or ``--env-kwarg``.
+    """
+    from creps_gym.runner.config import RunConfig
+
+    message = str(exc)
+    field, sep, rest = message.partition(":")
+    if sep and field in {f.name for f in fields(RunConfig)}:
+        flag = _FLAGS.get(field, "--" + field.replace("_", "-"))
+        return UsageError(f"argument {flag}:{rest}")
+    for flag, given in (("--opt", args.opt), ("--env-kwarg", args.env_kwarg)):
+        if any(key in message.split(":", 1)[0] or f"'{key}'" in message for key, _ in given):
+            return UsageError(f"argument {flag}: {message}")
+    return UsageError(message)
+
+
+def _finish(runner: Any, args: argparse.Namespace) -> int:
+    from creps_gym.runner.rundir import RunDir
+
+    history = runner.run()
+    last = history.records[-1] if history.records else None
+    if last is not None:
+        value = last.eval_regret if not math.isnan(last.eval_regret) else last.eval_return
+        metric = history.meta.get("metric", "return")
+        print(
+            f"iterations {last.iteration}, episodes {last.episodes}, {metric} {value:.6g}, "
+            f"stop: {history.stop_reason}; run directory {runner.run_dir.path}"
+        )
+    if not args.no_plot and history.records:
+        try:
+            from creps_gym.runner.plots import plot_run_dirs
+
+            plot_run_dirs([runner.run_dir.path], runner.run_dir.file(RunDir.PLOT))
+            print(f"plot: {runner.run_dir.file(RunDir.PLOT)}")
+        except ImportError as exc:
+            print(f"creps-gym: no plot written ({exc})", file=sys.stderr)
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from creps_gym.runner.callbacks import ProgressBar
+    from creps_gym.runner.config import RunConfig
+    from creps_gym.runner.loop import Runner
+    from creps_gym.runner.rundir import RunDir
+
+    options = {f.name: getattr(args, f.name) for f in fields(RunConfig) if hasattr(args, f.name)}
+    options.update(optimizer_options=dict(args.opt), env_kwargs=dict(args.env_kwarg))
+    try:
+        config = RunConfig(**options)
+        runner = Runner(config, callbacks=[ProgressBar(args.progress)])
+    except (ValueError, TypeError) as exc:
+        raise _as_usage_error(exc, args) from None
+    runner.run_dir = RunDir.create(args.out, config, runner.history.meta, overwrite=args.overwrite)
+    return _finish(runner, args)
+
+
+def _cmd_resume(args: argparse.Namespace) -> int:
+    from creps_gym.runner.callbacks import ProgressBar
+    from creps_gym.runner.loop import Runner
+    from creps_gym.runner.rundir import RunDir
+
+    directory = RunDir.open(args.run_dir)
+    config = directory.config()
+    if config.env is None or config.optimizer is None:
+        raise UsageError(
+            f"DIR: expected a run started by `creps-gym run`, got {directory.path} (use the Python API)"
+        )
+    runner = Runner(config, run_dir=directory, callbacks=[ProgressBar(args.progress)])
+    return _finish(runner, args)
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from creps_gym.runner.plots import plot_run_dirs
+
+    plot_run_dirs(args.run_dirs, args.output, title=args.title)
+    print(f"plot: {args.output}")
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from creps_gym.runner.export import write_iohanalyzer
+    from creps_gym.runner.plots import load_history
+
+    write_iohanalyzer([load_history(p) for p in args.run_dirs], args.output)
+    print(f"IOHanalyzer CSV: {args.output}")
+    return 0
+
+
+_COMMANDS = {
+    "list": _cmd_list,
+    "run": _cmd_run,
+    "resume": _cmd_resume,
+    "plot": _cmd_plot,
+    "export": _cmd_export,
+}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``creps-gym`` console script; returns the exit code (see the module docstring)."""
+    from creps_gym.runner.backends import EpisodeError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)  # exits with code 2 on usage errors
+    prog = f"creps-gym {args.command}"
+    try:
+        return _COMMANDS[args.command](args)
+    except UsageError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return EXIT_CODES["usage"]
+    except (FileExistsError, FileNotFoundError, NotADirectoryError) as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return EXIT_CODES["run_dir"]
+    except ImportError as exc:
+        print(f"{prog}: error: missing optional dependency: {exc}", file=sys.stderr)
+        return EXIT_CODES["missing_dependency"]
+    except BrokenPipeError:  # e.g. `creps-gym list | head`: the reader left, which is not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_CODES["ok"]
+    except KeyboardInterrupt:
+        print(
+            f"{prog}: interrupted; `creps-gym resume DIR` continues from the last checkpoint", file=sys.stderr
+        )
+        return EXIT_CODES["interrupted"]
+    except (EpisodeError, RuntimeError, ValueError, TypeError, ArithmeticError) as exc:
+        print(f"{prog}: run failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return EXIT_CODES["run_failed"]
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,45 @@
+"""The generic runner: any ask/tell optimiser on any contextual episodic env.
+
+``run(optimizer, env, iterations, samples_per_iteration, seed, ...) -> History`` runs the loop (contexts,
+ask, evaluate, tell), evaluates the recommended policy on fixed test contexts, and optionally writes a run
+directory (config, JSONL log, versions, atomic ``.npz`` checkpoints) that :func:`resume` continues. See
+``docs/runner.md``.
+
+Modules: :mod:`.config` (RunConfig), :mod:`.loop` (the Runner), :mod:`.api` (run, resume),
+:mod:`.history` (History), :mod:`.backends` (serial, vector, Ray), :mod:`.callbacks` (callbacks, progress
+bar), :mod:`.rundir` (run directory), :mod:`.export` (IOHanalyzer CSV), :mod:`.plots` (matplotlib).
+"""
+
+from creps_gym.runner.api import resume, run
+from creps_gym.runner.backends import EnvSource, EpisodeError, make_backend
+from creps_gym.runner.callbacks import Callback, ProgressBar
+from creps_gym.runner.config import BACKENDS, VECTOR_MODES, RunConfig
+from creps_gym.runner.export import write_iohanalyzer
+from creps_gym.runner.history import History, IterationRecord
+from creps_gym.runner.loop import Runner, default_initial_distribution, split_seed
+from creps_gym.runner.plots import load_history, plot_histories, plot_run_dirs
+from creps_gym.runner.rundir import RunDir, package_versions
+
+__all__ = [
+    "BACKENDS",
+    "VECTOR_MODES",
+    "Callback",
+    "EnvSource",
+    "EpisodeError",
+    "History",
+    "IterationRecord",
+    "ProgressBar",
+    "RunConfig",
+    "RunDir",
+    "Runner",
+    "default_initial_distribution",
+    "load_history",
+    "make_backend",
+    "package_versions",
+    "plot_histories",
+    "plot_run_dirs",
+    "resume",
+    "run",
+    "split_seed",
+    "write_iohanalyzer",
+]

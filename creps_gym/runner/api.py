@@ -1,0 +1,117 @@
+"""The public entry points: :func:`run` and :func:`resume`."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Any
+
+from creps_gym.runner.config import RunConfig
+from creps_gym.runner.history import History
+from creps_gym.runner.loop import Runner
+from creps_gym.runner.rundir import RunDir
+
+__all__ = ["resume", "run"]
+
+
+def run(
+    optimizer: Any,
+    env: Any,
+    iterations: int,
+    samples_per_iteration: int,
+    seed: int,
+    *,
+    run_dir: str | os.PathLike[str] | None = None,
+    callbacks: Sequence[Any] = (),
+    env_kwargs: dict[str, Any] | None = None,
+    optimizer_options: dict[str, Any] | None = None,
+    **options: Any,
+) -> History:
+    """Run an ask/tell optimiser on a contextual episodic env.
+
+    Parameters
+    ----------
+    optimizer : str or AskTellOptimizer
+        A registry name (see :func:`creps_gym.optimizers.optimizer_names`), built with the run's optimiser
+        seed and initial distribution, or an optimiser object (used as given).
+    env : str or gymnasium.Env
+        A registered id (made with ``env_kwargs``) or an env object.
+    iterations : int
+        Maximum number of iterations.
+    samples_per_iteration : int
+        Episodes per iteration (>= 2).
+    seed : int
+        Master seed (>= 0).
+    run_dir : path-like, optional
+        A new directory for the config, log, checkpoints and final history (see
+        :mod:`creps_gym.runner.rundir`); ``FileExistsError`` if it already holds a run.
+    callbacks : sequence of Callback or callables ``f(record, history) -> bool | None``
+    env_kwargs, optimizer_options : dict, optional
+        Keyword arguments of ``gymnasium.make`` (id envs) and of the optimiser (name optimisers).
+    **options
+        The other :class:`~creps_gym.runner.config.RunConfig` fields: ``eval_every``, ``eval_contexts``,
+        ``backend``, ``workers``, ``vector_mode``, ``retries``, ``max_episodes``, ``target_regret``,
+        ``max_time``, ``checkpoint_every``, ``initial_mean``, ``initial_std``.
+
+    Returns
+    -------
+    History
+    """
+    by_name, by_id = isinstance(optimizer, str), isinstance(env, str)
+    if not by_id and env_kwargs:
+        raise ValueError(f"env_kwargs: expected none with an env object, got {env_kwargs}")
+    if not by_name and optimizer_options:
+        raise ValueError(
+            f"optimizer_options: expected none with an optimiser object, got {optimizer_options}"
+        )
+    names = {"env": env if by_id else None, "optimizer": optimizer if by_name else None}
+    sizes = {"iterations": iterations, "samples": samples_per_iteration, "seed": seed}
+    kwargs = {"env_kwargs": env_kwargs or {}, "optimizer_options": optimizer_options or {}}
+    config = RunConfig(**names, **sizes, **kwargs, **options)
+    objects = {"env": None if by_id else env, "optimizer": None if by_name else optimizer}
+    runner = Runner(config, **objects, callbacks=callbacks)
+    if run_dir is not None:
+        runner.run_dir = RunDir.create(run_dir, config, runner.history.meta)
+    return runner.run()
+
+
+def resume(
+    run_dir: str | os.PathLike[str],
+    *,
+    env: Any = None,
+    optimizer_class: Any = None,
+    callbacks: Sequence[Any] = (),
+) -> History:
+    """Continue a run from its last checkpoint (or from the start if it has none); returns the History.
+
+    The resumed History equals the one an uninterrupted run would have produced (wall times aside). A
+    finished run is returned as is.
+
+    Parameters
+    ----------
+    run_dir : path-like
+        A directory written by :func:`run` or ``creps-gym run``.
+    env : gymnasium.Env, optional
+        Required when the run was started with an env object instead of an id.
+    optimizer_class : type, optional
+        Required when the run was started with an optimiser object: the class whose ``from_state_dict``
+        restores it. Such runs resume from a checkpoint only.
+    callbacks : sequence of Callback or callables
+    """
+    directory = RunDir.open(run_dir)
+    config = directory.config()
+    if config.env is None and env is None:
+        raise ValueError("env: expected the env object this run was started with (its config has no env id)")
+    if config.optimizer is None:
+        if optimizer_class is None:
+            raise ValueError("optimizer_class: expected the class of the run's optimiser object, got None")
+        if directory.load_checkpoint() is None:
+            raise ValueError(f"run_dir: expected a checkpoint in {directory.path}, got none")
+    runner = Runner(
+        config,
+        env=env if config.env is None else None,
+        optimizer_class=optimizer_class,
+        run_dir=directory,
+        callbacks=callbacks,
+    )
+    return runner.run()

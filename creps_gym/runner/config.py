@@ -1,0 +1,152 @@
+"""The resolved configuration of a run (:class:`RunConfig`), its validation and its JSON form."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from creps_gym._validation import check_positive_int
+
+__all__ = ["BACKENDS", "VECTOR_MODES", "RunConfig"]
+
+BACKENDS = ("serial", "vector", "ray")
+VECTOR_MODES = ("auto", "native", "sync", "async")
+
+
+def _optional_positive(value: Any, name: str, *, integer: bool) -> Any:
+    if value is None:
+        return None
+    if integer:
+        return check_positive_int(value, name)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < math.inf:
+        raise ValueError(f"{name}: expected a positive finite number or None, got {value!r}")
+    return float(value)
+
+
+def _vector_or_scalar(value: Any, name: str, positive: bool) -> Any:
+    if value is None:
+        return None
+    items = value if isinstance(value, (list, tuple)) else [value]
+    for item in items:
+        bad = isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item)
+        if bad or (positive and item <= 0):
+            kind = "positive finite numbers" if positive else "finite numbers"
+            raise ValueError(f"{name}: expected a number or a list of {kind}, got {value!r}")
+    return [float(v) for v in items] if isinstance(value, (list, tuple)) else float(value)
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Everything that defines a run; validates itself. Written to ``config.json`` in the run directory.
+
+    Parameters
+    ----------
+    env : str or None
+        Registered env id (None when the env object was given directly; such runs resume only when the
+        same env is passed to :func:`~creps_gym.runner.resume`).
+    optimizer : str or None
+        Registry name (None when an optimiser object was given).
+    iterations : int
+        Maximum number of iterations (ask, evaluate, tell).
+    samples : int
+        Episodes per iteration (>= 2).
+    seed : int
+        Master seed (>= 0), split into env, optimiser and evaluation streams.
+    env_kwargs, optimizer_options : dict
+        Keyword arguments of ``gymnasium.make`` and of the optimiser.
+    eval_every : int
+        Evaluate the recommended policy every this many iterations (and at the last one).
+    eval_contexts : int
+        Size of the fixed, seeded set of test contexts.
+    backend : {"serial", "vector", "ray"}
+        Where episodes run (see :mod:`creps_gym.runner.backends`).
+    workers : int or None
+        Vector: sub-envs (default: samples for the native vector env, else the CPU count); Ray: tasks per
+        iteration (default: the cluster's CPUs).
+    vector_mode : {"auto", "native", "sync", "async"}
+        Vector backend flavour; ``auto`` is the native vector env where registered, else ``async``.
+    retries : int
+        How many times a failed episode (or a dead Ray worker's task) is re-run before the run stops.
+    max_episodes : int or None
+        Episode budget: stop before an iteration would exceed it.
+    target_regret : float or None
+        Stop once the evaluated mean regret is at most this (envs with a regret only).
+    max_time : float or None
+        Stop after this many seconds of wall time.
+    checkpoint_every : int
+        Checkpoint every this many iterations (and at the end), when the run has a directory.
+    initial_mean, initial_std : float, list of float or None
+        Initial search distribution; None = the action box's centre and a quarter of its width.
+        ``initial_mean="uniform"`` draws the mean uniformly in the action box from the master seed (the
+        paper's initialisation), from a fourth ``SeedSequence`` child that no other stream uses.
+    """
+
+    env: str | None
+    optimizer: str | None
+    iterations: int
+    samples: int
+    seed: int
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    optimizer_options: dict[str, Any] = field(default_factory=dict)
+    eval_every: int = 1
+    eval_contexts: int = 16
+    backend: str = "serial"
+    workers: int | None = None
+    vector_mode: str = "auto"
+    retries: int = 2
+    max_episodes: int | None = None
+    target_regret: float | None = None
+    max_time: float | None = None
+    checkpoint_every: int = 10
+    initial_mean: Any = None
+    initial_std: Any = None
+
+    def __post_init__(self) -> None:
+        for name in ("env", "optimizer"):
+            value = getattr(self, name)
+            if value is not None and (not isinstance(value, str) or not value):
+                raise TypeError(f"{name}: expected a non-empty str or None, got {value!r}")
+        check_positive_int(self.iterations, "iterations")
+        check_positive_int(self.samples, "samples", minimum=2)
+        check_positive_int(self.seed, "seed", minimum=0)
+        check_positive_int(self.eval_every, "eval_every")
+        check_positive_int(self.eval_contexts, "eval_contexts")
+        check_positive_int(self.retries, "retries", minimum=0)
+        check_positive_int(self.checkpoint_every, "checkpoint_every")
+        for name in ("env_kwargs", "optimizer_options"):
+            if not isinstance(getattr(self, name), Mapping):
+                raise TypeError(f"{name}: expected a dict, got {type(getattr(self, name)).__name__}")
+            object.__setattr__(self, name, dict(getattr(self, name)))
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend: expected one of {list(BACKENDS)}, got {self.backend!r}")
+        if self.vector_mode not in VECTOR_MODES:
+            raise ValueError(f"vector_mode: expected one of {list(VECTOR_MODES)}, got {self.vector_mode!r}")
+        _optional_positive(self.workers, "workers", integer=True)
+        _optional_positive(self.max_episodes, "max_episodes", integer=True)
+        for name in ("target_regret", "max_time"):
+            object.__setattr__(self, name, _optional_positive(getattr(self, name), name, integer=False))
+        if self.initial_mean != "uniform":
+            object.__setattr__(
+                self, "initial_mean", _vector_or_scalar(self.initial_mean, "initial_mean", False)
+            )
+        object.__setattr__(self, "initial_std", _vector_or_scalar(self.initial_std, "initial_std", True))
+        if self.max_episodes is not None and self.max_episodes < self.samples:
+            raise ValueError(
+                f"max_episodes: expected at least one iteration's samples ({self.samples}), "
+                f"got {self.max_episodes}"
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable dict."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> RunConfig:
+        """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError``."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"config: expected keys from {sorted(known)}, got unknown keys {unknown}")
+        return cls(**dict(data))

@@ -1,0 +1,360 @@
+"""The generic loop: any ask/tell optimiser on any contextual episodic env.
+
+One iteration draws ``samples`` episode seeds from the env stream, reads each episode's context from
+``env.reset(seed=...)``, asks the optimiser, runs the episodes on the backend and tells the returns. At the
+configured interval (and at the last iteration) the recommended (mean) policy is evaluated on a fixed,
+seeded set of test contexts with :func:`creps_gym.envs.evaluation.evaluate_policy` (mean regret where the
+env supports it, mean return otherwise); for envs that are not creps_gym models the evaluation runs test
+episodes with seeded resets instead.
+
+**Seeds.** The master seed is split with ``numpy.random.SeedSequence(seed).spawn(3)`` into the env stream
+(episode seeds), the optimiser's seed and the test contexts' seed. The same seed gives a bit-identical
+:class:`~creps_gym.runner.history.History` (wall times aside) on every backend and after any resume.
+
+**Stop reasons** (``History.stop_reason``): ``"iterations"``, ``"max_episodes"`` (the next iteration would
+exceed the budget), ``"target_regret"``, ``"max_time"``, ``"optimizer: <criteria>"`` (the optimiser's own
+``stop()``), ``"callback"``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym.envs.evaluation import contextual_model, evaluate_policy, test_contexts
+from creps_gym.optimizers.registry import make_optimizer, restore_optimizer
+from creps_gym.runner.backends import EnvSource, EpisodeError, make_backend, run_episodes
+from creps_gym.runner.callbacks import as_callback
+from creps_gym.runner.config import RunConfig
+from creps_gym.runner.history import History, IterationRecord
+from creps_gym.runner.rundir import RunDir
+
+__all__ = ["Runner", "default_initial_distribution", "split_seed"]
+
+Array = NDArray[np.float64]
+
+
+def split_seed(seed: int) -> tuple[np.random.Generator, int, int]:
+    """The env stream (a Generator), the optimiser's seed and the test contexts' seed from a master seed."""
+    env_seq, optimizer_seq, eval_seq = np.random.SeedSequence(seed).spawn(3)
+    return (
+        np.random.default_rng(env_seq),
+        int(optimizer_seq.generate_state(1)[0]),
+        int(eval_seq.generate_state(1)[0]),
+    )
+
+
+def default_initial_distribution(action_space: gym.spaces.Box) -> tuple[Array, Array]:
+    """Mean and standard deviations (p,) of the default initial search distribution.
+
+    The centre of the action box and a quarter of its width per coordinate (so mean ± 2 std spans the box);
+    coordinates with an infinite bound get mean 0 and standard deviation 1.
+    """
+    low, high = np.asarray(action_space.low, np.float64), np.asarray(action_space.high, np.float64)
+    finite = np.isfinite(low) & np.isfinite(high)
+    low, high = np.where(finite, low, -2.0), np.where(finite, high, 2.0)
+    std = (high - low) / 4.0
+    return np.where(finite, (low + high) / 2.0, 0.0), np.where(std > 0, std, 1.0)
+
+
+class Runner:
+    """Runs one configuration; :func:`creps_gym.runner.run` and :func:`creps_gym.runner.resume` use it.
+
+    Parameters
+    ----------
+    config : RunConfig
+    env : gymnasium.Env, optional
+        The env object (required when ``config.env`` is None).
+    optimizer : AskTellOptimizer, optional
+        An optimiser object (required when ``config.optimizer`` is None).
+    run_dir : RunDir, optional
+        Where to log and checkpoint; its checkpoint, if any, is restored.
+    callbacks : sequence of Callback or callables
+    optimizer_class : type, optional
+        Class whose ``from_state_dict`` restores an object optimiser's checkpoint (default: its type).
+    """
+
+    def __init__(
+        self,
+        config: RunConfig,
+        *,
+        env: gym.Env | None = None,
+        optimizer: Any = None,
+        run_dir: RunDir | None = None,
+        callbacks: Sequence[Any] = (),
+        optimizer_class: Any = None,
+    ) -> None:
+        self.config = config
+        if (config.env is None) == (env is None):
+            raise TypeError("env: expected an env id in the config or an env object (exactly one)")
+        if (config.optimizer is None) == (optimizer is None) and optimizer_class is None:
+            raise TypeError("optimizer: expected a registry name or an optimiser object (exactly one)")
+        self.env = env if env is not None else gym.make(config.env, **config.env_kwargs)
+        for name in ("observation_space", "action_space"):
+            space = getattr(self.env, name)
+            if not isinstance(space, gym.spaces.Box):
+                raise TypeError(f"env: expected a Box {name} (contexts and parameters θ), got {space}")
+        self.source = EnvSource(config.env, dict(config.env_kwargs), None if config.env else self.env)
+        self.env_rng, optimizer_seed, eval_seed = split_seed(config.seed)
+        self.n_context_dims = int(np.prod(self.env.observation_space.shape))
+        self.n_params = int(np.prod(self.env.action_space.shape))
+        self.optimizer = optimizer
+        if optimizer is None and config.optimizer is not None:
+            self.optimizer = self._make_optimizer(optimizer_seed)
+        self._optimizer_class = optimizer_class or (type(optimizer) if optimizer is not None else None)
+        for attribute, expected in (("n_params", self.n_params), ("n_context_dims", self.n_context_dims)):
+            got = getattr(self.optimizer, attribute, expected)
+            if got != expected:
+                raise ValueError(
+                    f"optimizer: expected {attribute} = {expected} for {self.env_name}, got {got}"
+                )
+        self._model = self._contextual_model()
+        self.test_contexts = self._test_contexts(eval_seed)
+        if config.target_regret is not None and not self.has_regret:
+            raise ValueError(
+                f"target_regret: expected None for {self.env_name}, which has no regret, "
+                f"got {config.target_regret}"
+            )
+        self.run_dir = run_dir
+        self.callbacks = [as_callback(c) for c in callbacks]
+        self.history = History(meta=self._meta())
+        self.iteration = self.episodes = 0
+        self._elapsed_before = 0.0
+        self._clock = time.perf_counter()
+        if run_dir is not None:
+            self._restore(run_dir)
+
+    # -- set-up ----------------------------------------------------------------------------------------------
+    @property
+    def env_name(self) -> str:
+        """The env id, or the env's class name for env objects without a spec."""
+        spec = getattr(self.env, "spec", None)
+        return self.config.env or (spec.id if spec is not None else type(self.env.unwrapped).__name__)
+
+    def _uniform_mean(self) -> Array:
+        """The paper's initialisation: a mean drawn uniformly in the action box from the master seed."""
+        low, high = self.env.action_space.low, self.env.action_space.high
+        if not (np.isfinite(low).all() and np.isfinite(high).all()):
+            raise ValueError("initial_mean: expected a number for an unbounded action box, got 'uniform'")
+        init_seq = np.random.SeedSequence(self.config.seed).spawn(4)[3]  # children 0-2: split_seed
+        return np.random.default_rng(init_seq).uniform(low, high)
+
+    def _make_optimizer(self, seed: int) -> Any:
+        mean, std = default_initial_distribution(self.env.action_space)
+        if self.config.initial_mean == "uniform":
+            mean = self._uniform_mean()
+        for name in ("initial_mean", "initial_std"):
+            given = getattr(self.config, name)
+            if given is None or given == "uniform":
+                continue
+            values = np.atleast_1d(np.asarray(given, np.float64))
+            if values.shape not in ((1,), (self.n_params,)):
+                raise ValueError(
+                    f"{name}: expected a number or {self.n_params} numbers (one per parameter), "
+                    f"got {values.shape[0]}"
+                )
+            values = np.broadcast_to(values, (self.n_params,)).copy()
+            mean, std = (values, std) if name == "initial_mean" else (mean, values)
+        return make_optimizer(
+            self.config.optimizer,
+            self.n_params,
+            self.n_context_dims,
+            seed,
+            initial_mean=mean,
+            initial_cov=std**2,
+            **self.config.optimizer_options,
+        )
+
+    def _contextual_model(self) -> Any:
+        try:
+            model = contextual_model(self.env)
+        except TypeError:
+            return None
+        return model if model.observation_space == self.env.observation_space else None
+
+    @property
+    def has_regret(self) -> bool:
+        """Whether the evaluation reports a regret (the env is a creps_gym model with ``SupportsRegret``)."""
+        return self._model is not None and callable(getattr(self._model, "regret", None))
+
+    def _test_contexts(self, seed: int) -> Array:
+        if self._model is not None:
+            return test_contexts(self._model, self.config.eval_contexts, seed)
+        self._eval_seeds = np.random.default_rng(seed).integers(0, 2**63 - 1, size=self.config.eval_contexts)
+        return self._reset_contexts(self._eval_seeds)
+
+    def _meta(self) -> dict[str, Any]:
+        optimizer = self.config.optimizer or type(self.optimizer).__name__
+        return {
+            "env": self.env_name,
+            "optimizer": optimizer,
+            "seed": self.config.seed,
+            "n_params": self.n_params,
+            "n_context_dims": self.n_context_dims,
+            "samples": self.config.samples,
+            "metric": "regret" if self.has_regret else "return",
+        }
+
+    # -- checkpoints -----------------------------------------------------------------------------------------
+    def _restore(self, run_dir: RunDir) -> None:
+        loaded = run_dir.load_checkpoint()
+        if loaded is None:
+            return
+        state, optimizer_state = loaded
+        if self.config.optimizer is not None:
+            self.optimizer = restore_optimizer(self.config.optimizer, optimizer_state)
+        else:
+            self.optimizer = self._optimizer_class.from_state_dict(optimizer_state)
+        self.env_rng.bit_generator.state = state["env_rng"]
+        self.history = History.from_dict(state["history"])
+        self.iteration, self.episodes = int(state["iteration"]), int(state["episodes"])
+        self._elapsed_before = float(state["elapsed"])
+
+    def _checkpoint(self) -> None:
+        if self.run_dir is None:
+            return
+        state = {
+            "env_rng": self.env_rng.bit_generator.state,
+            "history": self.history.to_dict(),
+            "iteration": self.iteration,
+            "episodes": self.episodes,
+            "elapsed": self.elapsed,
+        }
+        self.run_dir.save_checkpoint(state, self.optimizer.state_dict())
+
+    @property
+    def elapsed(self) -> float:
+        """Wall time of the run so far in seconds (summed over resumes)."""
+        return self._elapsed_before + time.perf_counter() - self._clock
+
+    # -- one iteration ---------------------------------------------------------------------------------------
+    def _reset_contexts(self, seeds: NDArray[np.int64]) -> Array:
+        rows = [np.asarray(self.env.reset(seed=int(s))[0], dtype=np.float64).reshape(-1) for s in seeds]
+        return np.array(rows).reshape(len(seeds), self.n_context_dims)
+
+    def _evaluate(self) -> tuple[float, float]:
+        """Mean return and mean regret (NaN if none) of the recommended policy on the test contexts.
+
+        A failure is retried like an episode's (``config.retries`` times), then raises EpisodeError.
+        """
+        last: Exception | None = None
+        for _ in range(self.config.retries + 1):
+            try:
+                return self._evaluate_once()
+            except EpisodeError:
+                raise
+            except Exception as exc:  # env code may fail transiently, as in training episodes
+                last = exc
+        raise EpisodeError(
+            f"iteration {self.iteration}, evaluation of the recommended policy on the test contexts failed "
+            f"{self.config.retries + 1} time(s); last error: {type(last).__name__}: {last}"
+        ) from last
+
+    def _evaluate_once(self) -> tuple[float, float]:
+        if self._model is not None:
+            result = evaluate_policy(self._model, self.optimizer.recommend, self.test_contexts)
+            regret = math.nan if result.mean_regret is None else result.mean_regret
+            return result.mean_return, regret
+        params = np.asarray(self.optimizer.recommend(self.test_contexts), dtype=np.float64)
+        returns = run_episodes(
+            self.env,
+            self._eval_seeds,
+            self.test_contexts,
+            params,
+            first=0,
+            label="evaluation",
+            retries=self.config.retries,
+        )
+        return float(returns.mean()), math.nan
+
+    def _stop_before_evaluation(self) -> str | None:
+        config = self.config
+        if self.iteration >= config.iterations:
+            return "iterations"
+        if config.max_episodes is not None and self.episodes + config.samples > config.max_episodes:
+            return "max_episodes"
+        if config.max_time is not None and self.elapsed >= config.max_time:
+            return "max_time"
+        met = self.optimizer.stop()
+        return f"optimizer: {', '.join(sorted(met))}" if met else None
+
+    def step(self, backend: Any) -> tuple[IterationRecord, str | None]:
+        """Run one iteration on ``backend``; returns its record and the stop reason (None: go on)."""
+        n = self.config.samples
+        seeds = self.env_rng.integers(0, 2**63 - 1, size=n)
+        contexts = self._reset_contexts(seeds)
+        params = np.asarray(self.optimizer.ask(contexts), dtype=np.float64)
+        returns = backend.evaluate(seeds, contexts, params, f"iteration {self.iteration + 1}")
+        self.optimizer.tell(contexts, params, returns)
+        self.iteration += 1
+        self.episodes += n
+        reason = self._stop_before_evaluation()
+        eval_return = eval_regret = math.nan
+        if reason is not None or self.iteration % self.config.eval_every == 0:
+            eval_return, eval_regret = self._evaluate()
+            target = self.config.target_regret
+            if reason is None and target is not None and eval_regret <= target:
+                reason = "target_regret"
+        diagnostics = {str(k): float(v) for k, v in dict(self.optimizer.diagnostics).items()}
+        counts = (self.iteration, self.episodes, float(returns.mean()))
+        record = IterationRecord(*counts, eval_return, eval_regret, self.elapsed, diagnostics)
+        return record, reason
+
+    # -- the loop --------------------------------------------------------------------------------------------
+    def run(self) -> History:
+        """Iterate until a stop condition holds; log, checkpoint and call the callbacks on the way."""
+        if self.history.stop_reason is not None:
+            return self.history
+        self._clock = time.perf_counter()
+        if self.run_dir is not None:
+            self.run_dir.remove_temporaries()
+        self._log({"event": "resume" if self.iteration else "start", "iteration": self.iteration})
+        backend = make_backend(
+            self.config.backend,
+            self.source,
+            retries=self.config.retries,
+            workers=self.config.workers,
+            vector_mode=self.config.vector_mode,
+            samples=self.config.samples,
+            env=self.env,
+        )
+        try:
+            for callback in self.callbacks:
+                callback.on_start(self.history, self.config.iterations)
+            reason = None
+            while reason is None:
+                record, reason = self.step(backend)
+                self.history.append(record)
+                self._log(record.to_dict())
+                wants_stop = [bool(c.on_iteration(record, self.history)) for c in self.callbacks]
+                if any(wants_stop) and reason is None:
+                    reason = "callback"
+                self.history.stop_reason = reason
+                if reason is not None or self.iteration % self.config.checkpoint_every == 0:
+                    self._checkpoint()
+        finally:
+            backend.close()
+            for callback in self.callbacks:
+                callback.on_end(self.history)
+        self._finish()
+        return self.history
+
+    def _log(self, entry: dict[str, Any]) -> None:
+        if self.run_dir is not None:
+            self.run_dir.append_log(entry)
+
+    def _finish(self) -> None:
+        if self.run_dir is None:
+            return
+        from creps_gym.runner.export import write_iohanalyzer
+
+        self._log({"event": "end", "iteration": self.iteration, "stop_reason": self.history.stop_reason})
+        self.history.to_json(self.run_dir.file(RunDir.HISTORY_JSON))
+        self.history.to_csv(self.run_dir.file(RunDir.HISTORY_CSV))
+        write_iohanalyzer([self.history], self.run_dir.file(RunDir.IOH))

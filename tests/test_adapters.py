@@ -1,0 +1,208 @@
+"""The pycma, nevergrad and optuna adapters, the optimiser registry and the adapter-writing guide."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+
+from creps_gym.envs.evaluation import evaluate_policy, test_contexts
+from creps_gym.optimizers import registry
+from creps_gym.optimizers.adapters import CMAAdapter, MinimizerAdapter, NevergradAdapter, OptunaAdapter
+from creps_gym.optimizers.base import load_state, save_state
+from creps_gym.runner import default_initial_distribution, run, split_seed
+
+ADAPTERS = {"cma": CMAAdapter, "nevergrad": NevergradAdapter, "optuna": OptunaAdapter}
+GUIDE = Path(__file__).resolve().parent.parent / "docs" / "writing_an_adapter.md"
+
+
+def _drive(optimizer, iterations, n=8, z=1, seed=0):
+    """A quadratic with maximum at 0.3 in every coordinate; contexts are random and irrelevant."""
+    rng = np.random.default_rng(seed)
+    asked = []
+    for _ in range(iterations):
+        contexts = rng.uniform(size=(n, z))
+        params = optimizer.ask(contexts)
+        asked.append(params)
+        optimizer.tell(contexts, params, -np.sum((params - 0.3) ** 2, axis=1))
+    return asked
+
+
+def test_registry_lists_every_adapter_with_a_one_line_description():
+    described = registry.describe_optimizers()
+    assert set(ADAPTERS) | {"creps", "creps-cma-old", "creps-cma-current"} <= set(described)
+    assert all(text and "\n" not in text for text in described.values())
+    for name, cls in ADAPTERS.items():
+        assert registry.optimizer_class(name) is cls
+
+
+@pytest.mark.parametrize("name", registry.optimizer_names())
+def test_every_registered_optimizer_follows_the_protocol_and_restores_exactly(name):
+    optimizer = registry.make_optimizer(name, 3, 2, 11, initial_mean=[0.1, 0.2, 0.3], initial_cov=0.5)
+    assert (optimizer.n_params, optimizer.n_context_dims) == (3, 2)
+    _drive(optimizer, 3, z=2)
+    contexts = np.full((8, 2), 0.5)
+    pending = optimizer.ask(contexts)  # a checkpoint may be taken between ask and tell
+    restored = registry.restore_optimizer(name, optimizer.state_dict())
+    returns = -np.sum(pending**2, axis=1)
+    optimizer.tell(contexts, pending, returns)
+    restored.tell(contexts, pending, returns)
+    assert np.array_equal(optimizer.ask(contexts), restored.ask(contexts))
+    assert np.array_equal(optimizer.recommend(contexts[:2]), restored.recommend(contexts[:2]))
+    assert optimizer.diagnostics == restored.diagnostics
+
+
+def test_make_optimizer_names_the_valid_choices_and_fixed_options():
+    with pytest.raises(ValueError, match=r"optimizer: expected one of \[.*'cma'.*\], got 'nope'"):
+        registry.make_optimizer("nope", 2, 1, 0)
+    with pytest.raises(ValueError, match="variant"):
+        registry.make_optimizer("creps-cma-old", 2, 1, 0, variant="current")
+
+
+@pytest.mark.parametrize("name", sorted(ADAPTERS))
+def test_adapter_learns_on_a_function_env(name):
+    history = run(name, "creps_gym/Sphere-v0", 20, 12, 3, env_kwargs={"dim": 3}, eval_every=19)
+    regrets = history.column("eval_regret")
+    assert np.isnan(regrets[0]) and np.isfinite(regrets[[18, 19]]).all()
+    env = gymnasium.make("creps_gym/Sphere-v0", dim=3)
+    contexts = test_contexts(env, 16, split_seed(3)[2])  # the runner's test contexts for seed 3
+    centre = default_initial_distribution(env.action_space)[0]  # the runner's initial mean
+    start = evaluate_policy(env, centre, contexts).mean_regret
+    # On the sphere the regret is |theta - theta*(s)|^2, so no constant policy beats the mean of theta*(s).
+    best_constant = evaluate_policy(env, env.unwrapped.optimal_params(contexts).mean(axis=0), contexts)
+    assert best_constant.mean_regret <= regrets[-1] < 0.9 * start  # maximising the return lowers the regret
+
+
+@pytest.mark.parametrize("name", sorted(ADAPTERS))
+def test_sign_convention_library_minimises_the_negated_return(name):
+    adapter = ADAPTERS[name](2, 1, initial_mean=0.0, initial_cov=1.0, seed=5)
+    contexts = np.zeros((6, 1))
+    params = adapter.ask(contexts)
+    returns = np.arange(6.0)
+    adapter.tell(contexts, params, returns)
+    recorded = adapter.state_dict()["told_losses"]
+    assert np.array_equal(recorded, -returns)
+    assert adapter.diagnostics["best_return"] == 5.0
+
+
+@pytest.mark.parametrize("name", sorted(ADAPTERS))
+def test_contexts_are_ignored_and_asks_are_seeded(name):
+    a = ADAPTERS[name](3, 2, seed=9)
+    b = ADAPTERS[name](3, 2, seed=9)
+    c = ADAPTERS[name](3, 2, seed=10)
+    np.random.seed(0)  # noqa: NPY002 (global state must not matter)
+    first = _drive(a, 4, z=2, seed=1)
+    np.random.seed(123)  # noqa: NPY002
+    second = _drive(b, 4, z=2, seed=2)  # other context values, same batch sizes
+    assert all(np.array_equal(x, y) for x, y in zip(first, second, strict=True))
+    assert not np.array_equal(_drive(c, 1, z=2)[0], first[0])
+    rec = a.recommend(np.array([[0.0, 0.0], [3.0, -1.0]]))
+    assert np.array_equal(rec[0], rec[1])
+
+
+@pytest.mark.parametrize("name", sorted(ADAPTERS))
+def test_replay_reproduces_every_recorded_ask_bit_for_bit(name, tmp_path):
+    adapter = ADAPTERS[name](
+        4, 1, initial_mean=[1.0, 0.0, -1.0, 2.0], initial_cov=[0.5, 1.0, 2.0, 0.1], seed=3
+    )
+    asked = _drive(adapter, 6)
+    path = save_state(adapter.state_dict(), tmp_path / "adapter.npz")
+    state = load_state(path)
+    replayed = ADAPTERS[name].from_state_dict(state)
+    assert np.array_equal(
+        np.concatenate(asked), replayed.initial_mean + replayed.initial_std * state["asked"]
+    )
+    assert np.array_equal(_drive(replayed, 2, seed=9)[1], _drive(adapter, 2, seed=9)[1])
+    tampered = dict(state, asked=state["asked"] + 1e-12)
+    with pytest.raises(RuntimeError, match="diverged at event 0"):
+        ADAPTERS[name].from_state_dict(tampered)
+
+
+@pytest.mark.parametrize("name", sorted(ADAPTERS))
+def test_rejected_tells_leave_the_adapter_unchanged(name):
+    adapter = ADAPTERS[name](2, 1, seed=1)
+    contexts = np.zeros((5, 1))
+    params = adapter.ask(contexts)
+    before = adapter.state_dict()
+    with pytest.raises(RuntimeError, match="external samples"):
+        adapter.tell(contexts, params + 1.0, np.zeros(5), allow_external=True)
+    with pytest.raises(ValueError, match="returns: expected finite"):
+        adapter.tell(contexts, params, np.array([0.0, 1.0, np.nan, 0.0, 0.0]))
+    after = adapter.state_dict()
+    assert after["adapter"] == before["adapter"] and np.array_equal(after["asked"], before["asked"])
+    adapter.tell(contexts, params, np.zeros(5))  # the pending batch is still accepted
+
+
+def test_cma_needs_whole_populations_of_a_fixed_size():
+    adapter = CMAAdapter(2, 1, seed=0)
+    params = adapter.ask(np.zeros((6, 1)))
+    with pytest.raises(ValueError, match="expected all 6 asked samples"):
+        adapter.tell(np.zeros((4, 1)), params[:4], np.zeros(4))
+    adapter.tell(np.zeros((6, 1)), params, -np.sum(params**2, axis=1))
+    with pytest.raises(ValueError, match="contexts: expected 6 rows"):
+        adapter.ask(np.zeros((5, 1)))
+
+
+def test_subsets_are_fine_for_nevergrad_and_optuna():
+    for cls in (NevergradAdapter, OptunaAdapter):
+        adapter = cls(2, 1, seed=0)
+        params = adapter.ask(np.zeros((6, 1)))
+        adapter.tell(np.zeros((3, 1)), params[[4, 0, 2]], np.array([1.0, 2.0, 3.0]))
+        assert np.array_equal(adapter.state_dict()["told_index"], [4, 0, 2])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"initial_cov": [[1.0, 0.5], [0.5, 1.0]]}, ValueError, "off-diagonal"),
+        ({"initial_cov": -1.0}, ValueError, "initial_cov: expected positive variances"),
+        ({"initial_mean": np.zeros((2, 2))}, ValueError, r"initial_mean: expected a scalar or shape \(2,\)"),
+        ({"seed": 1.5}, TypeError, "seed: expected a non-negative int"),
+        ({"bogus": 1}, TypeError, "bogus"),
+    ],
+)
+@pytest.mark.parametrize("name", sorted(ADAPTERS))
+def test_bad_arguments_are_named(name, kwargs, error, match):
+    with pytest.raises(error, match=match):
+        ADAPTERS[name](2, 1, **kwargs)
+
+
+def test_library_specific_options_are_checked():
+    with pytest.raises(ValueError, match="cma_options: expected none of"):
+        CMAAdapter(2, 1, cma_options={"popsize": 4})
+    with pytest.raises(ValueError, match="optimizer: expected a name in nevergrad"):
+        NevergradAdapter(2, 1, optimizer="NoSuchOptimizer")
+    with pytest.raises(ValueError, match=r"sampler: expected one of \['tpe', 'random'\], got 'grid'"):
+        OptunaAdapter(2, 1, sampler="grid")
+    with pytest.raises(ValueError, match="bound_stds"):
+        OptunaAdapter(2, 1, bound_stds=0)
+
+
+def test_optuna_searches_inside_the_documented_box():
+    adapter = OptunaAdapter(
+        3, 1, initial_mean=[1.0, 2.0, 3.0], initial_cov=0.25, sampler="random", bound_stds=2.0
+    )
+    params = adapter.ask(np.zeros((50, 1)))
+    assert np.all(np.abs(params - [1.0, 2.0, 3.0]) <= 1.0) and np.ptp(params, axis=0).min() > 0.5
+
+
+def test_cma_reports_its_own_stop_criteria():
+    adapter = CMAAdapter(2, 1, seed=0, cma_options={"tolfun": 1e3, "tolfunhist": 1e3})
+    assert adapter.stop() == {}
+    _drive(adapter, 12, n=6)
+    assert adapter.stop()  # the huge tolerances are met once the history is long enough
+
+
+def test_the_adapter_guide_examples_run(monkeypatch, capsys):
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    blocks = re.findall(r"```python\n(.*?)```", GUIDE.read_text(), flags=re.DOTALL)
+    assert len(blocks) >= 2
+    namespace: dict = {"__name__": "writing_an_adapter"}
+    for block in blocks:
+        exec(compile(block, str(GUIDE), "exec"), namespace)
+    assert issubclass(namespace["RandomSearchAdapter"], MinimizerAdapter)
+    assert "random-search" in registry.optimizer_names()
+    assert "mean regret of the recommended policy" in capsys.readouterr().out

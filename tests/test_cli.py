@@ -1,0 +1,152 @@
+"""The ``creps-gym`` command line, each command through a real subprocess."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from creps_gym.cli import main
+from creps_gym.optimizers import optimizer_names
+from creps_gym.runner import History, RunDir, run
+
+SPHERE = "creps_gym/Sphere-v0"
+
+
+def cli(*args, cwd=None, timeout=120):
+    return subprocess.run(
+        [sys.executable, "-m", "creps_gym.cli", *map(str, args)],
+        capture_output=True, text=True, cwd=cwd, timeout=timeout, check=False,
+    )  # fmt: skip
+
+
+def run_args(out, *extra, seed=0):
+    return ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 6, "--samples", 10,
+            "--seed", seed, "--out", out, "--env-kwarg", "dim=4", "--eval-every", 2, *extra]  # fmt: skip
+
+
+def test_console_script_is_installed():
+    script = shutil.which("creps-gym")
+    if script is None:
+        pytest.skip("creps-gym is not on PATH (package not installed with pip)")
+    result = subprocess.run([script, "--help"], capture_output=True, text=True, timeout=60, check=False)
+    assert result.returncode == 0 and "Exit codes" in result.stdout
+
+
+def test_list_shows_envs_and_optimizers_with_descriptions():
+    result = cli("list")
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    sphere = next(line for line in lines if line.strip().startswith(SPHERE))
+    assert "Sphere" in sphere.split(SPHERE, 1)[1]
+    for name in optimizer_names():
+        assert any(line.split()[:1] == [name] and len(line.split()) > 1 for line in lines), name
+
+
+def test_run_writes_the_run_directory_and_matches_the_python_api(tmp_path):
+    out = tmp_path / "run"
+    result = cli(*run_args(out))
+    assert result.returncode == 0, result.stderr
+    assert "stop: iterations" in result.stdout and result.stderr == ""  # no bar when not on a terminal
+    history = History.from_json(out / RunDir.HISTORY_JSON)
+    expected = run("creps-cma-old", SPHERE, 6, 10, 0, env_kwargs={"dim": 4}, eval_every=2)
+    assert history.equals(expected)
+    for name in (RunDir.CONFIG, RunDir.VERSIONS, RunDir.LOG, RunDir.CHECKPOINT, RunDir.IOH, RunDir.PLOT):
+        assert (out / name).stat().st_size > 0, name
+
+
+def test_progress_bar_on_request_and_plot_and_export_and_resume(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    shown = cli(*run_args(a, "--progress", "--no-plot"))
+    assert shown.returncode == 0 and "regret=" in shown.stderr and "6/6" in shown.stderr
+    assert not (a / RunDir.PLOT).exists()
+    assert cli(*run_args(b, "--no-plot", seed=1)).returncode == 0
+    plotted = cli("plot", a, b, "-o", tmp_path / "both.png")
+    assert plotted.returncode == 0 and (tmp_path / "both.png").stat().st_size > 0
+    exported = cli("export", a, b, "-o", tmp_path / "ioh.csv")
+    lines = (tmp_path / "ioh.csv").read_text().splitlines()
+    assert (
+        exported.returncode == 0 and lines[0] == "evaluations,value,function_id,algorithm_id,dimension,run_id"
+    )
+    assert len(lines) == 1 + 2 * 3  # two runs, evaluated at iterations 2, 4 and 6
+    before = (a / RunDir.HISTORY_JSON).read_text()
+    resumed = cli("resume", a, "--no-plot")
+    assert resumed.returncode == 0 and (a / RunDir.HISTORY_JSON).read_text() == before  # finished: unchanged
+
+
+BAD_FLAGS = [
+    (["--samples", "1"], "argument --samples: expected an integer >= 2, got '1'"),
+    (["--iterations", "ten"], "argument --iterations: expected an integer >= 1, got 'ten'"),
+    (["--env", "creps_gym/Nope-v0"], "argument --env: expected one of ['creps_gym/"),
+    (["--optimizer", "adam"], "argument --optimizer: expected one of ['creps', 'creps-cma-old'"),
+    (["--backend", "gpu"], "argument --backend: invalid choice: 'gpu'"),
+    (["--target-regret", "-1"], "argument --target-regret: expected a positive finite number, got '-1'"),
+    (
+        ["--initial-std", "1,x"],
+        "argument --initial-std: expected a number or comma-separated numbers, got '1,x'",
+    ),
+    (
+        ["--opt", "epsilon"],
+        "argument --opt: expected KEY=VALUE (VALUE in JSON or a plain string), got 'epsilon'",
+    ),
+    (["--opt", "epsilon=-1"], "argument --opt: epsilon: expected a"),  # the optimiser's own message follows
+    (["--opt", "bogus=1"], "argument --opt: "),
+    (["--initial-mean", "centre"], "argument --initial-mean: expected 'uniform', a number or p comma"),
+    (["--initial-std", "uniform"], "argument --initial-std: expected a number or comma-separated numbers"),
+    (["--max-episodes", "5"], "argument --max-episodes: expected at least one iteration's samples (10)"),
+    (["--env-kwarg", "dim=1"], "argument --env-kwarg: dim: expected an integer >= 2, got 1"),
+]
+
+
+@pytest.mark.parametrize(("flags", "expected"), BAD_FLAGS)
+def test_bad_flags_name_the_flag_the_expectation_and_the_value(tmp_path, capsys, flags, expected):
+    # In-process (the same main() the console script calls) to keep the suite fast; the subprocess tests
+    # above and below cover the process boundary and the exit codes.
+    args = run_args(tmp_path / "run")
+    for flag, value in zip(flags[::2], flags[1::2], strict=True):
+        if flag in args:
+            args[args.index(flag) + 1] = value
+        else:
+            args += [flag, value]
+    try:
+        code = main([str(a) for a in args])
+    except SystemExit as exc:  # argparse exits by itself on flag-level errors
+        code = exc.code
+    assert code == 2
+    assert expected in capsys.readouterr().err
+    assert not (tmp_path / "run" / RunDir.CHECKPOINT).exists()
+
+
+def test_exit_codes_for_run_directories_and_regret_targets(tmp_path):
+    out = tmp_path / "run"
+    assert cli(*run_args(out, "--no-plot")).returncode == 0
+    again = cli(*run_args(out, "--no-plot"))
+    assert again.returncode == 3 and "holds a run" in again.stderr
+    (out / "notes.txt").write_text("mine")
+    replaced = cli(*run_args(out, "--no-plot", "--overwrite", "--iterations", 2))
+    assert replaced.returncode == 0 and len(History.from_json(out / RunDir.HISTORY_JSON)) == 2
+    assert (out / "notes.txt").read_text() == "mine"  # only the run's own files are replaced
+    missing = cli("resume", tmp_path / "nothing")
+    assert missing.returncode == 3 and "expected a folder with config.json" in missing.stderr
+    args = run_args(tmp_path / "plane", "--target-regret", "0.1")
+    args[args.index("--env") + 1] = "creps_gym/Plane-v0"
+    plane = cli(*args)
+    assert (
+        plane.returncode == 2
+        and "argument --target-regret: expected None for creps_gym/Plane-v0" in plane.stderr
+    )
+    usage = cli("frobnicate")
+    assert usage.returncode == 2 and "invalid choice: 'frobnicate'" in usage.stderr
+
+
+def test_config_json_records_the_resolved_configuration(tmp_path):
+    out = tmp_path / "run"
+    assert cli(*run_args(out, "--no-plot", "--opt", "epsilon=0.8", "--initial-std", "0.5")).returncode == 0
+    document = json.loads((out / RunDir.CONFIG).read_text())
+    config = document["config"]
+    assert config["optimizer_options"] == {"epsilon": 0.8} and config["initial_std"] == 0.5
+    assert config["env_kwargs"] == {"dim": 4} and config["retries"] == 2 and config["backend"] == "serial"
+    assert document["meta"]["n_params"] == 4 and document["meta"]["metric"] == "regret"

@@ -1,0 +1,71 @@
+"""The Ray backend on a real local Ray (``ray.init(num_cpus=2)``); skipped if Ray is not installed."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ray = pytest.importorskip("ray")
+
+from creps_gym.envs.base import ContextualEpisodicEnv  # noqa: E402
+from creps_gym.optimizers import CREPSCMA  # noqa: E402
+from creps_gym.runner import EpisodeError, run  # noqa: E402
+
+SPHERE = "creps_gym/Sphere-v0"
+
+
+class Target(ContextualEpisodicEnv):
+    """theta*(s) = (s, -s). A Ray worker (never the test process) dies while ``marker`` says so."""
+
+    def __init__(self, marker: str | None = None, deaths: int = 0, fail: bool = False):
+        super().__init__([0.0], [1.0], [-2.0, -2.0], [2.0, 2.0])
+        self.marker, self.deaths, self.fail, self.owner = marker, deaths, fail, os.getpid()
+
+    def evaluate(self, contexts, params):
+        if self.marker is not None and os.getpid() != self.owner:
+            died = Path(self.marker).read_text().count("x") if Path(self.marker).exists() else 0
+            if died < self.deaths:
+                Path(self.marker).write_text("x" * (died + 1))
+                os._exit(1)  # a crash of the worker process, not a Python exception
+        if self.fail and os.getpid() != self.owner and params[:, 0].max() > 0.3:
+            raise RuntimeError("simulated crash in a worker")
+        best = np.concatenate([contexts, -contexts], axis=1)
+        return -np.sum((params - best) ** 2, axis=1), {}
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])  # workers cannot import this test file
+    started = not ray.is_initialized()
+    if started:
+        ray.init(num_cpus=2, include_dashboard=False, logging_level="ERROR", log_to_driver=False)
+    yield
+    if started:
+        ray.shutdown()
+
+
+def test_ray_matches_serial_bit_for_bit_and_keeps_the_users_ray(local_ray):
+    serial = run("creps-cma-old", SPHERE, 3, 10, 2, env_kwargs={"dim": 4})
+    distributed = run("creps-cma-old", SPHERE, 3, 10, 2, env_kwargs={"dim": 4}, backend="ray")
+    uneven = run("creps-cma-old", SPHERE, 3, 10, 2, env_kwargs={"dim": 4}, backend="ray", workers=3)
+    assert distributed.equals(serial) and uneven.equals(serial)
+    assert ray.is_initialized()  # the runner shuts down only a Ray it started itself
+
+
+def test_a_dead_worker_is_retried_and_no_sample_is_lost(local_ray, tmp_path):
+    marker = tmp_path / "deaths"
+    reference = run(CREPSCMA(2, 1, seed=0), Target(), 2, 8, 0)
+    survived = run(CREPSCMA(2, 1, seed=0), Target(str(marker), deaths=1), 2, 8, 0, backend="ray")
+    assert marker.read_text() == "x" and survived.equals(reference)
+
+
+def test_failures_after_the_retries_stop_the_run_with_a_clear_error(local_ray, tmp_path):
+    with pytest.raises(EpisodeError, match=r"iteration 1, episode \d+ .*failed 2 time\(s\).*simulated crash"):
+        run(CREPSCMA(2, 1, seed=0, initial_cov=0.5), Target(fail=True), 2, 8, 0, backend="ray", retries=1)
+    marker = tmp_path / "deaths"
+    with pytest.raises(EpisodeError, match=r"iteration 1, episodes \d+\.\.\d+: the Ray task failed 1 time"):
+        run(CREPSCMA(2, 1, seed=0), Target(str(marker), deaths=5), 2, 8, 0, backend="ray", retries=0)

@@ -1,0 +1,87 @@
+"""Resume after a real SIGKILL: the resumed History equals an uninterrupted run's exactly."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from creps_gym.runner import History, RunDir, run
+
+if not hasattr(signal, "SIGKILL"):  # pragma: no cover - Windows
+    pytest.skip("needs SIGKILL", allow_module_level=True)
+
+SPHERE = "creps_gym/Sphere-v0"
+SETTINGS = {"iterations": 150, "samples": 12, "seed": 5, "checkpoint_every": 3, "eval_every": 2}
+
+
+def _command(*args):
+    return [sys.executable, "-m", "creps_gym.cli", *map(str, args)]
+
+
+def _iterations_logged(path: Path) -> int:
+    if not path.exists():
+        return 0
+    return sum(1 for line in path.read_text().splitlines() if line.startswith('{"iteration"'))
+
+
+def _kill_when(process: subprocess.Popen, ready, what: str, timeout: float = 90.0) -> None:
+    """SIGKILL ``process`` as soon as ``ready()`` holds; fail if it ends first."""
+    deadline = time.monotonic() + timeout
+    while not ready():
+        if process.poll() is not None:
+            pytest.fail(f"the run ended (code {process.returncode}) before {what}: {process.stderr.read()}")
+        if time.monotonic() > deadline:
+            process.kill()
+            pytest.fail(f"timed out waiting for {what}")
+        time.sleep(0.002)
+    process.send_signal(signal.SIGKILL)
+    process.wait(timeout=30)
+    assert process.returncode == -signal.SIGKILL
+
+
+@pytest.mark.parametrize("optimizer", ["creps-cma-old", "cma"])
+def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(tmp_path, optimizer):
+    out = tmp_path / "run"
+    log = out / RunDir.LOG
+    s = SETTINGS
+    start = _command(
+        "run", "--env", SPHERE, "--optimizer", optimizer, "--iterations", s["iterations"],
+        "--samples", s["samples"], "--seed", s["seed"], "--out", out, "--env-kwarg", "dim=6",
+        "--checkpoint-every", s["checkpoint_every"], "--eval-every", s["eval_every"], "--no-plot",
+    )  # fmt: skip
+    resume = _command("resume", out, "--no-plot")
+    popen = {"stdout": subprocess.DEVNULL, "stderr": subprocess.PIPE, "text": True}
+    # 1) killed as soon as the run directory exists (most likely before the first checkpoint);
+    _kill_when(subprocess.Popen(start, **popen), lambda: (out / RunDir.CONFIG).exists(), "config.json")
+    # 2) killed mid-run, 10 iterations later (most likely between checkpoints);
+    base = _iterations_logged(log)
+    _kill_when(
+        subprocess.Popen(resume, **popen), lambda: _iterations_logged(log) >= base + 10, "10 iterations"
+    )
+    checkpointed = RunDir.open(out).load_checkpoint()[0]["iteration"]
+    assert checkpointed % s["checkpoint_every"] == 0 and checkpointed < s["iterations"]
+    # 3) killed again after the first resume made progress; 4) resumed to the end.
+    base = _iterations_logged(log)
+    _kill_when(
+        subprocess.Popen(resume, **popen), lambda: _iterations_logged(log) >= base + 35, "35 iterations"
+    )
+    assert not (out / RunDir.HISTORY_JSON).exists()
+    finished = subprocess.run(resume, capture_output=True, text=True, timeout=120, check=False)
+    assert finished.returncode == 0, finished.stderr
+
+    expected = run(optimizer, SPHERE, s["iterations"], s["samples"], s["seed"], env_kwargs={"dim": 6},
+                   checkpoint_every=s["checkpoint_every"], eval_every=s["eval_every"])  # fmt: skip
+    resumed = History.from_json(out / RunDir.HISTORY_JSON)
+    assert resumed.equals(expected) and len(resumed) == s["iterations"]
+    records, events = RunDir.open(out).read_log()  # re-done iterations appear twice; the last copy counts
+    assert History(records, stop_reason="iterations").equals(expected)
+    sessions = [e["event"] for e in events if e["event"] in ("start", "resume")]
+    # (the first session may be killed before it logs its start)
+    assert len(sessions) in (3, 4) and sessions[-1] == "resume" and events[-1]["event"] == "end"
+    assert os.listdir(out) and not [name for name in os.listdir(out) if name.endswith(".tmp")]

@@ -16,7 +16,6 @@ __all__ = [
     "as_float_array",
     "check_finite",
     "check_positive_int",
-    "check_probability_like",
     "check_real_in_range",
 ]
 
@@ -117,8 +116,3 @@ def check_real_in_range(
         interval = f"{'[' if low_inclusive else '('}{low}, {high}{']' if high_inclusive else ')'}"
         raise ValueError(f"{name}: expected a finite value in {interval}, got {value!r}")
     return number
-
-
-def check_probability_like(value: Any, name: str, low: float, high: float, *, open_low: bool = True) -> float:
-    """Alias of :func:`check_real_in_range` for ``(low, high]`` (``[low, high]`` if not ``open_low``)."""
-    return check_real_in_range(value, name, low, high, low_inclusive=not open_low)

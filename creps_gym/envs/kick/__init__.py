@@ -1,0 +1,35 @@
+"""MuJoCo humanoid ball kick (the paper's section 5.3): precision and flexibility tasks.
+
+Importing this package is cheap and does not import mujoco: the env modules (``tasks``, ``env``,
+``simulation``, ``model``, ``rendering``) are loaded by the registered entry points when a kick env is made.
+
+Registered ids
+--------------
+``creps_gym/KickPrecision-v0``
+    Kick a fixed ball to a target distance s in [3, 12] m; return -(x - s)² - y².
+``creps_gym/KickFlexibility-v0``
+    Kick a ball placed at (x_B, y_B) as far as possible; return x² - y².
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["REGISTRATIONS"]
+
+_TASKS = "creps_gym.envs.kick.tasks"
+
+REGISTRATIONS: list[dict[str, Any]] = [
+    {
+        "id": "creps_gym/KickPrecision-v0",
+        "entry_point": f"{_TASKS}:KickPrecisionEnv",
+        "vector_entry_point": f"{_TASKS}:KickPrecisionVectorEnv",
+        "kwargs": {"rolling_friction": 0.003, "fall_penalty": 1.0},
+    },
+    {
+        "id": "creps_gym/KickFlexibility-v0",
+        "entry_point": f"{_TASKS}:KickFlexibilityEnv",
+        "vector_entry_point": f"{_TASKS}:KickFlexibilityVectorEnv",
+        "kwargs": {"rolling_friction": 0.003, "fall_penalty": 1.0},
+    },
+]

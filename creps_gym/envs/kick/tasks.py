@@ -1,0 +1,146 @@
+"""The two humanoid kick tasks of Abdolmaleki et al. (2019), section 5.3: precision and flexibility."""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym.envs.kick.env import KickEnv, KickVectorEnv
+
+__all__ = [
+    "FLEXIBILITY_HIGH",
+    "FLEXIBILITY_LOW",
+    "PRECISION_BALL",
+    "KickFlexibilityEnv",
+    "KickFlexibilityVectorEnv",
+    "KickPrecisionEnv",
+    "KickPrecisionVectorEnv",
+]
+
+Array = NDArray[np.float64]
+
+PRECISION_BALL: Array = np.array([0.16, -0.05])
+"""Ball start (m) of the precision task, relative to the torso: in front of the right foot."""
+FLEXIBILITY_LOW: Array = np.array([0.15, -0.15])
+FLEXIBILITY_HIGH: Array = np.array([0.30, 0.15])
+
+_MANUAL = """{summary}
+
+    ## Description
+{description}
+
+    ## Context Space
+{context}
+
+    ## Parameter Space
+    ``Box(-1, 1, (25,), float64)``, normalised: θ = (12 initial joint angles, 12 final joint angles,
+    duration t). The 12 joints are the right leg's then the left leg's (hip yaw-pitch, hip roll, hip pitch,
+    knee, ankle pitch, ankle roll); each maps linearly from [-1, 1] onto its joint range (NAO H25 figures,
+    rad) and t onto [0.05, 0.6] s. ``env.unwrapped.physical_low``/``physical_high``/``to_physical`` give
+    the physical units and ``param_names`` the names. Values outside [-1, 1] are clipped. The motion is the
+    paper's linear interpolator: from the settled standing pose to the initial pose in 0.4 s, hold 0.1 s,
+    linear to the final pose over t, hold. ``env.unwrapped.reference_params()`` is a right-leg kick that
+    ships as the recommended initial mean.
+
+    ## Return
+{returns}
+
+    ## Episode End
+    One step per episode (``terminated=True``). The simulation (MuJoCo, 2 ms, implicitfast) runs until 1 s
+    after the swing ends and the ball is 0.8 m away or at rest; the ball's roll is then finished on a
+    ball-only model until it is slower than 0.02 m/s (at most 16 s). The robot has *fallen* if its torso
+    drops below 0.6 of its standing height or tilts over 60° before that: a fall scores as "ball not moved"
+    minus ``fall_penalty`` (a falling body can pinch the ball and launch it, which is not a kick).
+    ``info`` holds ``context``, ``fell``, ``ball_displacement`` (x, y in m), ``kick_distance``,
+    ``min_foot_ball_distance`` (m, during the kick), ``launch_speed`` (m/s) and ``mirrored``.
+
+    ## Arguments
+    * ``rolling_friction`` (0.003): the ball's rolling friction, which sets the distance scale (calibrated
+      so that a strong kick, launched at about 4.5 m/s, rolls 12-14 m; pinned by a test).
+    * ``fall_penalty`` (1.0): subtracted from the "ball not moved" return when the robot falls.
+    * ``num_threads`` (0 = all CPUs): threads of the batched simulation; results do not depend on it.
+    * ``fixed_base`` (False): debug option that welds the torso to the world; not a benchmark setting.
+    * ``render_mode`` (None, ``"rgb_array"``, ``"rgb_array_list"``), ``width`` (480), ``height`` (360):
+      ``rgb_array`` renders the last kick at the end of its swing, ``rgb_array_list`` the whole last
+      episode at 25 frames/s from a camera tracking robot and ball. Headless: set ``MUJOCO_GL=egl`` or
+      ``osmesa`` before importing mujoco. :func:`creps_gym.envs.kick.rendering.save_video` writes a GIF/MP4.
+
+    ## Version History
+    * v0: initial version.
+"""
+
+
+def _manual(summary: str, description: str, context: str, returns: str) -> str:
+    """The class docstring: the task's sections and the shared ones, in Gymnasium's order."""
+    return _MANUAL.format(summary=summary, description=description, context=context, returns=returns)
+
+
+class KickPrecisionEnv(KickEnv):
+    __doc__ = _manual(
+        "Humanoid kick, precision task: kick a fixed ball to a target distance.",
+        """    A NAO-like humanoid (0.57 m, 5.25 kg, 6 position-controlled joints per leg, free-floating
+    torso) stands behind a RoboCup 3D ball (radius 0.042 m, 0.026 kg) placed at (0.16, -0.05) m relative
+    to its torso, in front of the right foot. It must kick the ball to the target distance ``s`` straight
+    ahead (paper, section 5.3, Fig. 5). The motion is open-loop; the robot must keep its balance.""",
+        """    ``Box(3, 12, (1,), float64)``: the target distance ``s`` in metres, uniform by default;
+    ``reset(options={"context": [s]})`` sets it. The context is the observation and ``info["context"]``.""",
+        """    ``-(x - s)² - y²``, with x, y the ball's displacement (m) forward and to the left.
+    A fall returns ``-s² - fall_penalty``.""",
+    )
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(np.array([3.0]), np.array([12.0]), **kwargs)
+
+    def ball_positions(self, contexts: Array) -> tuple[Array, NDArray[np.bool_]]:
+        """The fixed ball (n, 2); never mirrored."""
+        n = contexts.shape[0]
+        return np.tile(PRECISION_BALL, (n, 1)), np.zeros(n, dtype=bool)
+
+    def task_returns(self, contexts: Array, displacement: Array) -> Array:
+        """``-(x - s)² - y²``, shape (n,)."""
+        return -((displacement[:, 0] - contexts[:, 0]) ** 2) - displacement[:, 1] ** 2
+
+
+class KickFlexibilityEnv(KickEnv):
+    __doc__ = _manual(
+        "Humanoid kick, flexibility task: kick the ball as far as possible from wherever it lies.",
+        """    The NAO-like humanoid of ``KickPrecision-v0`` finds the ball at a context-dependent position in
+    front of it and must kick it as far as possible straight ahead (paper, section 5.3, Fig. 6 and 7).
+    θ describes a right-leg kick. As in the paper ("mirror the joints"), for balls on the left
+    (``y_B > 0``) the env swaps the right- and left-leg blocks of θ, so the left leg performs the
+    mirror-image kick; ``info["mirrored"]`` says when. The legs' joint axes are mirror images, so a ball
+    at (x_B, y_B) and θ give the mirror image of the kick of the ball at (x_B, -y_B).""",
+        """    ``Box([0.15, -0.15], [0.30, 0.15], (2,), float64)``: the ball position (x_B, y_B) in metres
+    relative to the torso (x forward, y left), the paper's box; uniform by default. The whole box is
+    within this robot's reach: CMA-ES from the reference kick (60 iterations of 24 episodes) kicked 7.4 m
+    at (0.30, -0.05) and 1.4 m at the hardest corner (0.30, -0.15) without falling, so the paper's box is
+    kept.""",
+        """    ``x² - y²``, with x, y the ball's displacement (m) forward and to the left (the paper's
+    reward).
+    A fall returns ``-fall_penalty``.""",
+    )
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(FLEXIBILITY_LOW, FLEXIBILITY_HIGH, **kwargs)
+
+    def ball_positions(self, contexts: Array) -> tuple[Array, NDArray[np.bool_]]:
+        """The ball at the context (n, 2); mirrored when ``y_B > 0``."""
+        return contexts.copy(), contexts[:, 1] > 0.0
+
+    def task_returns(self, contexts: Array, displacement: Array) -> Array:
+        """``x² - y²``, shape (n,)."""
+        return displacement[:, 0] ** 2 - displacement[:, 1] ** 2
+
+
+class KickPrecisionVectorEnv(KickVectorEnv):
+    """Native vector env of ``creps_gym/KickPrecision-v0`` (batched, multi-threaded)."""
+
+    single_env_class: ClassVar[type[KickEnv]] = KickPrecisionEnv
+
+
+class KickFlexibilityVectorEnv(KickVectorEnv):
+    """Native vector env of ``creps_gym/KickFlexibility-v0`` (batched, multi-threaded)."""
+
+    single_env_class: ClassVar[type[KickEnv]] = KickFlexibilityEnv

@@ -1,0 +1,364 @@
+"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0, creps_gym/KickFlexibility-v0)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+
+import creps_gym  # noqa: F401  (registers the ids)
+from creps_gym.envs.kick.model import (
+    JOINT_HIGH,
+    JOINT_LOW,
+    JOINT_NAMES,
+    REFERENCE_KICK,
+    load_models,
+    mirror_params,
+    to_normalised,
+    to_physical,
+)
+from creps_gym.envs.kick.simulation import KickSimulator
+from creps_gym.envs.kick.tasks import KickPrecisionEnv
+
+PRECISION, FLEXIBILITY = "creps_gym/KickPrecision-v0", "creps_gym/KickFlexibility-v0"
+# The reference kick's distance at the calibrated rolling friction 0.003 (measured; see model.py).
+REFERENCE_DISTANCE, REFERENCE_TOLERANCE = 8.49, 0.3
+
+
+@pytest.fixture(scope="module")
+def precision():
+    env = gym.make(PRECISION, num_threads=1).unwrapped
+    yield env
+    env.close()
+
+
+@pytest.fixture(scope="module")
+def flexibility():
+    env = gym.make(FLEXIBILITY, num_threads=2).unwrapped
+    yield env
+    env.close()
+
+
+@pytest.fixture(scope="module")
+def reference_result(precision):
+    returns, info = precision.evaluate(np.array([[8.0]]), REFERENCE_KICK[None, :])
+    return returns, info
+
+
+def test_import_does_not_load_mujoco():
+    code = "import sys, creps_gym; print('mujoco' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_spaces_and_metadata(precision, flexibility):
+    assert precision.action_space.shape == (25,) and flexibility.action_space.shape == (25,)
+    assert precision.observation_space.shape == (1,) and flexibility.observation_space.shape == (2,)
+    assert "human" not in precision.metadata["render_modes"]
+    assert precision.reference_params().shape == (25,)
+    assert np.all(np.abs(precision.reference_params()) <= 1.0)
+    assert len(precision.param_names) == 25
+
+
+def test_parameter_mapping_round_trip_and_bounds():
+    rng = np.random.default_rng(0)
+    u = rng.uniform(-1, 1, (5, 25))
+    initial, final, duration = to_physical(u)
+    np.testing.assert_allclose(to_normalised(initial, final, duration), u, atol=1e-12)
+    lo_init, lo_final, lo_t = to_physical(-np.ones((1, 25)))
+    np.testing.assert_allclose(lo_init[0], JOINT_LOW, atol=1e-12)
+    np.testing.assert_allclose(lo_final[0], JOINT_LOW, atol=1e-12)
+    hi_init = to_physical(np.full((1, 25), 3.0))[0]  # clipped to +1
+    np.testing.assert_allclose(hi_init[0], JOINT_HIGH, atol=1e-12)
+    assert lo_t[0] == pytest.approx(0.05)
+
+
+def test_joint_bounds_are_the_model_joint_ranges():
+    models = load_models()
+    hinge_ranges = np.array([models.full.joint(name).range for name in JOINT_NAMES])
+    np.testing.assert_array_equal(hinge_ranges[:, 0], JOINT_LOW)
+    np.testing.assert_array_equal(hinge_ranges[:, 1], JOINT_HIGH)
+    assert models.full.body_subtreemass[1] == pytest.approx(5.25)
+    assert models.ball.nbody == 2 and models.ball.nu == 0  # world and ball only
+
+
+def test_mirror_swaps_leg_blocks():
+    u = np.arange(25.0)[None, :]
+    m = mirror_params(u)
+    np.testing.assert_array_equal(m[0, :6], u[0, 6:12])
+    np.testing.assert_array_equal(m[0, 18:24], u[0, 12:18])
+    np.testing.assert_array_equal(m[0, 24], 24.0)
+    np.testing.assert_array_equal(mirror_params(m), u)
+
+
+def test_reference_kick_calibration(reference_result):
+    """The calibrated rolling friction pins the distance of the reference kick."""
+    _, info = reference_result
+    assert not info["fell"][0]
+    assert info["ball_displacement"][0, 0] == pytest.approx(REFERENCE_DISTANCE, abs=REFERENCE_TOLERANCE)
+    assert abs(info["ball_displacement"][0, 1]) < 1.0
+    assert info["min_foot_ball_distance"][0] < 0.005  # the foot touched the ball
+    assert 2.0 < info["launch_speed"][0] < 6.0
+
+
+def test_rolling_friction_sets_the_distance_scale(reference_result):
+    env = gym.make(PRECISION, rolling_friction=0.002, num_threads=1).unwrapped
+    _, info = env.evaluate(np.array([[8.0]]), REFERENCE_KICK[None, :])
+    _, ref = reference_result
+    # About the same launch (rolling friction acts on the foot contact too), a longer roll.
+    assert info["launch_speed"][0] == pytest.approx(ref["launch_speed"][0], rel=0.02)
+    assert info["ball_displacement"][0, 0] > 1.3 * ref["ball_displacement"][0, 0]
+
+
+def test_precision_return_formula(precision, reference_result):
+    returns, info = reference_result
+    x, y = info["ball_displacement"][0]
+    assert returns[0] == pytest.approx(-((x - 8.0) ** 2) - y**2)
+    # The context takes effect: same kick, other target.
+    other, other_info = precision.evaluate(np.array([[3.0]]), REFERENCE_KICK[None, :])
+    np.testing.assert_array_equal(other_info["ball_displacement"], info["ball_displacement"])
+    assert other[0] == pytest.approx(-((x - 3.0) ** 2) - y**2)
+
+
+def test_determinism_through_gymnasium_api():
+    outcomes = []
+    for _ in range(2):
+        env = gym.make(PRECISION, num_threads=1)
+        obs, _ = env.reset(seed=123)
+        action = np.clip(REFERENCE_KICK + env.unwrapped.np_random.normal(0, 0.02, 25), -1, 1)
+        outcomes.append((obs, env.step(action)[1]))
+    np.testing.assert_array_equal(outcomes[0][0], outcomes[1][0])
+    assert outcomes[0][1] == outcomes[1][1]
+
+
+def test_batch_equals_sequential_bit_identically(flexibility):
+    rng = np.random.default_rng(1)
+    contexts = flexibility.sample_contexts(rng, 4)
+    params = np.clip(REFERENCE_KICK + rng.normal(0, 0.03, (4, 25)), -1, 1)
+    batch_returns, batch_info = flexibility.evaluate(contexts, params)  # 2 threads, one batch
+    single = gym.make(FLEXIBILITY, num_threads=1).unwrapped
+    for i in range(4):
+        r, info = single.evaluate(contexts[i : i + 1], params[i : i + 1])
+        assert r[0] == batch_returns[i]
+        np.testing.assert_array_equal(info["ball_displacement"][0], batch_info["ball_displacement"][i])
+
+
+def test_vector_env_matches_scalar_env(precision):
+    envs = gym.make_vec(PRECISION, num_envs=3, vectorization_mode="vector_entry_point", num_threads=2)
+    contexts, _ = envs.reset(seed=0, options={"context": np.array([[4.0], [8.0], [11.0]])})
+    actions = np.tile(REFERENCE_KICK, (3, 1))
+    _, rewards, terminated, truncated, info = envs.step(actions)
+    assert terminated.all() and not truncated.any()
+    expected, _ = precision.evaluate(contexts, actions)
+    np.testing.assert_array_equal(rewards, expected)
+    np.testing.assert_array_equal(info["final_info"]["fell"], np.zeros(3, dtype=bool))
+    envs.close()
+
+
+def test_fall_is_penalised(precision, flexibility):
+    """The mid-range pose (all zeros) topples the robot: 'ball not moved' minus the penalty."""
+    zeros = np.zeros((1, 25))
+    returns, info = precision.evaluate(np.array([[5.0]]), zeros)
+    assert info["fell"][0]
+    assert returns[0] == -(5.0**2) - 1.0
+    returns, info = flexibility.evaluate(np.array([[0.2, -0.1]]), zeros)
+    assert info["fell"][0] and returns[0] == -1.0
+    heavy = gym.make(FLEXIBILITY, fall_penalty=7.5, num_threads=1).unwrapped
+    assert heavy.evaluate(np.array([[0.2, -0.1]]), zeros)[0][0] == -7.5
+
+
+def test_fixed_base_debug_option_never_falls():
+    env = gym.make(PRECISION, fixed_base=True, num_threads=1).unwrapped
+    _, info = env.evaluate(np.array([[5.0]]), np.zeros((1, 25)))
+    assert not info["fell"][0]
+
+
+def test_mirroring_for_left_balls(flexibility):
+    kick = REFERENCE_KICK[None, :]
+    contexts = np.array([[0.16, -0.05], [0.16, 0.05]])
+    returns, info = flexibility.evaluate(contexts, np.repeat(kick, 2, axis=0))
+    np.testing.assert_array_equal(info["mirrored"], [False, True])
+    right, left = info["ball_displacement"]
+    assert right[0] > 3.0 and not info["fell"].any()
+    # Mirror-image kicks: equal forward distance, opposite sideways one (equal to all digits on x86-64 Linux).
+    assert left[0] == pytest.approx(right[0], abs=1e-3)
+    assert left[1] == pytest.approx(-right[1], abs=1e-3)
+    assert returns[0] == pytest.approx(right[0] ** 2 - right[1] ** 2)
+
+
+def test_ball_only_roll_matches_full_simulation():
+    """Phase 2 on the ball-only model agrees with simulating the full model to rest within 2 cm."""
+    models = load_models()
+    sim = KickSimulator(models, num_threads=1)
+    initial, final, duration = to_physical(REFERENCE_KICK[None, :])
+    ball = np.array([[0.16, -0.05]])
+    two_phase = sim.run(ball, initial, final, duration)
+    full = sim.run(ball, initial, final, duration, two_phase=False)
+    assert not two_phase.fell[0] and not full.fell[0]
+    np.testing.assert_allclose(two_phase.displacement, full.displacement, atol=0.02)
+    assert two_phase.launch_speed[0] == full.launch_speed[0]
+
+
+def test_context_changes_flexibility_outcome(flexibility):
+    kick = np.repeat(REFERENCE_KICK[None, :], 2, axis=0)
+    _, info = flexibility.evaluate(np.array([[0.16, -0.05], [0.28, -0.14]]), kick)
+    assert not np.array_equal(info["ball_displacement"][0], info["ball_displacement"][1])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error"),
+    [
+        ({"rolling_friction": -0.1}, ValueError),
+        ({"rolling_friction": "0.003"}, TypeError),
+        ({"fall_penalty": -1.0}, ValueError),
+        ({"num_threads": -1}, ValueError),
+        ({"fixed_base": "yes"}, TypeError),
+        ({"width": 0}, ValueError),
+        ({"width": 4000, "render_mode": "rgb_array"}, ValueError),
+        ({"render_mode": "human"}, ValueError),
+    ],
+)
+def test_bad_constructor_arguments(kwargs, error):
+    with pytest.raises(error):
+        KickPrecisionEnv(**kwargs)
+
+
+def test_bad_inputs(precision):
+    with pytest.raises(ValueError, match="params"):
+        precision.evaluate(np.array([[5.0]]), np.zeros((1, 24)))
+    with pytest.raises(ValueError, match="params"):
+        precision.evaluate(np.array([[5.0]]), np.full((1, 25), np.nan))
+    with pytest.raises(ValueError, match="rows"):
+        precision.evaluate(np.array([[5.0], [6.0]]), np.zeros((1, 25)))
+    with pytest.raises(ValueError, match="context"):
+        precision.evaluate(np.array([[2.0]]), np.zeros((1, 25)))
+    env = gym.make(PRECISION, num_threads=1).unwrapped
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(np.zeros(25))
+    with pytest.raises(ValueError, match="context"):
+        env.reset(options={"context": [13.0]})
+
+
+_RENDER_SCRIPT = textwrap.dedent(
+    """
+    import sys
+    try:
+        import mujoco  # the GL backend named by MUJOCO_GL is loaded here
+    except Exception as exc:
+        print("NOGL", type(exc).__name__, exc)
+        sys.exit(0)
+    import numpy as np, gymnasium as gym, creps_gym
+    from creps_gym.envs.kick.model import REFERENCE_KICK
+    try:
+        env = gym.make("creps_gym/KickPrecision-v0", render_mode="rgb_array", width=160, height=120,
+                       num_threads=1)
+        env.reset(seed=0, options={"context": [8.0]})
+        env.step(REFERENCE_KICK)
+        frame = env.render()
+    except RuntimeError as exc:
+        if "OpenGL" in str(exc):
+            print("NOGL", exc)
+            sys.exit(0)
+        raise
+    env.close()
+    print("SHAPE", frame.shape, frame.dtype, float(frame.std()), int(frame.max()) - int(frame.min()))
+    """
+)
+
+
+@pytest.mark.parametrize("backend", ["egl", "osmesa"])
+def test_rgb_array_frame_is_not_blank(backend):
+    env = {**os.environ, "MUJOCO_GL": backend}
+    out = subprocess.run([sys.executable, "-c", _RENDER_SCRIPT], capture_output=True, text=True, env=env)
+    if out.stdout.startswith("NOGL"):
+        pytest.skip(f"no working MUJOCO_GL={backend} OpenGL backend: {out.stdout[-300:]}")
+    assert out.returncode == 0, out.stderr[-2000:]
+    fields = out.stdout.split("SHAPE", 1)[1].split()
+    assert fields[:4] == ["(120,", "160,", "3)", "uint8"]
+    assert float(fields[4]) > 5.0 and int(fields[5]) > 50  # a real picture, not a blank frame
+
+
+@pytest.mark.slow
+def test_creps_cma_improves_the_precision_mean_policy():
+    """A small learning check: 15 iterations of 20 samples of CREPS-CMA (old mean) from the reference kick."""
+    from creps_gym.optimizers import CREPSCMA
+
+    env = gym.make(PRECISION, num_threads=0).unwrapped
+    targets = np.array([[4.0], [6.0], [8.0], [10.0], [11.5]])
+    start = {"initial_mean": env.reference_params(), "initial_cov": 0.02**2}
+    opt = CREPSCMA(25, 1, variant="old", mean_features="affine", seed=0, **start)
+    before = env.evaluate(targets, opt.recommend(targets))[0].mean()
+    rng = np.random.default_rng(0)
+    for _ in range(15):
+        contexts = env.sample_contexts(rng, 20)
+        params = opt.ask(contexts)
+        opt.tell(contexts, params, env.evaluate(contexts, params)[0])
+    after, info = env.evaluate(targets, opt.recommend(targets))
+    assert not info["fell"].any()
+    # The reference kicks 8.5 m whatever the target (mean return about -7.6); the learned mean policy
+    # kicks shorter for near targets and longer for far ones.
+    assert after.mean() > before + 2.0
+    distances = info["ball_displacement"][:, 0]
+    assert distances[0] < distances[-1] - 1.0
+
+
+def test_empty_batch(flexibility):
+    returns, info = flexibility.evaluate(np.zeros((0, 2)) + 0.2, np.zeros((0, 25)))
+    assert returns.shape == (0,) and info["ball_displacement"].shape == (0, 2)
+
+
+def test_recorded_frames_cover_the_episode(precision):
+    """The frames rgb_array_list renders: one per 0.04 s of both phases, ending where the ball stopped."""
+    contexts, params = np.array([[8.0]]), REFERENCE_KICK[None, :]
+    plain = precision.simulate(contexts, params)
+    recorded = precision.simulate(contexts, params, frame_steps=20)
+    np.testing.assert_array_equal(recorded.displacement, plain.displacement)  # recording changes nothing
+    frames = recorded.frames[0]
+    assert frames.shape == (round(recorded.sim_time[0] / 0.04), precision.models.full.nq)
+    adr = precision.models.ball_qpos_address
+    np.testing.assert_allclose(
+        frames[-1, adr : adr + 2] - frames[0, adr : adr + 2], plain.displacement[0], atol=0.02
+    )
+
+
+def test_save_video_writes_a_gif(tmp_path):
+    pytest.importorskip("imageio")
+    import imageio.v3 as iio
+
+    from creps_gym.envs.kick.rendering import save_video
+
+    frames = [np.full((12, 16, 3), 40 * k, dtype=np.uint8) for k in range(5)]
+    path = save_video(frames, tmp_path / "kick.gif", fps=25)
+    back = iio.imread(path, index=None)
+    assert back.shape[0] == 5 and back.shape[1:3] == (12, 16)
+    assert back[4].mean() > back[0].mean()
+    with pytest.raises(ValueError, match="path"):
+        save_video(frames, tmp_path / "kick.avi")
+    with pytest.raises(ValueError, match="frames"):
+        save_video([], tmp_path / "kick.gif")
+
+
+def test_reproduction_script_runs_and_resumes(tmp_path):
+    """benchmarks/kick/run.py on a tiny budget: results, summary and figure; a rerun reads them back."""
+    pytest.importorskip("matplotlib")
+    script = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "kick", "run.py")
+    args = [sys.executable, script, "--only", "precision", "--iterations", "2", "--trials", "1"]
+    args += ["--threads", "1", "--out", str(tmp_path)]
+    first = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
+    assert first.returncode == 0, first.stderr[-2000:]
+    out = tmp_path / "custom_i2_t1"
+    result = out / "precision" / "rbf_trial0.json"
+    assert result.exists() and (out / "fig5c_precision.png").stat().st_size > 10_000
+    assert "precision (paper: 0.34" in (out / "summary.md").read_text()
+    written = result.read_text()
+    second = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
+    assert second.returncode == 0, second.stderr[-2000:]
+    assert result.read_text() == written  # cached: not recomputed
+    assert first.stdout.splitlines()[-3:] == second.stdout.splitlines()[-3:]

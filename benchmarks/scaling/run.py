@@ -1,0 +1,262 @@
+"""Fig. 3 of the paper: episodes CREPS-CMA-old needs to reach the target, over context and problem dimensions.
+
+For Rosenbrock, Sphere, Shifted Schwefel 1.2 and the Shifted Rotated Elliptic (condition 1e6), each cell
+(z, p) is the median number of training episodes (50 samples per iteration) until the mean regret of the mean
+policy on 16 fixed test contexts is <= 1e-5. Runs that spend their budget first are censored: the cell shows
+``>budget`` and is hatched. Runs are cached as JSON under ``--cache`` (the study resumes) and computed in a
+process pool; the heatmaps (PNG) and the table (``results.md``) are written from the cache only.
+
+    python benchmarks/scaling/run.py --quick     # p <= 16, 1 seed, < 10 min on 2 cores
+    python benchmarks/scaling/run.py --full      # p up to 64, 3 seeds
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))  # benchmarks/: study_tools
+
+import matplotlib  # noqa: E402
+
+matplotlib.use("Agg")
+
+from study_tools import (  # noqa: E402
+    RunSpec,
+    function_spec,
+    invocation_timing,
+    run_all,
+    summarise,
+    timing_text,
+    update_block,
+)
+
+REPO = HERE.parents[1]
+FUNCTIONS = ("Rosenbrock", "Sphere", "ShiftedSchwefel", "ShiftedRotatedElliptic")
+METHOD = "creps-cma-old"
+TITLES = {
+    "Rosenbrock": "Rosenbrock",
+    "Sphere": "Sphere",
+    "ShiftedSchwefel": "Shifted Schwefel 1.2",
+    "ShiftedRotatedElliptic": "Shifted rotated elliptic",
+}
+PRESETS = {
+    "quick": {"dims": (2, 4, 8, 16), "context_dims": (1, 2, 3, 4, 5), "seeds": 1, "budget": 100_000},
+    "full": {"dims": (2, 4, 8, 16, 32, 64), "context_dims": (1, 2, 3, 4, 5), "seeds": 3, "budget": 500_000},
+}
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """Command-line options; ``--quick``/``--full`` pick the defaults of the others."""
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument("--quick", action="store_const", dest="mode", const="quick", help="a fast subset")
+    mode.add_argument("--full", action="store_const", dest="mode", const="full", help="the whole grid")
+    parser.add_argument("--functions", nargs="+", choices=FUNCTIONS, default=list(FUNCTIONS))
+    parser.add_argument("--dims", nargs="+", type=int, help="problem dimensions p (>= 2)")
+    parser.add_argument("--context-dims", nargs="+", type=int, help="context dimensions z")
+    parser.add_argument("--seeds", type=int, help="seeds per cell (0 .. n-1)")
+    parser.add_argument("--budget", type=int, help="episode budget per run (censoring level)")
+    parser.add_argument("--samples", type=int, default=50, help="samples per iteration (paper: 50)")
+    parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    parser.add_argument(
+        "--render-only", action="store_true", help="compute nothing: render the runs already cached"
+    )
+    parser.add_argument("--cache", type=Path, default=HERE / "runs", help="per-run JSON (git-ignored)")
+    parser.add_argument("--out", type=Path, help="heatmaps and table (default docs/results/scaling/<mode>)")
+    args = parser.parse_args(argv)
+    args.mode = args.mode or "full"
+    preset = PRESETS[args.mode]
+    args.index = REPO / "docs" / "results" / "README.md" if args.out is None else None
+    args.out = args.out or REPO / "docs" / "results" / "scaling" / args.mode
+    args.dims = sorted(args.dims or preset["dims"])
+    args.context_dims = sorted(args.context_dims or preset["context_dims"])
+    args.seeds = args.seeds if args.seeds is not None else preset["seeds"]
+    args.budget = args.budget if args.budget is not None else preset["budget"]
+    if min(args.dims) < 2 or min(args.context_dims) < 1:
+        parser.error(
+            f"--dims/--context-dims: expected p >= 2 and z >= 1, got {args.dims}, {args.context_dims}"
+        )
+    for name in ("seeds", "budget", "samples", "workers"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name}: expected a positive integer, got {getattr(args, name)}")
+    return args
+
+
+def make_specs(args: argparse.Namespace) -> list[RunSpec]:
+    """Every run of the grid, smallest problems first."""
+    return [
+        RunSpec(name, p, z, METHOD, seed, args.budget, args.samples)
+        for p in args.dims
+        for name in args.functions
+        for z in args.context_dims
+        for seed in range(args.seeds)
+    ]
+
+
+def grid(documents: Sequence[dict[str, Any]], name: str, args: argparse.Namespace) -> list[list[dict]]:
+    """Summaries (see :func:`study_tools.summarise`) indexed [p][z] for one function.
+
+    Each summary also counts ``stopped``: runs that missed the target because the optimiser's own stop
+    criteria ended them (premature convergence) rather than the budget.
+    """
+    cells = []
+    for p in args.dims:
+        row = []
+        for z in args.context_dims:
+            runs = [
+                d
+                for d in documents
+                if d["spec"]["function"] == name and d["spec"]["dim"] == p and d["spec"]["context_dim"] == z
+            ]
+            summary = summarise(runs)
+            summary["stopped"] = sum(
+                d["hit"] is None and str(d["stop_reason"]).startswith("optimizer") for d in runs
+            )
+            row.append(summary)
+        cells.append(row)
+    return cells
+
+
+def cell_text(summary: dict[str, Any], budget: int) -> str:
+    """``median episodes`` (with hits/runs if not all hit); with no hit, ``>budget`` (censored: the budget
+    ran out) or ``stopped`` (the optimiser's stop criteria ended every run first), with the median final
+    regret."""
+    if not summary["runs"]:
+        return "–"
+    if not summary["hits"]:
+        final = f"regret {summary['median_final']:.2g}" if summary["median_final"] is not None else ""
+        if summary["stopped"] == summary["runs"]:
+            return f"stopped, {final}"
+        if summary["stopped"] == 0:
+            return f">{budget:,}, {final}"
+        return f">{budget:,} or stopped ({summary['stopped']}/{summary['runs']}), {final}"
+    text = f"{summary['median_hit']:,.0f}"
+    return text if summary["hits"] == summary["runs"] else f"{text} ({summary['hits']}/{summary['runs']})"
+
+
+def plot_heatmaps(documents: Sequence[dict[str, Any]], args: argparse.Namespace, path: Path) -> Path:
+    """One heatmap per function: log10 median episodes over (z, p); censored cells hatched."""
+    from matplotlib.colors import LogNorm
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(4.2 * len(args.functions), 4.0), layout="constrained")
+    axes = figure.subplots(1, len(args.functions), squeeze=False)[0]
+    norm = LogNorm(vmin=min(args.samples * 2, args.budget), vmax=args.budget)
+    image = None
+    for axis, name in zip(axes, args.functions, strict=True):
+        cells = grid(documents, name, args)
+        values = np.array([[c["median_hit"] or np.nan for c in row] for row in cells], dtype=np.float64)
+        image = axis.imshow(values, origin="lower", cmap="viridis", norm=norm, aspect="auto")
+        for i, row in enumerate(cells):
+            for j, summary in enumerate(row):
+                missed = summary["runs"] and not summary["hits"]
+                if missed:
+                    axis.add_patch(_hatch(j, i))
+                    label = "stop" if summary["stopped"] == summary["runs"] else "cens."
+                else:
+                    label = cell_text(summary, args.budget).replace(",", "")
+                axis.text(j, i, _short(label), ha="center", va="center", fontsize=7, color="w")
+        axis.set_xticks(range(len(args.context_dims)), [str(z) for z in args.context_dims])
+        axis.set_yticks(range(len(args.dims)), [str(p) for p in args.dims])
+        axis.set(xlabel="context dimension z", ylabel="problem dimension p", title=TITLES[name])
+    figure.colorbar(image, ax=list(axes), label="episodes to regret 1e-5 (median)")
+    figure.suptitle(
+        f"CREPS-CMA-old, {args.samples} samples/iteration, budget {args.budget:,}; hatched: target not "
+        "reached (cens. = budget spent, stop = the optimiser stopped first: premature convergence)"
+    )
+    figure.savefig(path, dpi=110)
+    return path
+
+
+def _hatch(column: int, row: int) -> Any:
+    from matplotlib.patches import Rectangle
+
+    return Rectangle((column - 0.5, row - 0.5), 1, 1, fill=True, facecolor="0.35", hatch="//", edgecolor="w")
+
+
+def _short(label: str) -> str:
+    """Compact number for a heatmap cell: 12345 -> 12.3k."""
+    head = label.split(" ")[0]
+    if head.isdigit():
+        value = int(head)
+        return f"{value / 1000:.1f}k" if value >= 1000 else head
+    return label
+
+
+def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[str, Any]) -> Path:
+    """Write the heatmaps and ``results.md`` into ``args.out``; returns the table's path."""
+    args.out.mkdir(parents=True, exist_ok=True)
+    figure = plot_heatmaps(documents, args, args.out / "heatmaps.png").name
+    command = ("python benchmarks/scaling/run.py " + " ".join(sys.argv[1:])).strip()
+    lines = [
+        f"# Scaling study ({args.mode}): generated by `benchmarks/scaling/run.py`",
+        "",
+        f"Command: `{command}`. CREPS-CMA-old, {args.samples} samples per iteration, {args.seeds} seed(s), "
+        f"episode budget {args.budget:,} per run (censoring level), function instance = seed.",
+        timing_text(timing, documents),
+        "",
+        "Cells: median training episodes until the mean regret of the mean policy on 16 test contexts is "
+        "<= 1e-5 ((seeds that got there / seeds) when not all did). No seed got there: `>budget` = censored "
+        "(the budget ran out), `stopped` = the optimiser's own stop criteria (covariance condition > 1e14 or "
+        "step size < 1e-12) ended every run first, i.e. premature convergence; with the median final regret.",
+        "",
+    ]
+    for name in args.functions:
+        lines += [f"### {function_spec(name).title}", ""]
+        lines.append("| p \\ z | " + " | ".join(str(z) for z in args.context_dims) + " |")
+        lines.append("|---" * (len(args.context_dims) + 1) + "|")
+        for p, row in zip(args.dims, grid(documents, name, args), strict=True):
+            lines.append(f"| {p} | " + " | ".join(cell_text(c, args.budget) for c in row) + " |")
+        lines.append("")
+    lines += [f"![heatmaps]({figure})", ""]
+    path = args.out / "results.md"
+    path.write_text("\n".join(lines), encoding="utf-8")
+    return path
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run (or resume) the grid and write its report."""
+    args = parse_args(argv)
+    start = time.perf_counter()
+    specs = make_specs(args)
+    cached_before = sum((args.cache / f"{s.key}.json").exists() for s in specs)
+    documents = run_all(specs, args.cache, workers=args.workers, compute=not args.render_only)
+    if not documents:
+        print(f"no cached runs in {args.cache}: nothing to render")
+        return 1
+    wall = time.perf_counter() - start
+    computed = 0 if args.render_only else len(specs) - cached_before
+    timing = invocation_timing(args.out, wall, computed, len(specs))
+    table = write_report(args, documents, timing)
+    print(f"wrote {table} and heatmaps.png in {wall:.0f} s")
+    if args.index is not None:
+        relative = table.relative_to(args.index.parent)
+        update_block(
+            args.index,
+            f"scaling-{args.mode}",
+            f"- Scaling study (Fig. 3), {args.mode}: [{relative}]({relative}); command "
+            f"`python benchmarks/scaling/run.py --{args.mode}`: {len(documents)} of {len(specs)} runs, "
+            + (
+                f"{timing['wall_seconds']:.0f} s wall on {timing['cores']} cores ({timing['computed']} runs "
+                "computed, the others cached)."
+                if timing["computed"]
+                else "rendered from the cached runs (the computing invocation has not finished)."
+            ),
+        )
+        body = table.read_text(encoding="utf-8").split("\n![heatmaps]")[0].split("\n", 1)[1]
+        update_block(HERE / "README.md", f"results-{args.mode}", body)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,354 @@
+"""Shared machinery of the paper-reproduction studies (``functions/``, ``scaling/``).
+
+One *run* is one (function, p, z, method, seed) with an episode budget. :func:`execute` runs it: the paper's
+methods (``creps``, ``creps-cma-old``, ``creps-cma-current``) through :func:`creps_gym.runner.run`, the
+baselines through :mod:`baselines`. Every run's result is a small JSON document cached on disk
+(:func:`run_all` skips runs whose file exists, so an interrupted study resumes) and computed in a process
+pool.
+
+The metric is the paper's: the mean over a fixed set of test contexts of the regret of the mean policy, with
+the target 1e-5; for the functions unbounded below (Plane, the ridges) it is the mean of f, with the target
+f <= -1e4. Curves are stored at up to :data:`CURVE_POINTS` log-spaced iterations plus the last one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym.envs.functions import SPECS
+from creps_gym.envs.functions.specs import UNBOUNDED_TARGET
+from creps_gym.runner import run
+
+__all__ = [
+    "BASELINE_METHODS",
+    "CURVE_POINTS",
+    "PAPER_METHODS",
+    "RunSpec",
+    "execute",
+    "function_spec",
+    "invocation_timing",
+    "is_bounded",
+    "run_all",
+    "summarise",
+    "timing_text",
+    "update_block",
+]
+
+#: The paper's three algorithms (registry names).
+PAPER_METHODS = ("creps", "creps-cma-old", "creps-cma-current")
+#: The baselines of :mod:`baselines`.
+BASELINE_METHODS = ("cma-fixed", "cma-regression")
+#: Maximum number of curve points stored per run.
+CURVE_POINTS = 300
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of a study.
+
+    Parameters
+    ----------
+    function : str
+        Function name, as in ``creps_gym/<function>-v0``.
+    dim, context_dim : int
+        p and z.
+    method : str
+        A name of :data:`PAPER_METHODS`, ``"cma-fixed"`` or ``"cma-regression"`` (see :mod:`baselines`).
+    seed : int
+        Master seed of the run; the function instance (A, shift, rotation) is ``instance = seed``.
+    budget : int
+        Maximum number of training episodes.
+    samples : int
+        Episodes per iteration of the paper's methods.
+    """
+
+    function: str
+    dim: int
+    context_dim: int
+    method: str
+    seed: int
+    budget: int
+    samples: int = 50
+
+    def __post_init__(self) -> None:
+        function_spec(self.function)  # raises for an unknown function
+        if self.method not in (*PAPER_METHODS, *BASELINE_METHODS):
+            raise ValueError(
+                f"method: expected one of {[*PAPER_METHODS, *BASELINE_METHODS]}, got {self.method!r}"
+            )
+        minimum = {"dim": 2, "context_dim": 1, "seed": 0, "samples": 2, "budget": self.samples}
+        for name, low in minimum.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+
+    @property
+    def key(self) -> str:
+        """File-name key, unique per run (the budget is part of it: a new budget is a new run)."""
+        return (
+            f"{self.function}-p{self.dim}-z{self.context_dim}-{self.method}-s{self.seed}"
+            f"-b{self.budget}-n{self.samples}"
+        )
+
+    @property
+    def env_id(self) -> str:
+        """The registered id of the function."""
+        return f"creps_gym/{self.function}-v0"
+
+    @property
+    def env_kwargs(self) -> dict[str, int]:
+        """``gymnasium.make`` keyword arguments."""
+        return {"dim": self.dim, "context_dim": self.context_dim, "instance": self.seed}
+
+
+def function_spec(name: str) -> Any:
+    """The :class:`~creps_gym.envs.functions.FunctionSpec` called ``name``."""
+    for spec in SPECS:
+        if spec.name == name:
+            return spec
+    raise ValueError(f"function: expected one of {[s.name for s in SPECS]}, got {name!r}")
+
+
+def is_bounded(name: str) -> bool:
+    """Whether the function has a minimum (regret metric) rather than the f <= -1e4 target."""
+    return bool(function_spec(name).bounded)
+
+
+def curve_indices(n: int, points: int = CURVE_POINTS) -> NDArray[np.int64]:
+    """Up to ``points`` log-spaced indices into a length-``n`` curve, always with the first and last."""
+    if n <= points:
+        return np.arange(n)
+    raw = np.unique(np.round(np.geomspace(1, n, points)).astype(np.int64) - 1)
+    return np.union1d(raw, [0, n - 1])
+
+
+def result_document(
+    spec: RunSpec,
+    episodes: Sequence[float],
+    values: Sequence[float],
+    stop_reason: str | None,
+    seconds: float,
+    **extra: Any,
+) -> dict[str, Any]:
+    """The cached JSON document of a run: its spec, the (thinned) curve, the hit and the final value.
+
+    ``values`` are the metric (regret, or f for unbounded functions) after each entry of ``episodes``;
+    ``hit`` is the first episode count at which the metric met the paper's target (None if never).
+    """
+    episodes_arr = np.asarray(episodes, dtype=np.float64)
+    values_arr = np.asarray(values, dtype=np.float64)
+    target = function_spec(spec.function).target
+    met = np.flatnonzero(values_arr <= target)
+    keep = curve_indices(len(values_arr))
+    return {
+        "spec": asdict(spec),
+        "metric": "regret" if is_bounded(spec.function) else "f",
+        "target": target,
+        "episodes": [int(e) for e in episodes_arr[keep]],
+        "values": [_finite_or_none(v) for v in values_arr[keep]],
+        "hit": int(episodes_arr[met[0]]) if met.size else None,
+        "final": _finite_or_none(values_arr[-1]) if values_arr.size else None,
+        "total_episodes": int(episodes_arr[-1]) if episodes_arr.size else 0,
+        "stop_reason": stop_reason,
+        "seconds": round(float(seconds), 3),
+        **extra,
+    }
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _reached_f_target(record: Any, history: Any) -> bool:
+    """Callback: stop an unbounded function's run once the mean f on the test contexts is <= -1e4."""
+    return bool(-record.eval_return <= UNBOUNDED_TARGET)
+
+
+def paper_method_result(spec: RunSpec) -> dict[str, Any]:
+    """Run one of the paper's methods through the runner and return its result document."""
+    bounded = is_bounded(spec.function)
+    start = time.perf_counter()
+    history = run(
+        spec.method,
+        spec.env_id,
+        iterations=max(1, spec.budget // spec.samples),
+        samples_per_iteration=spec.samples,
+        seed=spec.seed,
+        env_kwargs=spec.env_kwargs,
+        target_regret=function_spec(spec.function).target if bounded else None,
+        callbacks=() if bounded else (_reached_f_target,),
+        eval_every=1,
+    )
+    values = history.column("eval_regret") if bounded else -history.column("eval_return")
+    return result_document(
+        spec, history.column("episodes"), values, history.stop_reason, time.perf_counter() - start
+    )
+
+
+def execute(spec: RunSpec) -> dict[str, Any]:
+    """Run one spec (a paper method or a baseline) and return its result document."""
+    if spec.method in PAPER_METHODS:
+        return paper_method_result(spec)
+    import baselines  # the sibling module; run.py scripts put benchmarks/ on sys.path
+
+    return baselines.run_baseline(spec)
+
+
+def _load(path: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError):
+        return None  # missing or a partial write: recompute
+
+
+def _store(path: Path, document: dict[str, Any]) -> None:
+    _write_text(path, json.dumps(document, allow_nan=False) + "\n")
+
+
+def run_all(
+    specs: Iterable[RunSpec],
+    cache_dir: str | os.PathLike[str],
+    workers: int = 2,
+    worker: Callable[[RunSpec], dict[str, Any]] = execute,
+    log: Callable[[str], None] = print,
+    compute: bool = True,
+) -> list[dict[str, Any]]:
+    """Results of the specs, in order: cached ones are read, the others computed in a process pool.
+
+    Parameters
+    ----------
+    specs : iterable of RunSpec
+    cache_dir : path-like
+        One ``<key>.json`` per run; created if missing.
+    workers : int
+        Processes (1 runs in this process, which is what the tests use).
+    worker : callable
+        ``RunSpec -> result document`` (a module-level function, so the pool can send it).
+    log : callable
+        Receives one progress line per computed run.
+    compute : bool
+        False: compute nothing and return only the cached results (to render a partial study).
+    """
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    cache = Path(cache_dir)
+    cache.mkdir(parents=True, exist_ok=True)
+    specs = list(specs)
+    results: dict[str, dict[str, Any]] = {}
+    todo = []
+    for spec in specs:
+        cached = _load(cache / f"{spec.key}.json")
+        if cached is not None:
+            results[spec.key] = cached
+        elif spec.key not in {s.key for s in todo}:
+            todo.append(spec)
+    if not compute:
+        log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} missing (not computed)")
+        return [results[spec.key] for spec in specs if spec.key in results]
+    log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} to compute with {workers} worker(s)")
+
+    def done(spec: RunSpec, document: dict[str, Any], count: int) -> None:
+        _store(cache / f"{spec.key}.json", document)
+        results[spec.key] = document
+        outcome = f"hit at {document['hit']}" if document["hit"] is not None else f"final {document['final']}"
+        log(f"[{count}/{len(todo)}] {spec.key}: {outcome} ({document['seconds']:.1f} s)")
+
+    if workers == 1:
+        for count, spec in enumerate(todo, 1):
+            done(spec, worker(spec), count)
+    elif todo:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(worker, spec): spec for spec in todo}
+            for count, future in enumerate(as_completed(futures), 1):
+                done(futures[future], future.result(), count)
+    return [results[spec.key] for spec in specs]
+
+
+def summarise(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Median episodes to the target over the runs that hit it, how many hit it, and the median final value.
+
+    Returns
+    -------
+    dict
+        ``hits`` (int), ``runs`` (int), ``median_hit`` (float or None), ``median_final`` (float or None),
+        ``median_total`` (median episodes used).
+    """
+    hits = [d["hit"] for d in documents if d["hit"] is not None]
+    finals = [d["final"] for d in documents if d["final"] is not None]
+    return {
+        "hits": len(hits),
+        "runs": len(documents),
+        "median_hit": float(np.median(hits)) if hits else None,
+        "median_final": float(np.median(finals)) if finals else None,
+        "median_total": float(np.median([d["total_episodes"] for d in documents])) if documents else None,
+    }
+
+
+def update_block(path: str | os.PathLike[str], name: str, text: str) -> Path:
+    """Replace the text between ``<!-- name -->`` and ``<!-- /name -->`` in a Markdown file.
+
+    The block is appended (with its markers) when the file lacks it; the file is created if missing.
+    """
+    path = Path(path)
+    start, end = f"<!-- {name} -->", f"<!-- /{name} -->"
+    old = path.read_text(encoding="utf-8") if path.exists() else ""
+    block = f"{start}\n{text.strip()}\n{end}"
+    if start in old and end in old:
+        head, _, rest = old.partition(start)
+        _, _, tail = rest.partition(end)
+        new = head + block + tail
+    else:
+        new = old.rstrip("\n") + ("\n\n" if old else "") + block + "\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _write_text(path, new)
+    return path
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def invocation_timing(out: str | os.PathLike[str], wall: float, computed: int, total: int) -> dict[str, Any]:
+    """Wall time of the last invocation that computed runs, kept in ``out/timing.json``.
+
+    An invocation that only reads the cache (to re-render) keeps the stored timing, so the reports always
+    state how long the computation took.
+    """
+    path = Path(out) / "timing.json"
+    stored = _load(path) if computed == 0 else None
+    if stored is not None:
+        return stored
+    timing = {"wall_seconds": round(wall, 1), "computed": computed, "total": total, "cores": os.cpu_count()}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _write_text(path, json.dumps(timing) + "\n")
+    return timing
+
+
+def timing_text(timing: dict[str, Any], documents: Sequence[dict[str, Any]]) -> str:
+    """Markdown on the time taken and on how complete the study is (see :func:`invocation_timing`)."""
+    cpu = sum(d["seconds"] for d in documents)
+    if timing["computed"]:
+        text = (
+            f"Time taken: {timing['wall_seconds']:.0f} s wall on {timing['cores']} cores for the last "
+            f"invocation that computed runs ({timing['computed']} of {timing['total']} runs computed, the "
+            "others read from the cache)"
+        )
+    else:
+        text = "Rendered from cached runs only (no invocation that computed runs has finished)"
+    text += f"; per-run times summed over the {len(documents)} runs shown: {cpu:.0f} s."
+    if len(documents) < timing["total"]:
+        text += f" **Partial: {len(documents)} of {timing['total']} runs have finished.**"
+    return text

@@ -1,0 +1,166 @@
+"""Smoke tests of the paper-reproduction studies (``benchmarks/functions``, ``benchmarks/scaling``).
+
+The scripts run as users run them (a subprocess) on tiny configurations into a temporary directory; the tests
+check that the tables and figures appear, that the tables are computed from the cached run results, and that
+cached runs are not recomputed (the studies resume).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+pytest.importorskip("cma")
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
+
+import baselines  # noqa: E402
+import study_tools  # noqa: E402
+
+
+def _script(study: str, *args: str) -> str:
+    result = subprocess.run(
+        [sys.executable, str(BENCHMARKS / study / "run.py"), *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
+def _documents(cache: Path) -> dict[str, dict]:
+    return {p.stem: json.loads(p.read_text()) for p in sorted(cache.glob("*.json"))}
+
+
+def test_functions_study_writes_table_and_figures_from_its_cached_runs(tmp_path: Path) -> None:
+    cache, out = tmp_path / "cache", tmp_path / "out"
+    args = ["--functions", "Sphere", "Plane", "--context-dims", "1", "--seeds", "1", "--dim", "4"]
+    args += ["--budget", "3000", "--workers", "1", "--cache", str(cache), "--out", str(out)]
+    log = _script("functions", *args)
+    assert "0 runs cached" in log
+    documents = _documents(cache)
+    assert len(documents) == 2 * 5  # 2 functions x 5 methods (3 paper methods + 2 baselines)
+    assert (out / "Sphere.png").stat().st_size > 10_000 and (out / "Plane.png").stat().st_size > 10_000
+    table = (out / "results.md").read_text()
+    fixed = documents["Sphere-p4-z1-cma-fixed-s0-b3000-n50"]
+    assert fixed["hit"] is not None  # pycma solves a 4-D sphere at one context within 3000 episodes
+    assert f"{fixed['hit']:,} (1/1)" in table
+    # Tamper with a cached result: a rerun must read it (no recomputation) and the table must show it.
+    key = "Sphere-p4-z1-creps-cma-old-s0-b3000-n50"
+    tampered = dict(documents[key], hit=1234567, final=1e-9)
+    (cache / f"{key}.json").write_text(json.dumps(tampered))
+    log = _script("functions", *args)
+    assert "10 runs cached" in log and "0 to compute" in log
+    assert "1,234,567 (1/1)" in (out / "results.md").read_text()
+    # A partial study renders what has finished, computing nothing.
+    (cache / f"{key}.json").unlink()
+    _script("functions", *args, "--render-only")
+    assert len(list(cache.glob("*.json"))) == 9
+    assert "Partial: 9 of 10 runs have finished." in (out / "results.md").read_text()
+
+
+def test_scaling_study_writes_heatmaps_and_marks_censored_cells(tmp_path: Path) -> None:
+    cache, out = tmp_path / "cache", tmp_path / "out"
+    args = ["--functions", "Sphere", "Rosenbrock", "--dims", "2", "4", "--context-dims", "1", "2"]
+    args += ["--seeds", "1", "--budget", "1500", "--workers", "1", "--cache", str(cache), "--out", str(out)]
+    _script("scaling", *args)
+    documents = _documents(cache)
+    assert len(documents) == 2 * 2 * 2
+    assert (out / "heatmaps.png").stat().st_size > 10_000
+    table = (out / "results.md").read_text()
+    for document in documents.values():
+        spec = document["spec"]
+        if document["hit"] is not None:
+            expected = f"{document['hit']:,}"
+        else:  # missed: censored by the budget, or stopped early by the optimiser's own criteria
+            stopped = str(document["stop_reason"]).startswith("optimizer")
+            expected = ("stopped" if stopped else ">1,500") + f", regret {document['final']:.2g}"
+        section = table[table.index("### " + study_tools.function_spec(spec["function"]).title) :]
+        row = next(line for line in section.splitlines() if line.startswith(f"| {spec['dim']} |"))
+        assert row.split(" | ")[spec["context_dim"]].strip(" |") == expected
+    assert any(d["hit"] is None for d in documents.values())  # Rosenbrock p=4 needs more than 1500
+    assert any(d["hit"] is not None for d in documents.values())
+
+
+def test_runs_are_deterministic_for_a_seed() -> None:
+    spec = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-old", 7, 1000)
+    first, second = study_tools.execute(spec), study_tools.execute(spec)
+    first.pop("seconds"), second.pop("seconds")
+    assert first == second
+    other = study_tools.execute(study_tools.RunSpec("Sphere", 3, 1, "creps-cma-old", 8, 1000))
+    assert other["values"] != first["values"]
+
+
+def test_result_document_finds_the_first_episode_at_the_target() -> None:
+    spec = study_tools.RunSpec("Sphere", 3, 1, "creps", 0, 500)
+    document = study_tools.result_document(spec, [50, 100, 150, 200], [1.0, 2e-5, 9e-6, 1e-7], "x", 0.0)
+    assert document["hit"] == 150 and document["final"] == 1e-7 and document["total_episodes"] == 200
+    unbounded = study_tools.RunSpec("Plane", 3, 1, "creps", 0, 500)
+    document = study_tools.result_document(unbounded, [50, 100], [-10.0, -2e4], "x", 0.0)
+    assert document["metric"] == "f" and document["hit"] == 100
+
+
+def test_curve_indices_thin_long_curves_but_keep_both_ends() -> None:
+    np.testing.assert_array_equal(study_tools.curve_indices(5, 300), np.arange(5))
+    indices = study_tools.curve_indices(10_000, 100)
+    assert len(indices) <= 102 and indices[0] == 0 and indices[-1] == 9999
+    assert np.all(np.diff(indices) > 0)
+
+
+def test_update_block_replaces_only_its_block(tmp_path: Path) -> None:
+    path = tmp_path / "README.md"
+    path.write_text("# Results\n\nkept\n")
+    study_tools.update_block(path, "a", "first")
+    study_tools.update_block(path, "b", "other")
+    study_tools.update_block(path, "a", "second")
+    text = path.read_text()
+    assert text.startswith("# Results\n\nkept\n")
+    assert "second" in text and "first" not in text and "other" in text
+    assert text.count("<!-- a -->") == 1
+
+
+def test_regression_baseline_training_contexts_span_the_box() -> None:
+    one = baselines.training_contexts(1)
+    np.testing.assert_allclose(one[:, 0], [0.0, 0.75, 1.5, 2.25, 3.0])
+    three = baselines.training_contexts(3)
+    assert three.shape == (9, 3) and {0.0, 3.0} == set(np.unique(three[:8]))
+    np.testing.assert_allclose(three[8], [1.5, 1.5, 1.5])
+
+
+def test_unknown_function_or_baseline_is_rejected() -> None:
+    with pytest.raises(ValueError, match="function: expected one of"):
+        study_tools.function_spec("Nope")
+    with pytest.raises(ValueError, match="method: expected one of"):
+        study_tools.RunSpec("Sphere", 3, 1, "cma-nope", 0, 100)
+    with pytest.raises(ValueError, match="method: expected one of"):
+        baselines.run_baseline(study_tools.RunSpec("Sphere", 3, 1, "creps", 0, 100))
+    with pytest.raises(ValueError, match="budget: expected an integer >= 50"):
+        study_tools.RunSpec("Sphere", 3, 1, "creps", 0, 10)
+    with pytest.raises(ValueError, match="dim: expected an integer >= 2"):
+        study_tools.RunSpec("Sphere", 1, 1, "creps", 0, 100)
+    with pytest.raises(ValueError, match="workers: expected"):
+        study_tools.run_all([], "/tmp/unused", workers=0)
+
+
+def test_stalled_runs_are_those_that_missed_the_target_and_stopped_improving() -> None:
+    sys.path.insert(0, str(BENCHMARKS / "functions"))
+    import report
+
+    spec = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-current", 0, 1000)
+    episodes = [100, 200, 300, 400]
+    flat = study_tools.result_document(spec, episodes, [50.0, 8.0, 7.9, 7.8], "max_episodes", 0.0)
+    falling = study_tools.result_document(spec, episodes, [50.0, 8.0, 1.0, 0.1], "max_episodes", 0.0)
+    solved = study_tools.result_document(spec, [100, 200], [1.0, 1e-6], "target_regret", 0.0)
+    assert report.stalled(flat) and not report.stalled(falling) and not report.stalled(solved)
+    plane = study_tools.RunSpec("Plane", 3, 1, "creps-cma-current", 0, 1000)
+    stuck = study_tools.result_document(plane, [100, 200, 300], [-100.0, -240.0, -250.0], "x", 0.0)
+    assert report.stalled(stuck)

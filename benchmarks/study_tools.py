@@ -352,3 +352,49 @@ def timing_text(timing: dict[str, Any], documents: Sequence[dict[str, Any]]) -> 
     if len(documents) < timing["total"]:
         text += f" **Partial: {len(documents)} of {timing['total']} runs have finished.**"
     return text
+
+
+def run_study(
+    args: Any,
+    specs: Sequence[RunSpec],
+    write_report: Callable[[Any, list[dict[str, Any]], dict[str, Any]], Path],
+    *,
+    title: str,
+    script: str,
+    figures_marker: str,
+    readme: Path,
+) -> int:
+    """Run (or resume) ``specs``, write the report, and update the results index and the study README.
+
+    ``title`` names the study in the index (e.g. "Function study"), ``script`` is its command's path,
+    ``figures_marker`` is the line where the generated table's figures start (the README gets the text
+    above it), and ``readme`` is the study README with a generated ``results-<mode>`` block.
+    """
+    start = time.perf_counter()
+    cached_before = sum((args.cache / f"{spec.key}.json").exists() for spec in specs)
+    documents = run_all(specs, args.cache, workers=args.workers, compute=not args.render_only)
+    if not documents:
+        print(f"no cached runs in {args.cache}: nothing to render")
+        return 1
+    wall = time.perf_counter() - start
+    computed = 0 if args.render_only else len(specs) - cached_before
+    timing = invocation_timing(args.out, wall, computed, len(specs))
+    table = write_report(args, documents, timing)
+    print(f"wrote {table} and its figures in {wall:.0f} s")
+    if args.index is not None:
+        relative = table.relative_to(args.index.parent)
+        how = (
+            f"{timing['wall_seconds']:.0f} s wall on {timing['cores']} cores ({timing['computed']} runs "
+            "computed, the others cached)."
+            if timing["computed"]
+            else "rendered from the cached runs (the computing invocation has not finished)."
+        )
+        update_block(
+            args.index,
+            f"{Path(script).parent.name}-{args.mode}",
+            f"- {title}, {args.mode}: [{relative}]({relative}); command "
+            f"`python {script} --{args.mode}`: {len(documents)} of {len(specs)} runs, {how}",
+        )
+        body = table.read_text(encoding="utf-8").split(figures_marker)[0].split("\n", 1)[1]
+        update_block(readme, f"results-{args.mode}", body)
+    return 0

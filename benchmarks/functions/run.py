@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,7 @@ import matplotlib  # noqa: E402
 matplotlib.use("Agg")
 
 from report import METHODS, claims, plot_function, results_table  # noqa: E402
-from study_tools import RunSpec, invocation_timing, run_all, timing_text, update_block  # noqa: E402
+from study_tools import RunSpec, run_study, timing_text  # noqa: E402
 
 from creps_gym.envs.functions import SPECS  # noqa: E402
 
@@ -136,35 +135,15 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
 def main(argv: Sequence[str] | None = None) -> int:
     """Run (or resume) the study and write its report."""
     args = parse_args(argv)
-    start = time.perf_counter()
-    specs = make_specs(args)
-    cached_before = sum((args.cache / f"{s.key}.json").exists() for s in specs)
-    documents = run_all(specs, args.cache, workers=args.workers, compute=not args.render_only)
-    if not documents:
-        print(f"no cached runs in {args.cache}: nothing to render")
-        return 1
-    wall = time.perf_counter() - start
-    computed = 0 if args.render_only else len(specs) - cached_before
-    timing = invocation_timing(args.out, wall, computed, len(specs))
-    table = write_report(args, documents, timing)
-    print(f"wrote {table} and its figures in {wall:.0f} s")
-    if args.index is not None:
-        relative = table.relative_to(args.index.parent)
-        update_block(
-            args.index,
-            f"functions-{args.mode}",
-            f"- Function study, {args.mode}: [{relative}]({relative}); command "
-            f"`python benchmarks/functions/run.py --{args.mode}`: {len(documents)} of {len(specs)} runs, "
-            + (
-                f"{timing['wall_seconds']:.0f} s wall on {timing['cores']} cores ({timing['computed']} runs "
-                "computed, the others cached)."
-                if timing["computed"]
-                else "rendered from the cached runs (the computing invocation has not finished)."
-            ),
-        )
-        body = table.read_text(encoding="utf-8").split("\n## Figures")[0].split("\n", 1)[1]
-        update_block(HERE / "README.md", f"results-{args.mode}", body)
-    return 0
+    return run_study(
+        args,
+        make_specs(args),
+        write_report,
+        title="Function study",
+        script="benchmarks/functions/run.py",
+        figures_marker="\n## Figures",
+        readme=HERE / "README.md",
+    )
 
 
 if __name__ == "__main__":

@@ -51,19 +51,10 @@ def as_float_array(
     numpy.ndarray
         A float64 array (a copy only when a conversion was needed).
     """
-    if isinstance(value, (str, bytes)) or value is None:
-        raise TypeError(f"{name}: expected an array of real numbers, got {type(value).__name__}")
-    if not isinstance(value, np.ndarray) or value.dtype != np.float64:  # float64 arrays skip this check
-        kind = np.asarray(value).dtype.kind
-        if kind in "cUSVb":
-            what = {"c": "complex", "U": "string", "S": "bytes", "V": "structured", "b": "boolean"}[kind]
-            raise TypeError(f"{name}: expected an array of real numbers, got a {what} array")
-    try:
-        array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(
-            f"{name}: expected an array of real numbers, got {type(value).__name__} ({exc})"
-        ) from None
+    if type(value) is np.ndarray and value.dtype == np.float64:
+        array = value  # the hot path (batches from numpy code): nothing to convert or inspect
+    else:
+        array = _convert(value, name)
     if shape is not None:
         ok = array.ndim == len(shape) and all(
             e is None or e == a for e, a in zip(shape, array.shape, strict=True)
@@ -73,6 +64,22 @@ def as_float_array(
     if finite:
         check_finite(array, name)
     return array
+
+
+def _convert(value: Any, name: str) -> NDArray[np.float64]:
+    """Convert non-float64 input, rejecting strings, bytes, booleans, complex and structured data."""
+    if isinstance(value, (str, bytes)) or value is None:
+        raise TypeError(f"{name}: expected an array of real numbers, got {type(value).__name__}")
+    kind = np.asarray(value).dtype.kind
+    if kind in "cUSVb":
+        what = {"c": "complex", "U": "string", "S": "bytes", "V": "structured", "b": "boolean"}[kind]
+        raise TypeError(f"{name}: expected an array of real numbers, got a {what} array")
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(
+            f"{name}: expected an array of real numbers, got {type(value).__name__} ({exc})"
+        ) from None
 
 
 def check_finite(array: NDArray[np.float64], name: str) -> None:

@@ -37,19 +37,6 @@ CONTEXT_LOW = 0.0
 CONTEXT_HIGH = 3.0
 
 
-def _as_batch(value: Any, name: str, columns: int) -> Array:
-    """A finite float64 array of shape (n, columns); a fast path for arrays that already are one."""
-    if (
-        type(value) is np.ndarray
-        and value.dtype == np.float64
-        and value.ndim == 2
-        and value.shape[1] == columns
-    ):
-        if np.isfinite(value).all():
-            return value
-    return as_float_array(value, name, (None, columns))
-
-
 class ContextualFunctionEnv(ContextualEpisodicEnv):
     """Common base of the contextual test-function envs; see a concrete class for the manual.
 
@@ -88,8 +75,8 @@ class ContextualFunctionEnv(ContextualEpisodicEnv):
         return CONTEXT_HIGH * rng.random((n, self.context_dim))
 
     def _check_batch(self, contexts: Any, params: Any) -> tuple[Array, Array]:
-        contexts = _as_batch(contexts, "contexts", self.context_dim)
-        params = _as_batch(params, "params", self.param_dim)
+        contexts = as_float_array(contexts, "contexts", (None, self.context_dim))
+        params = as_float_array(params, "params", (None, self.param_dim))
         if contexts.shape[0] != params.shape[0]:
             raise ValueError(
                 f"params: expected as many rows as contexts ({contexts.shape[0]}), got {params.shape[0]}"

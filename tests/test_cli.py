@@ -93,7 +93,12 @@ BAD_FLAGS = [
         "argument --opt: expected KEY=VALUE (VALUE in JSON or a plain string), got 'epsilon'",
     ),
     (["--opt", "epsilon=-1"], "argument --opt: epsilon: expected a"),  # the optimiser's own message follows
-    (["--opt", "bogus=1"], "argument --opt: "),
+    (
+        ["--opt", "bogus=1"],
+        "argument --opt: options: expected names in ['baseline_features', 'epsilon', 'initial_cov', "
+        "'initial_mean', 'max_condition', 'mean_features', 'min_std', 'ridge', 'seed', 'variant'], "
+        "got unknown ['bogus']",
+    ),
     (["--initial-mean", "centre"], "argument --initial-mean: expected 'uniform', a number or p comma"),
     (["--initial-std", "uniform"], "argument --initial-std: expected a number or comma-separated numbers"),
     (["--max-episodes", "5"], "argument --max-episodes: expected at least one iteration's samples (10)"),

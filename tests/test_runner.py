@@ -190,12 +190,13 @@ def test_callbacks_see_every_record_and_can_stop_the_run():
 def test_env_and_optimizer_objects_and_generic_env_evaluation():
     history = run(CREPSCMA(2, 1, seed=0, initial_cov=0.5), Target(), 15, 12, 0)
     assert history.meta["optimizer"] == "CREPSCMA" and history.meta["metric"] == "return"
-    assert history.records[-1].eval_return > history.records[0].eval_return
+    # The return is −|θ − θ*(s)|²: learning must cut the mean policy's error by far more than noise could.
+    assert history.records[-1].eval_return > 0.1 * history.records[0].eval_return
     with pytest.raises(ValueError, match="optimizer: expected n_params = 2 for Target, got 3"):
         run(CREPSCMA(3, 1, seed=0), Target(), 2, 10, 0)
     plain = run(CREPSCMA(1, 1, seed=0), PlainEnv(), 10, 10, 0)
     assert np.isnan(plain.column("eval_regret")).all()
-    assert plain.records[-1].eval_return > plain.records[0].eval_return
+    assert plain.records[-1].eval_return > 0.1 * plain.records[0].eval_return
     assert plain.equals(run(CREPSCMA(1, 1, seed=0), PlainEnv(), 10, 10, 0))
 
 
@@ -402,3 +403,14 @@ def test_the_runner_guide_examples_run(tmp_path, monkeypatch):
     assert (tmp_path / "comparison.png").exists() and (
         tmp_path / "runs" / "api-demo" / "history.json"
     ).exists()
+
+
+def test_wrapped_action_spaces_are_evaluated_through_episodes_not_the_raw_model():
+    """Regression: under NormalizeParams the raw model would read normalised parameters as physical ones."""
+    import gymnasium as gym
+
+    from creps_gym.wrappers import NormalizeParams
+
+    env = NormalizeParams(gym.make(SPHERE, dim=3))
+    history = run(CREPSCMA(3, 1, seed=0), env, 3, 10, 0)
+    assert history.meta["metric"] == "return"

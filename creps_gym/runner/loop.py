@@ -176,7 +176,13 @@ class Runner:
             model = contextual_model(self.env)
         except TypeError:
             return None
-        return model if model.observation_space == self.env.observation_space else None
+        # A wrapper that changes what the agent sees or sends (e.g. NormalizeParams) makes the raw model's
+        # evaluate/regret the wrong function of the agent's parameters: then evaluate through episodes.
+        same_interface = (
+            model.observation_space == self.env.observation_space
+            and model.action_space == self.env.action_space
+        )
+        return model if same_interface else None
 
     @property
     def has_regret(self) -> bool:

@@ -155,7 +155,10 @@ def test_evaluation_helper_uses_the_env_model(env_id):
     np.testing.assert_array_equal(result.returns, rewards)
     assert result.metric in ("regret", "return")
     if result.metric == "regret":
-        assert (result.regrets >= 0).all()
+        np.testing.assert_array_equal(
+            result.regrets, model.regret(contexts, np.tile(action, (len(contexts), 1)))
+        )
+        assert (result.regrets >= 0).all() and result.value == pytest.approx(result.regrets.mean())
     else:
         assert result.value == pytest.approx(np.mean(rewards))
     env.close()

@@ -213,20 +213,32 @@ def test_context_changes_flexibility_outcome(flexibility):
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "error"),
+    ("kwargs", "error", "match"),
     [
-        ({"rolling_friction": -0.1}, ValueError),
-        ({"rolling_friction": "0.003"}, TypeError),
-        ({"fall_penalty": -1.0}, ValueError),
-        ({"num_threads": -1}, ValueError),
-        ({"fixed_base": "yes"}, TypeError),
-        ({"width": 0}, ValueError),
-        ({"width": 4000, "render_mode": "rgb_array"}, ValueError),
-        ({"render_mode": "human"}, ValueError),
+        (
+            {"rolling_friction": -0.1},
+            ValueError,
+            r"rolling_friction: expected a finite value in \(0.0, 1.0\], got -0.1",
+        ),
+        ({"rolling_friction": "0.003"}, TypeError, "rolling_friction: expected a real number, got str"),
+        ({"fall_penalty": -1.0}, ValueError, "fall_penalty: expected a finite real number >= 0, got -1.0"),
+        ({"num_threads": -1}, ValueError, "num_threads: expected an integer >= 0, got -1"),
+        ({"fixed_base": "yes"}, TypeError, "fixed_base: expected a bool, got str"),
+        ({"width": 0}, ValueError, "width: expected an integer >= 1, got 0"),
+        (
+            {"width": 4000, "render_mode": "rgb_array"},
+            ValueError,
+            "width, height: expected at most 640x480, got 4000x360",
+        ),
+        (
+            {"render_mode": "human"},
+            ValueError,
+            r"render_mode: expected one of \['rgb_array', 'rgb_array_list'\]",
+        ),
     ],
 )
-def test_bad_constructor_arguments(kwargs, error):
-    with pytest.raises(error):
+def test_bad_constructor_arguments(kwargs, error, match):
+    with pytest.raises(error, match=match):
         KickPrecisionEnv(**kwargs)
 
 

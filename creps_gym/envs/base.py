@@ -176,7 +176,7 @@ class ContextualEpisodicEnv(gym.Env[Array, Array]):
             raise RuntimeError(
                 "step() called after the episode terminated: each episode is one step, call reset()"
             )
-        params = self.check_params(np.reshape(as_float_array(action, "action", (self.param_dim,)), (1, -1)))
+        params = as_float_array(action, "action", (self.param_dim,))[None, :]
         returns, batch_info = self.evaluate(self._context[None, :], params)
         self._done = True
         self._last_params = params[0].copy()

@@ -72,7 +72,7 @@ class PolicyEvaluation:
     @property
     def value(self) -> float:
         """The headline number: the mean regret where defined, else the mean return."""
-        return self.mean_return if self.regrets is None else float(self.regrets.mean())
+        return self.mean_return if self.mean_regret is None else self.mean_regret
 
 
 def contextual_model(env: Any) -> ContextualEpisodicEnv:

@@ -88,12 +88,8 @@ class FunctionInstance:
         """Number of context dimensions z."""
         return int(self.matrix.shape[1])
 
-    def offset(self, contexts: Array) -> Array:
-        """``A s`` for contexts (n, z): shape (n, p), computed row by row without a BLAS product."""
-        return -self.negative_offset(contexts)
-
     def negative_offset(self, contexts: Array) -> Array:
-        """``-A s`` for contexts (n, z): shape (n, p); exactly the negation of :meth:`offset`.
+        """``-A s`` for contexts (n, z): shape (n, p), computed without a BLAS product.
 
         A sum of element-wise products over the z columns, in a fixed order: row-independent, and IEEE
         rounding is symmetric, so negating A first gives exactly ``-(A s)`` with one pass fewer.

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import gymnasium
 import numpy as np
 import pytest
+from helpers import python_blocks
 
 from creps_gym.envs.evaluation import evaluate_policy, test_contexts
 from creps_gym.optimizers import registry
@@ -198,7 +198,7 @@ def test_cma_reports_its_own_stop_criteria():
 
 def test_the_adapter_guide_examples_run(monkeypatch, capsys):
     monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
-    blocks = re.findall(r"```python\n(.*?)```", GUIDE.read_text(), flags=re.DOTALL)
+    blocks = python_blocks(GUIDE)
     assert len(blocks) >= 2
     namespace: dict = {"__name__": "writing_an_adapter"}
     for block in blocks:

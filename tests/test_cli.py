@@ -5,20 +5,18 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
-import sys
 
 import pytest
+from helpers import SPHERE, cli_command
 
 from creps_gym.cli import main
 from creps_gym.optimizers import optimizer_names
 from creps_gym.runner import History, RunDir, run
 
-SPHERE = "creps_gym/Sphere-v0"
-
 
 def cli(*args, cwd=None, timeout=120):
     return subprocess.run(
-        [sys.executable, "-m", "creps_gym.cli", *map(str, args)],
+        cli_command(*args),
         capture_output=True, text=True, cwd=cwd, timeout=timeout, check=False,
     )  # fmt: skip
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.error import DependencyNotInstalled
 from gymnasium.utils.env_checker import check_env, data_equivalence
+from helpers import make_or_skip
 
 import creps_gym
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
@@ -23,10 +23,7 @@ pytestmark = pytest.mark.filterwarnings("ignore:.*(symmetric and normalized|diff
 
 
 def _make(env_id: str) -> gym.Env:
-    try:
-        return gym.make(env_id)
-    except (DependencyNotInstalled, ModuleNotFoundError) as exc:  # optional extra (MuJoCo, robotics) missing
-        pytest.skip(f"{env_id}: optional dependency not installed ({exc})")
+    return make_or_skip(env_id)
 
 
 def _model(env: gym.Env) -> ContextualEpisodicEnv:
@@ -117,10 +114,7 @@ def test_info_context_is_the_observation(env_id):
 
 @pytest.mark.parametrize("env_id", NATIVE_VECTOR_IDS)
 def test_native_vector_env_matches_the_scalar_env(env_id):
-    try:
-        vector = gym.make_vec(env_id, num_envs=2)
-    except (DependencyNotInstalled, ModuleNotFoundError) as exc:
-        pytest.skip(f"{env_id}: optional dependency not installed ({exc})")
+    vector = make_or_skip(env_id, vector=True, num_envs=2)
     assert isinstance(vector, ContextualEpisodicVectorEnv)
     env = _make(env_id)
     contexts = _two_contexts(_model(env))

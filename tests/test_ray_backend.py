@@ -11,11 +11,11 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
+from helpers import SPHERE  # noqa: E402
+
 from creps_gym.envs.base import ContextualEpisodicEnv  # noqa: E402
 from creps_gym.optimizers import CREPSCMA  # noqa: E402
 from creps_gym.runner import EpisodeError, run  # noqa: E402
-
-SPHERE = "creps_gym/Sphere-v0"
 
 
 class Target(ContextualEpisodicEnv):

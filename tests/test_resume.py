@@ -5,23 +5,18 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
+from helpers import SPHERE, cli_command
 
 from creps_gym.runner import History, RunDir, run
 
 if not hasattr(signal, "SIGKILL"):  # pragma: no cover - Windows
     pytest.skip("needs SIGKILL", allow_module_level=True)
 
-SPHERE = "creps_gym/Sphere-v0"
 SETTINGS = {"iterations": 150, "samples": 12, "seed": 5, "checkpoint_every": 3, "eval_every": 2}
-
-
-def _command(*args):
-    return [sys.executable, "-m", "creps_gym.cli", *map(str, args)]
 
 
 def _iterations_logged(path: Path) -> int:
@@ -50,12 +45,12 @@ def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(
     out = tmp_path / "run"
     log = out / RunDir.LOG
     s = SETTINGS
-    start = _command(
+    start = cli_command(
         "run", "--env", SPHERE, "--optimizer", optimizer, "--iterations", s["iterations"],
         "--samples", s["samples"], "--seed", s["seed"], "--out", out, "--env-kwarg", "dim=6",
         "--checkpoint-every", s["checkpoint_every"], "--eval-every", s["eval_every"], "--no-plot",
     )  # fmt: skip
-    resume = _command("resume", out, "--no-plot")
+    resume = cli_command("resume", out, "--no-plot")
     popen = {"stdout": subprocess.DEVNULL, "stderr": subprocess.PIPE, "text": True}
     # 1) killed as soon as the run directory exists (most likely before the first checkpoint);
     _kill_when(subprocess.Popen(start, **popen), lambda: (out / RunDir.CONFIG).exists(), "config.json")

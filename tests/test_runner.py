@@ -6,12 +6,12 @@ import csv
 import io
 import json
 import math
-import re
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
+from helpers import SPHERE, python_blocks
 
 from creps_gym import registered_ids
 from creps_gym.envs.base import ContextualEpisodicEnv, SupportsRegret
@@ -34,7 +34,6 @@ from creps_gym.runner import (
     write_iohanalyzer,
 )
 
-SPHERE = "creps_gym/Sphere-v0"
 SMALL = {"env_kwargs": {"dim": 4}}
 
 
@@ -394,7 +393,7 @@ def test_record_round_trip_and_column_errors():
 def test_the_runner_guide_examples_run(tmp_path, monkeypatch):
     pytest.importorskip("matplotlib")
     guide = Path(__file__).resolve().parent.parent / "docs" / "runner.md"
-    blocks = re.findall(r"```python\n(.*?)```", guide.read_text(), flags=re.DOTALL)
+    blocks = python_blocks(guide)
     monkeypatch.chdir(tmp_path)
     namespace: dict = {"__name__": "runner_guide"}
     for block in blocks:

@@ -2,16 +2,15 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.error import DependencyNotInstalled
 from gymnasium.utils import seeding
 from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode
+from helpers import make_or_skip, python_blocks
 
 import creps_gym
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
@@ -283,10 +282,7 @@ NATIVE_IDS = [i for i in creps_gym.registered_ids() if gym.spec(i).vector_entry_
 
 @pytest.mark.parametrize("env_id", NATIVE_IDS)
 def test_every_vector_wrapper_on_every_registered_native_vector_env(env_id):
-    try:
-        vec = gym.make_vec(env_id, num_envs=2)
-    except (DependencyNotInstalled, ModuleNotFoundError) as exc:  # an optional extra (MuJoCo) is missing
-        pytest.skip(f"{env_id}: optional dependency not installed ({exc})")
+    vec = make_or_skip(env_id, vector=True, num_envs=2)
     model = vec.unwrapped.model
     low, high = model.observation_space.low, model.observation_space.high
     contexts = np.vstack([low, high, 0.5 * (low + high)])
@@ -308,28 +304,21 @@ DOC = Path(__file__).resolve().parents[1] / "docs" / "wrappers.md"
 
 @pytest.mark.parametrize("index", [0, 1])
 def test_doc_examples_run(index, capsys):
-    blocks = re.findall(r"```python\n(.*?)```", DOC.read_text(), re.S)
+    blocks = python_blocks(DOC)
     assert len(blocks) == 4
     exec(compile(blocks[index], f"{DOC}:block{index}", "exec"), {"__name__": "docs"})
     assert "return" in capsys.readouterr().out
 
 
-def _make_or_skip(env_id):
-    try:
-        return gym.make(env_id)
-    except (DependencyNotInstalled, ModuleNotFoundError) as exc:  # an optional extra (MuJoCo) is missing
-        pytest.skip(f"{env_id}: optional dependency not installed ({exc})")
-
-
 @pytest.mark.filterwarnings("ignore:.*(is different from the unwrapped version|symmetric and normalized)")
 @pytest.mark.parametrize("env_id", creps_gym.registered_ids())
 def test_check_env_on_every_wrapped_registered_id(env_id):
-    env = _make_or_skip(env_id)
+    env = make_or_skip(env_id)
     low, high = env.observation_space.low, env.observation_space.high
     stacked = NormalizeParams(HideContext(SampleContexts(env, UniformContexts(low, high))))
     check_env(stacked, skip_render_check=True)
     _, info = stacked.reset(seed=0)
     np.testing.assert_array_equal(info["context"], UniformContexts(low, high)(seeding.np_random(0)[0], 1)[0])
-    fixed = FixedContexts(_make_or_skip(env_id), np.vstack([low, high]), order="random")
+    fixed = FixedContexts(make_or_skip(env_id), np.vstack([low, high]), order="random")
     check_env(fixed, skip_render_check=True)
     assert fixed.reset(seed=1)[1]["context_index"] in (0, 1)

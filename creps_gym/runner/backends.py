@@ -210,8 +210,10 @@ class VectorBackend(Backend):
             obs, _ = self._vec.reset(options={"context": contexts})
         else:
             obs, _ = self._vec.reset(seed=[int(s) for s in seeds])
-        for k in range(len(seeds)):
-            _check_context(obs[k], contexts[k], f"sub-env {k}")
+        got = np.asarray(obs, dtype=np.float64).reshape(len(seeds), -1)
+        if got.shape != contexts.shape or not np.array_equal(got, contexts):
+            for k in range(len(seeds)):  # find and name the first sub-env that differs
+                _check_context(obs[k], contexts[k], f"sub-env {k}")
         _, rewards, terminated, truncated, _ = self._vec.step(params)
         rewards = np.asarray(rewards, dtype=np.float64)
         if not np.all(terminated | truncated) or not np.isfinite(rewards).all():

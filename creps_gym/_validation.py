@@ -14,8 +14,10 @@ from numpy.typing import NDArray
 
 __all__ = [
     "as_float_array",
+    "check_bool",
     "check_finite",
     "check_positive_int",
+    "check_real",
     "check_real_in_range",
 ]
 
@@ -123,3 +125,21 @@ def check_real_in_range(
         interval = f"{'[' if low_inclusive else '('}{low}, {high}{']' if high_inclusive else ')'}"
         raise ValueError(f"{name}: expected a finite value in {interval}, got {value!r}")
     return number
+
+
+def check_real(value: Any, name: str, *, minimum: float = 0.0, strict: bool = False) -> float:
+    """Return ``value`` as a finite float ``>= minimum`` (``> minimum`` if ``strict``), else raise."""
+    relation = f"{'>' if strict else '>='} {minimum:g}"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}: expected a real number {relation}, got {type(value).__name__} {value!r}")
+    number = float(value)
+    if not np.isfinite(number) or number < minimum or (strict and number == minimum):
+        raise ValueError(f"{name}: expected a finite value {relation}, got {value!r}")
+    return number
+
+
+def check_bool(value: Any, name: str) -> bool:
+    """Return ``value`` as a bool, or raise ``TypeError`` (ints such as 0 and 1 are not accepted)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name}: expected a bool, got {type(value).__name__} {value!r}")
+    return bool(value)

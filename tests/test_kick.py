@@ -221,7 +221,7 @@ def test_context_changes_flexibility_outcome(flexibility):
             r"rolling_friction: expected a finite value in \(0.0, 1.0\], got -0.1",
         ),
         ({"rolling_friction": "0.003"}, TypeError, "rolling_friction: expected a real number, got str"),
-        ({"fall_penalty": -1.0}, ValueError, "fall_penalty: expected a finite real number >= 0, got -1.0"),
+        ({"fall_penalty": -1.0}, ValueError, "fall_penalty: expected a finite value >= 0, got -1.0"),
         ({"num_threads": -1}, ValueError, "num_threads: expected an integer >= 0, got -1"),
         ({"fixed_base": "yes"}, TypeError, "fixed_base: expected a bool, got str"),
         ({"width": 0}, ValueError, "width: expected an integer >= 1, got 0"),

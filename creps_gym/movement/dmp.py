@@ -72,20 +72,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_positive_int
+from creps_gym._validation import as_float_array, check_bool, check_positive_int, check_real
 
 __all__ = ["DMPConfig", "DMPTrajectory", "DiscreteDMP", "step_spectral_radius"]
 
 Array = NDArray[np.float64]
-
-
-def _positive_float(value: Any, name: str) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name}: expected a positive real number, got {type(value).__name__} {value!r}")
-    number = float(value)
-    if not np.isfinite(number) or number <= 0.0:
-        raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
-    return number
 
 
 @dataclass(frozen=True)
@@ -116,13 +107,8 @@ class DMPConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "n_basis", check_positive_int(self.n_basis, "n_basis"))
         for name in ("alpha_z", "beta_z", "alpha_x", "weight_scale"):
-            object.__setattr__(self, name, _positive_float(getattr(self, name), name))
-        if not isinstance(self.amplitude_scaling, (bool, np.bool_)):
-            raise TypeError(
-                f"amplitude_scaling: expected a bool, got {type(self.amplitude_scaling).__name__} "
-                f"{self.amplitude_scaling!r}"
-            )
-        object.__setattr__(self, "amplitude_scaling", bool(self.amplitude_scaling))
+            object.__setattr__(self, name, check_real(getattr(self, name), name, strict=True))
+        object.__setattr__(self, "amplitude_scaling", check_bool(self.amplitude_scaling, "amplitude_scaling"))
 
 
 def step_spectral_radius(config: DMPConfig, step: float) -> float:
@@ -272,8 +258,8 @@ class DiscreteDMP:
         start = self._check_state(start, "start", n)
         goal = self._check_state(goal, "goal", n)
         n_steps = check_positive_int(n_steps, "n_steps")
-        dt = _positive_float(dt, "dt")
-        tau = n_steps * dt if tau is None else _positive_float(tau, "tau")
+        dt = check_real(dt, "dt", strict=True)
+        tau = n_steps * dt if tau is None else check_real(tau, "tau", strict=True)
         cfg = self.config
         radius = step_spectral_radius(cfg, dt / tau)
         if radius >= 1.0:

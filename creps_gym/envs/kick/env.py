@@ -7,7 +7,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import check_positive_int, check_real_in_range
+from creps_gym._validation import check_bool, check_positive_int, check_real, check_real_in_range
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
 from creps_gym.envs.kick.model import (
     DURATION_RANGE,
@@ -26,20 +26,6 @@ __all__ = ["KickEnv", "KickVectorEnv"]
 
 Array = NDArray[np.float64]
 FRAME_STEPS = 20  # one rendered frame every 20 steps of 2 ms: 25 frames per second
-
-
-def _check_bool(value: Any, name: str) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name}: expected a bool, got {type(value).__name__} {value!r}")
-    return bool(value)
-
-
-def _check_nonnegative(value: Any, name: str) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name}: expected a real number >= 0, got {type(value).__name__} {value!r}")
-    if not np.isfinite(value) or value < 0:
-        raise ValueError(f"{name}: expected a finite real number >= 0, got {value!r}")
-    return float(value)
 
 
 class KickEnv(ContextualEpisodicEnv):
@@ -65,9 +51,9 @@ class KickEnv(ContextualEpisodicEnv):
         height: int = 360,
     ) -> None:
         rolling = check_real_in_range(rolling_friction, "rolling_friction", 0.0, 1.0)
-        self.fall_penalty = _check_nonnegative(fall_penalty, "fall_penalty")
+        self.fall_penalty = check_real(fall_penalty, "fall_penalty")
         threads = check_positive_int(num_threads, "num_threads", minimum=0)
-        fixed = _check_bool(fixed_base, "fixed_base")
+        fixed = check_bool(fixed_base, "fixed_base")
         self.width = check_positive_int(width, "width")
         self.height = check_positive_int(height, "height")
         buffer = (640, 480)  # the MJCF's offscreen buffer

@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array
+from creps_gym._validation import as_float_array, check_real
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
 from creps_gym.movement import DiscreteDMP, DMPConfig, DMPTrajectory
 
@@ -130,8 +130,8 @@ class PlanarReacherEnv(ContextualEpisodicEnv):
         n_basis: int = 5,
         render_mode: str | None = None,
     ) -> None:
-        self.position_weight = _non_negative(position_weight, "position_weight")
-        self.acceleration_weight = _non_negative(acceleration_weight, "acceleration_weight")
+        self.position_weight = check_real(position_weight, "position_weight")
+        self.acceleration_weight = check_real(acceleration_weight, "acceleration_weight")
         config = DMPConfig(
             n_basis=n_basis, alpha_z=ALPHA_Z, beta_z=BETA_Z, alpha_x=3.0, weight_scale=ALPHA_Z * BETA_Z
         )
@@ -188,12 +188,3 @@ class PlanarReacherVectorEnv(ContextualEpisodicVectorEnv):
     """Native vector version of :class:`PlanarReacherEnv`: one batched DMP rollout per step."""
 
     single_env_class = PlanarReacherEnv
-
-
-def _non_negative(value: Any, name: str) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name}: expected a real number >= 0, got {type(value).__name__} {value!r}")
-    number = float(value)
-    if not np.isfinite(number) or number < 0.0:
-        raise ValueError(f"{name}: expected a finite value >= 0, got {value!r}")
-    return number

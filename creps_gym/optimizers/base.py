@@ -147,6 +147,7 @@ class ContextualOptimizer(ABC):
     def __init__(self) -> None:
         self._pending: tuple[Array, Array] | None = None
         self._pending_index: dict[bytes, list[int]] = {}
+        self._told_rows: NDArray[np.int64] = np.empty(0, dtype=np.int64)  # asked index per told row
         self._diagnostics: dict[str, float] = {}
         self.iteration = 0
         self.evaluations = 0
@@ -200,7 +201,8 @@ class ContextualOptimizer(ABC):
         returns = as_float_array(returns, "returns", (n,))
         if n < 2:
             raise ValueError(f"returns: expected at least 2 samples per tell, got {n}")
-        external = self._count_external(contexts, params, allow_external)
+        self._told_rows = self._match_told_rows(contexts, params, allow_external)  # for _update
+        external = int((self._told_rows < 0).sum())
         self._update(contexts, params, returns)
         self._pending, self._pending_index = None, {}
         self._diagnostics["external_samples"] = float(external)
@@ -279,19 +281,19 @@ class ContextualOptimizer(ABC):
             raise ValueError(f"{name}: expected at least one row, got shape {contexts.shape}")
         return contexts
 
-    def _count_external(self, contexts: Array, params: Array, allow_external: bool) -> int:
-        """Check the told rows against the pending ask; return how many were not asked."""
+    def _match_told_rows(self, contexts: Array, params: Array, allow_external: bool) -> NDArray[np.int64]:
+        """Index in the pending ask of each told row, −1 for external rows; raises on protocol misuse.
+
+        Identical asked rows are matched in order, each at most once.
+        """
         if self._pending is None and not allow_external:
             raise RuntimeError(
                 "tell() without a pending ask(): the last batch was told already or nothing was asked; "
                 "pass allow_external=True to tell samples generated elsewhere"
             )
-        rows = np.concatenate([contexts, params], axis=1)
-        used: dict[
-            bytes, int
-        ] = {}  # how often each asked row was told; identical asked rows count separately
-        external = 0
-        for k, row in enumerate(rows):
+        used: dict[bytes, int] = {}  # how often each distinct asked row was told so far
+        indices = np.full(contexts.shape[0], -1, dtype=np.int64)
+        for k, row in enumerate(np.concatenate([contexts, params], axis=1)):
             key = row.tobytes()
             asked = self._pending_index.get(key)
             if asked is None:
@@ -300,11 +302,11 @@ class ContextualOptimizer(ABC):
                         f"tell(): row {k} (contexts[{k}], params[{k}]) was not returned by the last ask(); "
                         "pass allow_external=True to tell external samples"
                     )
-                external += 1
                 continue
             used[key] = used.get(key, 0) + 1
             if used[key] > len(asked):
                 raise RuntimeError(
                     f"tell(): row {k} repeats asked sample {asked[0]}; each sample is told once"
                 )
-        return external
+            indices[k] = asked[used[key] - 1]
+        return indices

@@ -187,32 +187,20 @@ class MinimizerAdapter(ContextualOptimizer):
         self._asked.append(y.copy())
         return y
 
-    def _asked_rows(self, contexts: Array, params: Array) -> list[int]:
-        """Index in the last ask of each told row (identical asked rows are matched in order)."""
-        used: dict[bytes, int] = {}
-        indices = []
-        for row in np.concatenate([contexts, params], axis=1):
-            key = row.tobytes()
-            asked = self._pending_index.get(key)
-            if asked is None:
-                raise RuntimeError(
-                    f"tell(): the {self.kind} adapter cannot use external samples "
-                    "(rows not returned by the last ask)"
-                )
-            used[key] = used.get(key, 0) + 1
-            indices.append(int(asked[used[key] - 1]))
-        return indices
-
     def _update(self, contexts: Array, params: Array, returns: Array) -> None:
-        indices = self._asked_rows(contexts, params)
+        indices = self._told_rows  # asked index per told row, matched by ContextualOptimizer.tell
+        if (indices < 0).any():
+            raise RuntimeError(
+                f"tell(): the {self.kind} adapter cannot use external samples "
+                "(rows not returned by the last ask)"
+            )
         if self.fixed_batch and len(indices) != self.batch_size:
             raise ValueError(
                 f"returns: expected all {self.batch_size} asked samples "
                 f"({self.kind} needs whole populations), got {len(indices)}"
             )
-        told = np.asarray(indices, dtype=np.int64)
         losses = -np.asarray(returns, dtype=np.float64)  # the sign convention: libraries minimise
-        self._raw_tell(told, losses)
+        self._raw_tell(indices, losses)
 
     def _raw_tell(self, indices: NDArray[np.int64], losses: Array) -> None:
         self._lib_tell(indices, losses)

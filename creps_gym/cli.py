@@ -130,7 +130,9 @@ def _add_progress(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_run(commands: Any) -> None:
-    from creps_gym.runner.config import BACKENDS, VECTOR_MODES
+    from creps_gym.runner.config import BACKENDS, VECTOR_MODES, RunConfig
+
+    run_defaults = {f.name: f.default for f in fields(RunConfig)}  # one source for the defaults
 
     run = commands.add_parser(
         "run", help="run an optimiser on an env", description="Run an optimiser on an env."
@@ -146,26 +148,29 @@ def _add_run(commands: Any) -> None:
     for flag, parse, text in required:
         run.add_argument(flag, required=True, type=parse, help=text)
     run.add_argument("--overwrite", action="store_true", help="replace a run already in --out (deletes it)")
-    run.add_argument("--backend", default="serial", choices=BACKENDS, help="where episodes run")
-    run.add_argument("--vector-mode", default="auto", choices=VECTOR_MODES, help="vector backend flavour")
+    run.add_argument(
+        "--backend", default=run_defaults["backend"], choices=BACKENDS, help="where episodes run"
+    )
+    run.add_argument(
+        "--vector-mode",
+        default=run_defaults["vector_mode"],
+        choices=VECTOR_MODES,
+        help="vector backend flavour",
+    )
     optional = [
-        ("--workers", _integer(1), None, "vector sub-envs or Ray tasks per iteration"),
-        ("--retries", _integer(0), 2, "re-runs of a failed episode"),
-        ("--eval-every", _integer(1), 1, "evaluate the mean policy every N iterations"),
-        ("--eval-contexts", _integer(1), 16, "number of test contexts"),
-        ("--checkpoint-every", _integer(1), 10, "checkpoint every N iterations"),
-        ("--max-episodes", _integer(2), None, "episode budget"),
-        ("--target-regret", _positive_float, None, "stop once the mean regret is at most this"),
-        ("--max-time", _positive_float, None, "stop after this many seconds"),
-        (
-            "--initial-mean",
-            _initial_mean,
-            None,
-            "a number, p comma-separated numbers, or 'uniform' in the box",
-        ),
-        ("--initial-std", _numbers, None, "initial standard deviation(s); default: box width / 4"),
+        ("--workers", _integer(1), "vector sub-envs or Ray tasks per iteration"),
+        ("--retries", _integer(0), "re-runs of a failed episode"),
+        ("--eval-every", _integer(1), "evaluate the mean policy every N iterations"),
+        ("--eval-contexts", _integer(1), "number of test contexts"),
+        ("--checkpoint-every", _integer(1), "checkpoint every N iterations"),
+        ("--max-episodes", _integer(2), "episode budget"),
+        ("--target-regret", _positive_float, "stop once the mean regret is at most this"),
+        ("--max-time", _positive_float, "stop after this many seconds"),
+        ("--initial-mean", _initial_mean, "a number, p comma-separated numbers, or 'uniform' in the box"),
+        ("--initial-std", _numbers, "initial standard deviation(s); default: box width / 4"),
     ]
-    for flag, parse, default, text in optional:
+    for flag, parse, text in optional:
+        default = run_defaults[flag[2:].replace("-", "_")]
         run.add_argument(flag, type=parse, default=default, help=f"{text} (default {default})")
     for flag, text in (("--opt", "optimiser option, e.g. --opt epsilon=1.0"), ("--env-kwarg", "e.g. dim=5")):
         run.add_argument(

@@ -29,6 +29,7 @@ import itertools
 import math
 import os
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,6 +47,7 @@ __all__ = [
     "SerialBackend",
     "VectorBackend",
     "make_backend",
+    "retry",
     "run_episodes",
 ]
 
@@ -93,6 +95,31 @@ def _check_context(obs: Any, context: Array, where: str) -> None:
         )
 
 
+def retry(
+    call: Callable[[], Any],
+    attempts: int,
+    *,
+    on_failure: Callable[[], None] | None = None,
+    reraise: tuple[type[Exception], ...] = (EpisodeError,),
+) -> tuple[bool, Any, Exception | None]:
+    """Call ``call()`` up to ``attempts`` times: ``(True, value, None)``, or ``(False, None, last error)``.
+
+    Exceptions in ``reraise`` (by default ``EpisodeError``: an episode already named) propagate at once;
+    ``on_failure`` runs after each other failure (e.g. to rebuild a broken vector env).
+    """
+    last: Exception | None = None
+    for _ in range(attempts):
+        try:
+            return True, call(), None
+        except reraise:
+            raise
+        except Exception as exc:  # any failure of user env code is retried, then reported by the caller
+            last = exc
+            if on_failure is not None:
+                on_failure()
+    return False, None, last
+
+
 def _one_episode(env: gym.Env, seed: int, context: Array, params: Array) -> float:
     obs, _ = env.reset(seed=int(seed))
     _check_context(obs, context, "reset")
@@ -129,21 +156,18 @@ def run_episodes(
     """
     returns = np.empty(len(seeds))
     for k, seed in enumerate(seeds):
-        last: Exception | None = None
-        for _ in range(retries + 1):
-            try:
-                returns[k] = _one_episode(env, int(seed), contexts[k], params[k])
-                break
-            except EpisodeError as exc:
-                where = _episode_text(label, first + k, int(seed), contexts[k])
-                raise EpisodeError(f"{where}: {exc}") from None
-            except Exception as exc:  # any failure of user env code is retried, then reported
-                last = exc
-        else:
+        where = _episode_text(label, first + k, int(seed), contexts[k])
+        try:
+            ok, value, last = retry(
+                lambda k=k, seed=seed: _one_episode(env, int(seed), contexts[k], params[k]), retries + 1
+            )
+        except EpisodeError as exc:
+            raise EpisodeError(f"{where}: {exc}") from None
+        if not ok:
             raise EpisodeError(
-                f"{_episode_text(label, first + k, int(seed), contexts[k])} failed {retries + 1} time(s); "
-                f"last error: {type(last).__name__}: {last}"
+                f"{where} failed {retries + 1} time(s); last error: {type(last).__name__}: {last}"
             ) from last
+        returns[k] = value
     return returns
 
 
@@ -225,15 +249,13 @@ class VectorBackend(Backend):
         returns = np.empty(n)
         for start in range(0, n, m):
             rows = np.minimum(np.arange(start, start + m), n - 1)  # pad by repeating the last episode
-            last: Exception | None = None
-            for _ in range(self.retries + 1):
-                try:
-                    chunk = self._chunk(seeds[rows], contexts[rows], params[rows])
-                    break
-                except Exception as exc:  # rebuild the vector env (a failed async env is unusable)
-                    last = exc
-                    self.close()
-            else:
+            ok, chunk, last = retry(  # a failed async env is unusable: rebuild it before the next try
+                lambda rows=rows: self._chunk(seeds[rows], contexts[rows], params[rows]),
+                self.retries + 1,
+                on_failure=self.close,
+                reraise=(),  # even a named failure is retried, then located episode by episode
+            )
+            if not ok:
                 self._locate(seeds, contexts, params, label, start, min(start + m, n), last)
             stop = min(start + m, n)
             returns[start:stop] = chunk[: stop - start]

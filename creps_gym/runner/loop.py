@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import contextual_model, evaluate_policy, test_contexts
 from creps_gym.optimizers.registry import make_optimizer, restore_optimizer
-from creps_gym.runner.backends import EnvSource, EpisodeError, make_backend, run_episodes
+from creps_gym.runner.backends import EnvSource, EpisodeError, make_backend, retry, run_episodes
 from creps_gym.runner.callbacks import as_callback
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History, IterationRecord
@@ -249,14 +249,9 @@ class Runner:
 
         A failure is retried like an episode's (``config.retries`` times), then raises EpisodeError.
         """
-        last: Exception | None = None
-        for _ in range(self.config.retries + 1):
-            try:
-                return self._evaluate_once()
-            except EpisodeError:
-                raise
-            except Exception as exc:  # env code may fail transiently, as in training episodes
-                last = exc
+        ok, value, last = retry(self._evaluate_once, self.config.retries + 1)
+        if ok:
+            return value
         raise EpisodeError(
             f"iteration {self.iteration}, evaluation of the recommended policy on the test contexts failed "
             f"{self.config.retries + 1} time(s); last error: {type(last).__name__}: {last}"

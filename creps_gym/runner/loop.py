@@ -147,20 +147,11 @@ class Runner:
 
     def _make_optimizer(self, seed: int) -> Any:
         mean, std = default_initial_distribution(self.env.action_space)
-        if self.config.initial_mean == "uniform":
+        if isinstance(self.config.initial_mean, str) and self.config.initial_mean == "uniform":
             mean = self._uniform_mean()
-        for name in ("initial_mean", "initial_std"):
-            given = getattr(self.config, name)
-            if given is None or given == "uniform":
-                continue
-            values = np.atleast_1d(np.asarray(given, np.float64))
-            if values.shape not in ((1,), (self.n_params,)):
-                raise ValueError(
-                    f"{name}: expected a number or {self.n_params} numbers (one per parameter), "
-                    f"got {values.shape[0]}"
-                )
-            values = np.broadcast_to(values, (self.n_params,)).copy()
-            mean, std = (values, std) if name == "initial_mean" else (mean, values)
+        else:
+            mean = self._per_parameter("initial_mean", mean)
+        std = self._per_parameter("initial_std", std)
         return make_optimizer(
             self.config.optimizer,
             self.n_params,
@@ -170,6 +161,19 @@ class Runner:
             initial_cov=std**2,
             **self.config.optimizer_options,
         )
+
+    def _per_parameter(self, name: str, default: Array) -> Array:
+        """The config's ``name`` (a number or one per parameter) as shape (p,), or ``default`` if unset."""
+        given = getattr(self.config, name)
+        if given is None or isinstance(given, str):
+            return default
+        values = np.atleast_1d(np.asarray(given, np.float64))
+        if values.shape not in ((1,), (self.n_params,)):
+            raise ValueError(
+                f"{name}: expected a number or {self.n_params} numbers (one per parameter), "
+                f"got {values.shape[0]}"
+            )
+        return np.broadcast_to(values, (self.n_params,)).copy()
 
     def _contextual_model(self) -> Any:
         try:

@@ -108,6 +108,29 @@ def test_interpolation_factor_and_regularised_covariance_follow_eq_13_14():
     np.testing.assert_allclose(regularised_covariance(old, sample, 0.25), np.diag([1.75, 0.75]))
 
 
+def test_max_interpolation_caps_lambda_only_where_eq_14_exceeds_it():
+    weights = np.full(50, 1 / 50)
+    assert interpolation_factor(weights, 5, maximum=0.2) == 0.2
+    assert interpolation_factor(weights, 16, maximum=0.2) == pytest.approx(50 / 256)  # below the cap
+    rng = np.random.default_rng(0)
+    contexts, params = rng.uniform(0, 3, (50, 1)), rng.normal(size=(50, 4))
+    returns = -(params**2).sum(axis=1)
+    lambdas = []
+    for cap in (1.0, 0.2):
+        optimizer = CREPSCMA(4, 1, max_interpolation=cap, seed=0)
+        optimizer.tell(contexts, params, returns, allow_external=True)
+        lambdas.append(optimizer.diagnostics["interpolation"])
+    assert lambdas == [1.0, 0.2]  # φ_eff ≥ 16 = n², so Eq. (14) alone gives λ = 1
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.1, 1.5, float("nan"), float("inf")])
+def test_max_interpolation_outside_the_unit_interval_is_rejected(bad):
+    with pytest.raises(ValueError, match=r"max_interpolation: expected a finite value in \(0.0, 1.0\]"):
+        CREPSCMA(4, 1, max_interpolation=bad)
+    with pytest.raises(TypeError, match="max_interpolation: expected a real number"):
+        CREPSCMA(4, 1, max_interpolation="0.2")
+
+
 @pytest.mark.parametrize("variant", ["old", "current"])
 def test_sample_covariance_is_centred_on_the_old_or_the_new_mean(variant):
     """Equal returns give exactly uniform weights; then Eqs. (12)-(16) can be checked by hand."""
@@ -491,3 +514,28 @@ def test_eta_diagnostic_is_the_temperature_in_return_units():
     weights /= weights.sum()
     # The η reported before a fix (scaled by std R instead of the residual's spread) gave 0.41 here.
     assert np.log(40) + weights @ np.log(weights) == pytest.approx(0.5, abs=1e-3)
+
+
+def test_eq_14_collapses_on_a_small_rosenbrock_and_the_cap_prevents_it():
+    """With 50 samples and p = 4, Eq. (14) gives λ = 1 (no regularisation): CREPS-CMA-old's covariance
+    collapses before the target, as in ``benchmarks/scaling``. Capping λ at 0.2 reaches it."""
+    from creps_gym.runner import run
+
+    def final(cap: float) -> tuple[str | None, float]:
+        history = run(
+            "creps-cma-old",
+            "creps_gym/Rosenbrock-v0",
+            iterations=400,
+            samples_per_iteration=50,
+            seed=0,
+            env_kwargs={"dim": 4, "context_dim": 1, "instance": 0},
+            optimizer_options={"max_interpolation": cap},
+            target_regret=1e-5,
+            backend="vector",
+        )
+        return history.stop_reason, float(history.column("eval_regret")[-1])
+
+    reason, regret = final(1.0)
+    assert reason == "optimizer: max_condition" and regret > 0.1
+    reason, regret = final(0.2)
+    assert reason == "target_regret" and regret <= 1e-5

@@ -14,6 +14,12 @@ around the *old* mean, the coefficients that generated the samples, so Σ learns
 ``variant="current"`` (CREPS-CMA_Curr) computes S around the new mean. CREPS is the special case λ = 1 with
 the new mean. λ multiplies S as in Eqs. (13) and (16) (not Algorithm 2's last line): section 4 derives exactly
 this form with λ = 1/(1 + γ), and γ = 0, plain maximum likelihood, gives CREPS.
+
+``max_interpolation`` (default 1, the paper's Eq. (14) exactly) caps λ. With the paper's 50 samples per
+iteration φ_eff ≈ 25–30, so Eq. (14) gives λ = 1 for n ≤ 5 and λ ≈ 0.4 for n = 8: the regularisation is
+switched off (or nearly) and the old-mean variant can collapse like CREPS on small problems
+(``benchmarks/scaling/`` measures it). A cap of 0.2 removes that failure there and changes nothing where
+φ_eff/n² ≤ 0.2 already, e.g. for every n ≥ 16 with N ≤ 50 samples.
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._validation import check_real_in_range
 from creps_gym.optimizers.creps import CREPS, CREPSConfig, weighted_sample_covariance
 
 __all__ = ["CREPSCMA", "CREPSCMAConfig", "interpolation_factor", "regularised_covariance"]
@@ -32,8 +39,8 @@ Array = NDArray[np.float64]
 VARIANTS = ("old", "current")
 
 
-def interpolation_factor(weights: Array, n_params: int) -> float:
-    """λ = min(1, φ_eff / n²) with φ_eff = 1 / Σ_k d_k², Eq. (14).
+def interpolation_factor(weights: Array, n_params: int, maximum: float = 1.0) -> float:
+    """λ = min(1, φ_eff / n²) with φ_eff = 1 / Σ_k d_k², Eq. (14); ``maximum`` < 1 caps it lower.
 
     Parameters
     ----------
@@ -41,9 +48,11 @@ def interpolation_factor(weights: Array, n_params: int) -> float:
         Normalised sample weights d_k.
     n_params : int
         n = dim θ.
+    maximum : float
+        Upper bound of λ, in (0, 1]; 1 is the paper's rule.
     """
     effective_samples = 1.0 / float(weights @ weights)
-    return min(1.0, effective_samples / n_params**2)
+    return min(maximum, effective_samples / n_params**2)
 
 
 def regularised_covariance(old_cov: Array, sample_cov: Array, interpolation: float) -> Array:
@@ -60,16 +69,24 @@ def regularised_covariance(old_cov: Array, sample_cov: Array, interpolation: flo
 
 @dataclass(frozen=True, eq=False)
 class CREPSCMAConfig(CREPSConfig):
-    """CREPSConfig plus ``variant``: ``"old"`` (default) or ``"current"``.
+    """CREPSConfig plus the covariance update's options.
+
+    Parameters
+    ----------
+    variant : str               ``"old"`` (default, Eqs. 15–16) or ``"current"`` (Eqs. 12–13).
+    max_interpolation : float   cap of λ in (0, 1]; 1 (default) is Eq. (14) as published.
 
     See :class:`~creps_gym.optimizers.creps.CREPSConfig` for the other fields.
     """
 
     variant: str = "old"
+    max_interpolation: float = 1.0
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise ValueError(f"variant: expected one of {VARIANTS}, got {self.variant!r}")
+        cap = check_real_in_range(self.max_interpolation, "max_interpolation", 0.0, 1.0, low_inclusive=False)
+        object.__setattr__(self, "max_interpolation", cap)
         super().__post_init__()
 
 
@@ -89,5 +106,7 @@ class CREPSCMA(CREPS):
     def _covariance_update(self, params: Array, old_means: Array, new_means: Array, weights: Array) -> tuple:
         centre = old_means if self.config.variant == "old" else new_means
         sample_cov = weighted_sample_covariance(params, centre, weights)  # Eq. (15) old / Eq. (12) current
-        interpolation = interpolation_factor(weights, self.n_params)  # Eq. (14)
+        interpolation = interpolation_factor(
+            weights, self.n_params, self.config.max_interpolation
+        )  # Eq. (14)
         return regularised_covariance(self.cov, sample_cov, interpolation), interpolation  # Eq. (16) / (13)

@@ -164,3 +164,70 @@ def test_stalled_runs_are_those_that_missed_the_target_and_stopped_improving() -
     plane = study_tools.RunSpec("Plane", 3, 1, "creps-cma-current", 0, 1000)
     stuck = study_tools.result_document(plane, [100, 200, 300], [-100.0, -240.0, -250.0], "x", 0.0)
     assert report.stalled(stuck)
+
+
+def _count_calls(calls: list):
+    def worker(spec, checkpoint_dir):
+        calls.append(spec.key)
+        return study_tools.execute(spec, checkpoint_dir)
+
+    return worker
+
+
+def test_a_larger_budget_recomputes_only_the_censored_runs(tmp_path: Path) -> None:
+    hit = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-old", 0, 3000)
+    censored = study_tools.RunSpec("Rosenbrock", 4, 1, "creps-cma-old", 0, 500)
+    calls: list[str] = []
+    first = study_tools.run_all([hit, censored], tmp_path, workers=1, worker=_count_calls(calls), log=str)
+    assert first[0]["hit"] is not None and first[1]["stop_reason"] in study_tools.BUDGET_STOPS
+    larger = [
+        study_tools.RunSpec(s.function, 3 if s is hit else 4, 1, s.method, 0, 6000) for s in (hit, censored)
+    ]
+    calls.clear()
+    second = study_tools.run_all(larger, tmp_path, workers=1, worker=_count_calls(calls), log=str)
+    assert calls == [larger[1].key]  # the run that met its target is the same run under any larger budget
+    assert second[0] is not None and second[0]["hit"] == first[0]["hit"]
+    # ... and the rerun of a run that met its target under the larger budget is the cached document.
+    rerun = study_tools.execute(larger[0])
+    assert rerun["values"] == first[0]["values"] and rerun["episodes"] == first[0]["episodes"]
+
+
+def test_an_interrupted_run_continues_from_its_checkpoint(tmp_path: Path, monkeypatch) -> None:
+    from creps_gym.runner.loop import Runner
+
+    spec = study_tools.RunSpec("Sphere", 5, 2, "creps-cma-old", 1, 20_000)
+    reference = study_tools.execute(spec)
+    monkeypatch.setattr(study_tools, "CHECKPOINT_EVERY", 10)
+    step, calls = Runner.step, []
+
+    def interrupted_step(self, backend):
+        calls.append(1)
+        if len(calls) == 25:
+            raise KeyboardInterrupt  # as if the study were stopped during iteration 25
+        return step(self, backend)
+
+    monkeypatch.setattr(Runner, "step", interrupted_step)
+    with pytest.raises(KeyboardInterrupt):
+        study_tools.run_all([spec], tmp_path, workers=1, log=str)
+    partial = tmp_path / "partial" / spec.key
+    assert (partial / "checkpoint.npz").exists() and not (tmp_path / f"{spec.key}.json").exists()
+    calls.clear()
+
+    def counted_step(self, backend):
+        calls.append(1)
+        return step(self, backend)
+
+    monkeypatch.setattr(Runner, "step", counted_step)
+    (document,) = study_tools.run_all([spec], tmp_path, workers=1, log=str)
+    assert len(calls) == reference["total_episodes"] // 50 - 20  # continued after the checkpoint at 20
+    assert not partial.exists()  # removed once the document is stored
+    assert document["values"] == reference["values"] and document["hit"] == reference["hit"]
+
+
+def test_a_cap_that_cannot_bind_is_the_uncapped_run() -> None:
+    capped = study_tools.RunSpec("Sphere", 16, 1, "creps-cma-old", 0, 1000, max_interpolation=0.2)
+    assert capped.key == study_tools.RunSpec("Sphere", 16, 1, "creps-cma-old", 0, 1000).key  # 50/256 < 0.2
+    binding = study_tools.RunSpec("Sphere", 4, 1, "creps-cma-old", 0, 1000, max_interpolation=0.2)
+    assert binding.key == "Sphere-p4-z1-creps-cma-old-cap0.2-s0-b1000-n50"
+    with pytest.raises(ValueError, match="max_interpolation: expected 1 for method 'creps'"):
+        study_tools.RunSpec("Sphere", 4, 1, "creps", 0, 1000, max_interpolation=0.2)

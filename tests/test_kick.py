@@ -357,6 +357,19 @@ def test_save_video_writes_a_gif(tmp_path):
         save_video([], tmp_path / "kick.gif")
 
 
+def test_save_video_writes_an_mp4(tmp_path):
+    pytest.importorskip("imageio_ffmpeg")
+    import imageio.v3 as iio
+
+    from creps_gym.envs.kick.rendering import save_video
+
+    frames = [np.full((32, 48, 3), 40 * k, dtype=np.uint8) for k in range(6)]
+    path = save_video(frames, tmp_path / "kick.mp4", fps=25)
+    back = iio.imread(path, index=None)
+    assert back.shape[0] == 6 and back.shape[1:3] == (32, 48)
+    assert back[5].mean() > back[0].mean() + 100  # lossy, but the brightness ramp survives
+
+
 def test_reproduction_script_runs_and_resumes(tmp_path):
     """benchmarks/kick/run.py on a tiny budget: results, summary and figure; a rerun reads them back."""
     pytest.importorskip("matplotlib")

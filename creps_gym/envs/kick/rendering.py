@@ -74,7 +74,7 @@ def save_video(frames: Sequence[NDArray[np.uint8]], path: str | Path, fps: float
     frames : sequence of ndarray, each (height, width, 3) uint8
         E.g. ``env.render()`` with ``render_mode="rgb_array_list"``.
     path : str or Path
-        Ending in ``.gif`` or ``.mp4`` (MP4 needs the ``imageio-ffmpeg`` package).
+        Ending in ``.gif`` or ``.mp4`` (H.264, through the ``imageio-ffmpeg`` package of the extra).
     fps : float
         Frames per second (the env's ``metadata["render_fps"]``).
 

@@ -72,13 +72,28 @@ def test_scaling_study_writes_heatmaps_and_marks_censored_cells(tmp_path: Path) 
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--functions", "Sphere", "Rosenbrock", "--dims", "2", "4", "--context-dims", "1", "2"]
     args += ["--seeds", "1", "--budget", "1500", "--workers", "1", "--cache", str(cache), "--out", str(out)]
-    _script("scaling", *args)
+    _script("scaling", *args, "--baseline-dims", "2")
     documents = _documents(cache)
-    assert len(documents) == 2 * 2 * 2
-    assert (out / "heatmaps.png").stat().st_size > 10_000
+    assert len(documents) == 2 * 2 * 2 + 2 * 2 * 2  # the grid + 2 baselines x 2 functions x 2 z at p = 2
+    assert (out / "heatmaps.png").stat().st_size > 10_000 and (out / "baselines.png").stat().st_size > 10_000
     table = (out / "results.md").read_text()
+    baselines_table = table[table.index("## Baselines") :]
     for document in documents.values():
         spec = document["spec"]
+        if spec["method"] != "creps-cma-old":
+            label = "pycma" if spec["method"] == "cma-fixed" else "independent"
+            header = f"### {study_tools.function_spec(spec['function']).title}: {label}"
+            section = baselines_table[baselines_table.index(header) :]
+            row = next(line for line in section.splitlines() if line.startswith("| 2 |"))
+            text = row.split(" | ")[spec["context_dim"]].strip(" |")
+            if spec["method"] == "cma-regression":
+                assert text.endswith(
+                    f"{document['total_episodes']:,} ep., regret {document['final']:.2g} ("
+                    + ("1/1)" if document["hit"] else "0/1)")
+                )
+            elif document["hit"] is not None:
+                assert text == f"{document['hit']:,}"
+            continue
         if document["hit"] is not None:
             expected = f"{document['hit']:,}"
         else:  # missed: censored by the budget, or stopped early by the optimiser's own criteria

@@ -28,10 +28,12 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))  # benchmarks/: study_tools
 
 import matplotlib  # noqa: E402
+import matplotlib.lines  # noqa: E402
 
 matplotlib.use("Agg")
 
 from study_tools import (  # noqa: E402
+    BASELINE_METHODS,
     RunSpec,
     function_spec,
     run_study,
@@ -49,13 +51,25 @@ TITLES = {
     "ShiftedRotatedElliptic": "Shifted rotated elliptic",
 }
 PRESETS = {
-    "quick": {"dims": (2, 4, 8, 16), "context_dims": (1, 2, 3, 4, 5), "seeds": 1, "budget": 100_000},
+    "quick": {
+        "dims": (2, 4, 8, 16),
+        "context_dims": (1, 2, 3, 4, 5),
+        "seeds": 1,
+        "budget": 100_000,
+        "baseline_dims": (2, 4, 8),
+    },
     "full": {
         "dims": (2, 4, 8, 16, 32, 64),
         "context_dims": (1, 2, 3, 4, 5),
         "seeds": 3,
         "budget": 20_000_000,
+        "baseline_dims": (2, 4, 8, 16),
     },
+}
+LEGEND_LABELS = {"cma-fixed": "pycma, 1 fixed context", "cma-regression": "indep. CMA-ES + regression"}
+BASELINE_LABELS = {
+    "cma-fixed": "pycma on one fixed context",
+    "cma-regression": "independent CMA-ES on 2^z + 1 training contexts (5 for z = 1) + linear regression",
 }
 
 
@@ -79,6 +93,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         default=1.0,
         help="cap of CREPS-CMA's λ (default 1: Eq. (14) as published); binds only where samples/p² > cap",
     )
+    parser.add_argument(
+        "--baselines", nargs="*", choices=BASELINE_METHODS, default=list(BASELINE_METHODS), help="none: skip"
+    )
+    parser.add_argument("--baseline-dims", nargs="+", type=int, help="problem dimensions of the baselines")
     parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     parser.add_argument(
         "--render-only", action="store_true", help="compute nothing: render the runs already cached"
@@ -99,6 +117,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     args.context_dims = sorted(args.context_dims or preset["context_dims"])
     args.seeds = args.seeds if args.seeds is not None else preset["seeds"]
     args.budget = args.budget if args.budget is not None else preset["budget"]
+    baseline_dims = args.baseline_dims or preset["baseline_dims"]
+    args.baseline_dims = sorted(set(baseline_dims) & set(args.dims))
     if min(args.dims) < 2 or min(args.context_dims) < 1:
         parser.error(
             f"--dims/--context-dims: expected p >= 2 and z >= 1, got {args.dims}, {args.context_dims}"
@@ -110,30 +130,49 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 
 def make_specs(args: argparse.Namespace) -> list[RunSpec]:
-    """Every run of the grid: smallest problems first, and per p every cell's seed 0 before any seed 1."""
-    return [
+    """Every run: the grid (smallest problems first, and per p every cell's seed 0 before any seed 1), then
+    the baselines on ``args.baseline_dims``."""
+    grid_specs = [
         RunSpec(name, p, z, METHOD, seed, args.budget, args.samples, args.max_interpolation)
         for p in args.dims
         for seed in range(args.seeds)
         for name in args.functions
         for z in args.context_dims
     ]
+    baseline_specs = [
+        RunSpec(name, p, z, method, seed, args.budget, args.samples)
+        for p in args.baseline_dims
+        for method in args.baselines
+        for seed in range(args.seeds)
+        for name in args.functions
+        for z in args.context_dims
+    ]
+    return grid_specs + baseline_specs
 
 
-def grid(documents: Sequence[dict[str, Any]], name: str, args: argparse.Namespace) -> list[list[dict]]:
-    """Summaries (see :func:`study_tools.summarise`) indexed [p][z] for one function.
+def grid(
+    documents: Sequence[dict[str, Any]],
+    name: str,
+    args: argparse.Namespace,
+    method: str = METHOD,
+    dims: Sequence[int] | None = None,
+) -> list[list[dict]]:
+    """Summaries (see :func:`study_tools.summarise`) of one function and method, indexed [p][z].
 
     Each summary also counts ``stopped``: runs that missed the target because the optimiser's own stop
     criteria ended them (premature convergence) rather than the budget.
     """
     cells = []
-    for p in args.dims:
+    for p in args.dims if dims is None else dims:
         row = []
         for z in args.context_dims:
             runs = [
                 d
                 for d in documents
-                if d["spec"]["function"] == name and d["spec"]["dim"] == p and d["spec"]["context_dim"] == z
+                if d["spec"]["function"] == name
+                and d["spec"]["method"] == method
+                and d["spec"]["dim"] == p
+                and d["spec"]["context_dim"] == z
             ]
             summary = summarise(runs)
             summary["stopped"] = sum(
@@ -202,6 +241,80 @@ def method_text(args: argparse.Namespace) -> str:
     return "CREPS-CMA-old (λ of Eq. (14) as published)"
 
 
+def baseline_cell(summary: dict[str, Any], method: str, budget: int) -> str:
+    """A baseline's cell: like :func:`cell_text` for ``cma-fixed``; for ``cma-regression`` the median total
+    episodes of its CMA-ES runs and the median test regret of the regression (✗ unless every seed met the
+    target)."""
+    if method != "cma-regression" or not summary["runs"]:
+        return cell_text(summary, budget)
+    mark = "" if summary["hits"] == summary["runs"] else "✗ "
+    total, final = summary["median_total"], summary["median_final"]
+    regret = "n/a" if final is None else f"{final:.2g}"
+    return f"{mark}{total:,.0f} ep., regret {regret} ({summary['hits']}/{summary['runs']})"
+
+
+def plot_baselines(documents: Sequence[dict[str, Any]], args: argparse.Namespace, path: Path) -> Path:
+    """Episodes against z per function: CREPS-CMA-old (all contexts at once) against the baselines."""
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(4.2 * len(args.functions), 4.0), layout="constrained")
+    axes = figure.subplots(1, len(args.functions), squeeze=False)[0]
+    colours = matplotlib.colormaps["viridis"](np.linspace(0.0, 0.85, len(args.baseline_dims)))
+    styles = {METHOD: ("-", "o"), "cma-regression": ("--", "s"), "cma-fixed": (":", "^")}
+    for axis, name in zip(axes, args.functions, strict=True):
+        for method in (METHOD, *args.baselines):
+            cells = grid(documents, name, args, method, args.baseline_dims)
+            for colour, row in zip(colours, cells, strict=True):
+                key = "median_total" if method == "cma-regression" else "median_hit"
+                values = [c[key] if c["hits"] == c["runs"] and c["runs"] else np.nan for c in row]
+                line, marker = styles[method]
+                axis.plot(args.context_dims, values, line, marker=marker, color=colour, ms=4)
+        axis.set(yscale="log", xlabel="context dimension z", ylabel="episodes", title=TITLES[name])
+        axis.set_xticks(args.context_dims)
+    handles = [
+        matplotlib.lines.Line2D([], [], color="k", linestyle=style, marker=marker, label=label)
+        for (style, marker), label in (
+            (styles[METHOD], "CREPS-CMA-old, every context"),
+            *((styles[m], LEGEND_LABELS[m]) for m in args.baselines),
+        )
+    ]
+    handles += [
+        matplotlib.lines.Line2D([], [], color=c, label=f"p = {p}")
+        for c, p in zip(colours, args.baseline_dims, strict=True)
+    ]
+    figure.legend(handles=handles, loc="outside lower center", ncols=3, fontsize=8)
+    figure.suptitle("Episodes to regret 1e-5 (median; a point only where every seed got there)")
+    figure.savefig(path, dpi=110)
+    return path
+
+
+def baseline_lines(documents: Sequence[dict[str, Any]], args: argparse.Namespace) -> list[str]:
+    """The baselines' tables (Markdown lines), one per function and baseline."""
+    if not args.baselines or not args.baseline_dims:
+        return []
+    lines = [
+        "## Baselines",
+        "",
+        "Same test contexts, initial distribution and episode budget as the grid "
+        "(`benchmarks/baselines.py`). pycma on one fixed context: episodes until the regret at that one "
+        "context met 1e-5 (the cost of a single task). Regression: the K = 2^z + 1 (5 for z = 1) "
+        "independent CMA-ES runs, each given budget/K episodes, then least squares from [1, s] to θ; the "
+        "total episodes of those runs and the mean test regret of the fitted map (✗: a seed missed 1e-5).",
+        "",
+    ]
+    for name in args.functions:
+        for method in args.baselines:
+            lines += [f"### {function_spec(name).title}: {BASELINE_LABELS[method]}", ""]
+            lines.append("| p \\ z | " + " | ".join(str(z) for z in args.context_dims) + " |")
+            lines.append("|---" * (len(args.context_dims) + 1) + "|")
+            cells = grid(documents, name, args, method, args.baseline_dims)
+            for p, row in zip(args.baseline_dims, cells, strict=True):
+                texts = [baseline_cell(c, method, args.budget) for c in row]
+                lines.append(f"| {p} | " + " | ".join(texts) + " |")
+            lines.append("")
+    return lines
+
+
 def _hatch(column: int, row: int) -> Any:
     from matplotlib.patches import Rectangle
 
@@ -243,7 +356,10 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
         for p, row in zip(args.dims, grid(documents, name, args), strict=True):
             lines.append(f"| {p} | " + " | ".join(cell_text(c, args.budget) for c in row) + " |")
         lines.append("")
+    lines += baseline_lines(documents, args)
     lines += [f"![heatmaps]({figure})", ""]
+    if args.baselines and args.baseline_dims:
+        lines += [f"![baselines]({plot_baselines(documents, args, args.out / 'baselines.png').name})", ""]
     path = args.out / "results.md"
     path.write_text("\n".join(lines), encoding="utf-8")
     return path

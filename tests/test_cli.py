@@ -94,8 +94,8 @@ BAD_FLAGS = [
     (
         ["--opt", "bogus=1"],
         "argument --opt: options: expected names in ['baseline_features', 'epsilon', 'initial_cov', "
-        "'initial_mean', 'max_condition', 'max_interpolation', 'mean_features', 'min_std', 'ridge', 'seed', "
-        "'variant'], "
+        "'initial_mean', 'max_condition', 'max_interpolation', 'max_std_growth', 'mean_features', 'min_std', "
+        "'ridge', 'seed', 'variant'], "
         "got unknown ['bogus']",
     ),
     (["--initial-mean", "centre"], "argument --initial-mean: expected 'uniform', a number or p comma"),

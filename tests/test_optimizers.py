@@ -539,3 +539,21 @@ def test_eq_14_collapses_on_a_small_rosenbrock_and_the_cap_prevents_it():
     assert reason == "optimizer: max_condition" and regret > 0.1
     reason, regret = final(0.2)
     assert reason == "target_regret" and regret <= 1e-5
+
+
+def test_max_std_growth_stops_a_diverging_search():
+    """Returns that ignore θ (pure noise) do not steer Σ: with λ = 1 its eigenvalues take a multiplicative
+    random walk (and the old-mean S divided by Z = 1 − Σd² grows by 1/Z in expectation), so the search
+    spreads out; ``max_std_growth`` stops it, like pycma's tolupsigma."""
+    rng = np.random.default_rng(0)
+    optimizer = CREPSCMA(4, 1, initial_cov=1.0, max_std_growth=3.0, seed=0)
+    met: dict = {}
+    iterations = 0
+    while not met and iterations < 500:
+        contexts = rng.uniform(0, 3, (50, 1))
+        optimizer.tell(contexts, optimizer.ask(contexts), rng.normal(size=50))
+        iterations += 1
+        met = optimizer.stop()
+    assert set(met) == {"max_std_growth"} and met["max_std_growth"] > 3.0 and 10 < iterations < 500
+    with pytest.raises(ValueError, match=r"max_std_growth: expected a finite value in \(1.0, 1e\+300\]"):
+        CREPSCMA(4, 1, max_std_growth=0.5)

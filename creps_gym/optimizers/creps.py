@@ -177,7 +177,8 @@ class CREPSConfig:
     baseline_features : str, dict or FeatureMap   φ(s) of the dual's baseline; ``"baseline"`` = [s, s²].
     ridge : float               relative ridge of Eq. (7), ≥ 0 (kept tiny; see the notes).
     seed : int or None          seed of the sampling Generator.
-    min_std, max_condition : float   stop criteria: √λ_max(Σ) < min_std, or cond(Σ) > max_condition.
+    min_std, max_condition, max_std_growth : float   stop criteria: √λ_max(Σ) < min_std, cond(Σ) >
+        max_condition, or √λ_max(Σ) > max_std_growth·√λ_max(Σ₀) (divergence, like pycma's tolupsigma).
     """
 
     n_params: int
@@ -191,6 +192,7 @@ class CREPSConfig:
     seed: int | None = None
     min_std: float = 1e-12
     max_condition: float = 1e14
+    max_std_growth: float = 1e20
     mean_map: FeatureMap = field(init=False, repr=False)
     baseline_map: FeatureMap = field(init=False, repr=False)
 
@@ -205,6 +207,7 @@ class CREPSConfig:
             ("ridge", 0.0, 1.0, True),
             ("min_std", 0.0, 1.0e300, True),
             ("max_condition", 1.0, 1.0e300, False),
+            ("max_std_growth", 1.0, 1.0e300, False),
         ):
             value = check_real_in_range(getattr(self, name), name, low, high, low_inclusive=low_inclusive)
             object.__setattr__(self, name, value)
@@ -275,6 +278,7 @@ class CREPS(ContextualOptimizer):
         self.rng = np.random.default_rng(config.seed)
         self.coefficients = config.initial_mean.copy()
         self.cov, self._chol, _ = spd_factor(config.initial_cov)
+        self._initial_max_std = float(np.sqrt(np.linalg.eigvalsh(config.initial_cov)[-1]))
         self._eta = 1.0  # the dual's warm start, normalised units
 
     # -- the distribution --------------------------------------------------------------------------------
@@ -359,7 +363,8 @@ class CREPS(ContextualOptimizer):
         }
 
     def stop(self) -> dict[str, Any]:
-        """``min_std`` and ``max_condition`` criteria that are met (empty before the first update)."""
+        """``min_std``, ``max_condition`` and ``max_std_growth`` criteria that are met (empty before the first
+        update)."""
         met: dict[str, Any] = {}
         diagnostics = self.diagnostics
         if not diagnostics:
@@ -368,6 +373,8 @@ class CREPS(ContextualOptimizer):
             met["min_std"] = diagnostics["max_std"]
         if diagnostics["cond_cov"] > self.config.max_condition:
             met["max_condition"] = diagnostics["cond_cov"]
+        if diagnostics["max_std"] > self.config.max_std_growth * self._initial_max_std:
+            met["max_std_growth"] = diagnostics["max_std"] / self._initial_max_std
         return met
 
     # -- checkpoints ---------------------------------------------------------------------------------------

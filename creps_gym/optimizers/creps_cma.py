@@ -51,6 +51,8 @@ def interpolation_factor(weights: Array, n_params: int, maximum: float = 1.0) ->
     maximum : float
         Upper bound of λ, in (0, 1]; 1 is the paper's rule.
     """
+    if not 0.0 < maximum <= 1.0:
+        raise ValueError(f"maximum: expected a value in (0, 1], got {maximum!r}")
     effective_samples = 1.0 / float(weights @ weights)
     return min(maximum, effective_samples / n_params**2)
 

@@ -33,12 +33,15 @@ from creps_gym.runner import resume, run
 
 __all__ = [
     "BASELINE_METHODS",
-    "BUDGET_STOPS",
     "CHECKPOINT_EVERY",
     "CURVE_POINTS",
+    "DIVERGENCE_GROWTH",
+    "EARLY_STOPS",
+    "MAX_CHECKPOINTS",
     "PAPER_METHODS",
     "RunSpec",
     "cached_result",
+    "ended_early",
     "execute",
     "function_spec",
     "invocation_timing",
@@ -55,10 +58,15 @@ PAPER_METHODS = ("creps", "creps-cma-old", "creps-cma-current")
 BASELINE_METHODS = ("cma-fixed", "cma-regression")
 #: Maximum number of curve points stored per run.
 CURVE_POINTS = 300
-#: Iterations between the checkpoints of a run computed by :func:`run_all` (a few seconds of work at p = 64).
+#: Fewest iterations between the checkpoints of a run computed by :func:`run_all` (seconds of work at p = 64).
 CHECKPOINT_EVERY = 2000
-#: Stop reasons that mean the budget ran out: such a run is *censored* (see :func:`cached_result`).
-BUDGET_STOPS = ("iterations", "max_episodes")
+#: Most checkpoints per run: each one rewrites the run's history, so a fixed interval would cost O(n²).
+MAX_CHECKPOINTS = 20
+#: A run of a paper method stops as diverged once √λ_max(Σ) exceeds this multiple of its initial value (the
+#: optimiser's ``max_std_growth``); converging runs stay within a few times the initial value.
+DIVERGENCE_GROWTH = 1000.0
+#: Stop reasons of a run that ended before its budget ran out (besides the optimiser's ``"optimizer: ..."``).
+EARLY_STOPS = ("target_regret", "callback", "target")
 
 
 @dataclass(frozen=True)
@@ -108,13 +116,13 @@ class RunSpec:
             raise ValueError(f"max_interpolation: expected a value in (0, 1], got {self.max_interpolation!r}")
         if self.max_interpolation < 1.0 and self.method not in ("creps-cma-old", "creps-cma-current"):
             raise ValueError(f"max_interpolation: expected 1 for method {self.method!r}, got a cap")
-        if self.max_interpolation >= self.samples / self.dim**2:
+        if self.max_interpolation >= self.samples / self.dim**2 * (1.0 + 1e-9):  # (rounding of φ_eff)
             object.__setattr__(self, "max_interpolation", 1.0)  # never binds: the same run as uncapped
 
     @property
     def prefix(self) -> str:
         """The key without the budget: the runs that differ only in their budget share it."""
-        cap = "" if self.max_interpolation == 1.0 else f"-cap{self.max_interpolation:g}"
+        cap = "" if self.max_interpolation == 1.0 else f"-cap{self.max_interpolation!r}"
         return f"{self.function}-p{self.dim}-z{self.context_dim}-{self.method}{cap}-s{self.seed}"
 
     @property
@@ -208,7 +216,9 @@ def paper_method_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> di
     if checkpoint_dir is not None and (checkpoint_dir / "config.json").exists():
         history = resume(checkpoint_dir, callbacks=callbacks)
     else:
-        options = {"max_interpolation": spec.max_interpolation} if spec.max_interpolation < 1.0 else {}
+        options: dict[str, float] = {"max_std_growth": DIVERGENCE_GROWTH}
+        if spec.max_interpolation < 1.0:
+            options["max_interpolation"] = spec.max_interpolation
         history = run(
             spec.method,
             spec.env_id,
@@ -223,7 +233,7 @@ def paper_method_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> di
             backend="vector",
             vector_mode="native",
             run_dir=checkpoint_dir,
-            checkpoint_every=CHECKPOINT_EVERY,
+            checkpoint_every=max(CHECKPOINT_EVERY, spec.budget // spec.samples // MAX_CHECKPOINTS),
         )
     values = history.column("eval_regret") if bounded else -history.column("eval_return")
     seconds = history.records[-1].wall_time if history.records else 0.0  # summed over resumes
@@ -255,13 +265,18 @@ def cached_result(cache: Path, spec: RunSpec) -> dict[str, Any] | None:
         return exact
     for path in sorted(cache.glob(f"{spec.prefix}-b*-n{spec.samples}.json")):
         document = _load(path)
-        if (
-            document is not None
-            and document["spec"]["budget"] <= spec.budget
-            and document["stop_reason"] not in BUDGET_STOPS
-        ):
+        if document is not None and document["spec"]["budget"] <= spec.budget and ended_early(document):
             return document
     return None
+
+
+def ended_early(document: dict[str, Any]) -> bool:
+    """Whether a run's document would be the same under any larger budget: it met its target or its
+    optimiser stopped. Never for ``cma-regression``, whose per-context share of the budget depends on it."""
+    if document["spec"]["method"] == "cma-regression":
+        return False
+    reason = str(document["stop_reason"])
+    return reason in EARLY_STOPS or reason.startswith("optimizer")
 
 
 def _load(path: Path) -> dict[str, Any] | None:
@@ -279,7 +294,7 @@ def run_all(
     specs: Iterable[RunSpec],
     cache_dir: str | os.PathLike[str],
     workers: int = 2,
-    worker: Callable[[RunSpec], dict[str, Any]] = execute,
+    worker: Callable[[RunSpec, Path], dict[str, Any]] = execute,
     log: Callable[[str], None] = print,
     compute: bool = True,
 ) -> list[dict[str, Any]]:
@@ -294,7 +309,8 @@ def run_all(
         Processes (1 runs in this process, which is what the tests use).
     worker : callable
         ``(RunSpec, checkpoint_dir) -> result document`` (a module-level function, so the pool can send
-        it). ``checkpoint_dir`` is ``cache_dir/partial/<key>``, removed once the run's document is stored.
+        it). ``checkpoint_dir`` is ``cache_dir/partial/<key>``; it is removed, with the same run's
+        checkpoints under other budgets, once the run's document is stored.
     log : callable
         Receives one progress line per computed run.
     compute : bool
@@ -322,7 +338,8 @@ def run_all(
 
     def done(spec: RunSpec, document: dict[str, Any], count: int) -> None:
         _store(cache / f"{spec.key}.json", document)
-        shutil.rmtree(partial / spec.key, ignore_errors=True)
+        for stale in partial.glob(f"{spec.prefix}-b*-n{spec.samples}"):  # this run, under any budget
+            shutil.rmtree(stale, ignore_errors=True)
         results[spec.key] = document
         outcome = f"hit at {document['hit']}" if document["hit"] is not None else f"final {document['final']}"
         log(f"[{count}/{len(todo)}] {spec.key}: {outcome} ({document['seconds']:.1f} s)")

@@ -7,6 +7,7 @@ cached runs are not recomputed (the studies resume).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -194,7 +195,7 @@ def test_a_larger_budget_recomputes_only_the_censored_runs(tmp_path: Path) -> No
     censored = study_tools.RunSpec("Rosenbrock", 4, 1, "creps-cma-old", 0, 500)
     calls: list[str] = []
     first = study_tools.run_all([hit, censored], tmp_path, workers=1, worker=_count_calls(calls), log=str)
-    assert first[0]["hit"] is not None and first[1]["stop_reason"] in study_tools.BUDGET_STOPS
+    assert study_tools.ended_early(first[0]) and not study_tools.ended_early(first[1])
     larger = [
         study_tools.RunSpec(s.function, 3 if s is hit else 4, 1, s.method, 0, 6000) for s in (hit, censored)
     ]
@@ -246,3 +247,14 @@ def test_a_cap_that_cannot_bind_is_the_uncapped_run() -> None:
     assert binding.key == "Sphere-p4-z1-creps-cma-old-cap0.2-s0-b1000-n50"
     with pytest.raises(ValueError, match="max_interpolation: expected 1 for method 'creps'"):
         study_tools.RunSpec("Sphere", 4, 1, "creps", 0, 1000, max_interpolation=0.2)
+    # The cap reaches the optimiser: at p = 4, λ = 1 without it, so the runs differ from the first update.
+    uncapped = study_tools.execute(study_tools.RunSpec("Sphere", 4, 1, "creps-cma-old", 0, 500))
+    capped = study_tools.execute(dataclasses.replace(binding, budget=500))
+    assert capped["values"][0] == uncapped["values"][0] and capped["values"][1:] != uncapped["values"][1:]
+
+
+def test_a_regression_baseline_is_never_reused_for_another_budget(tmp_path: Path) -> None:
+    small = study_tools.RunSpec("Sphere", 2, 1, "cma-regression", 0, 2000)
+    (document,) = study_tools.run_all([small], tmp_path, workers=1, log=str)
+    assert document["hit"] is not None and not study_tools.ended_early(document)
+    assert study_tools.cached_result(tmp_path, dataclasses.replace(small, budget=4000)) is None

@@ -274,7 +274,7 @@ def plot_baselines(documents: Sequence[dict[str, Any]], args: argparse.Namespace
     handles = [
         matplotlib.lines.Line2D([], [], color="k", linestyle=style, marker=marker, label=label)
         for (style, marker), label in (
-            (styles[METHOD], "CREPS-CMA-old, every context"),
+            (styles[METHOD], f"{method_text(args).split(' (')[0]}, every context"),
             *((styles[m], LEGEND_LABELS[m]) for m in args.baselines),
         )
     ]

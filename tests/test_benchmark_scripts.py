@@ -258,3 +258,25 @@ def test_a_regression_baseline_is_never_reused_for_another_budget(tmp_path: Path
     (document,) = study_tools.run_all([small], tmp_path, workers=1, log=str)
     assert document["hit"] is not None and not study_tools.ended_early(document)
     assert study_tools.cached_result(tmp_path, dataclasses.replace(small, budget=4000)) is None
+
+
+def test_scaling_cells_say_why_every_seed_missed() -> None:
+    import importlib.util
+
+    module_spec = importlib.util.spec_from_file_location("scaling_run", BENCHMARKS / "scaling" / "run.py")
+    scaling = importlib.util.module_from_spec(module_spec)
+    module_spec.loader.exec_module(scaling)
+
+    def document(reason: str, final: float) -> dict:
+        spec = {"function": "Sphere", "method": "creps-cma-old", "dim": 4, "context_dim": 1}
+        return {"spec": spec, "hit": None, "final": final, "total_episodes": 10, "stop_reason": reason}
+
+    runs = [document("optimizer: max_std_growth", 1e9), document("optimizer: max_condition", 2.0)]
+    runs.append(document("iterations", 3.0))
+    kinds = [scaling.missed_kind(d) for d in runs]
+    assert kinds == ["diverged", "stopped", "censored"]
+    args = scaling.parse_args(["--quick", "--dims", "4", "--context-dims", "1"])
+    (row,) = scaling.grid(runs, "Sphere", args)
+    assert scaling.cell_text(row[0], 1000) == ">1,000 1 / diverged 1 / stopped 1, regret 3"
+    (row,) = scaling.grid(runs[:1], "Sphere", args)
+    assert scaling.cell_text(row[0], 1000) == "diverged, regret 1e+09"

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,7 @@ matplotlib.use("Agg")
 
 from study_tools import (  # noqa: E402
     BASELINE_METHODS,
+    DIVERGENCE_GROWTH,
     RunSpec,
     function_spec,
     run_study,
@@ -159,8 +161,7 @@ def grid(
 ) -> list[list[dict]]:
     """Summaries (see :func:`study_tools.summarise`) of one function and method, indexed [p][z].
 
-    Each summary also counts ``stopped``: runs that missed the target because the optimiser's own stop
-    criteria ended them (premature convergence) rather than the budget.
+    Each summary also has ``missed``: how many runs missed the target, by :func:`missed_kind`.
     """
     cells = []
     for p in args.dims if dims is None else dims:
@@ -175,27 +176,34 @@ def grid(
                 and d["spec"]["context_dim"] == z
             ]
             summary = summarise(runs)
-            summary["stopped"] = sum(
-                d["hit"] is None and str(d["stop_reason"]).startswith("optimizer") for d in runs
-            )
+            summary["missed"] = Counter(missed_kind(d) for d in runs if d["hit"] is None)
             row.append(summary)
         cells.append(row)
     return cells
 
 
+def missed_kind(document: dict[str, Any]) -> str:
+    """Why a run missed the target: ``"diverged"`` (its spread grew past the study's limit),
+    ``"stopped"`` (another stop criterion of the optimiser: premature convergence) or ``"censored"`` (the
+    budget ran out)."""
+    reason = str(document["stop_reason"])
+    if "max_std_growth" in reason:
+        return "diverged"
+    return "stopped" if reason.startswith("optimizer") else "censored"
+
+
 def cell_text(summary: dict[str, Any], budget: int) -> str:
-    """``median episodes`` (with hits/runs if not all hit); with no hit, ``>budget`` (censored: the budget
-    ran out) or ``stopped`` (the optimiser's stop criteria ended every run first), with the median final
-    regret."""
+    """``median episodes`` (with hits/runs if not all hit); with no hit, why the runs missed (see
+    :func:`missed_kind`; censored shows as ``>budget``) and the median final regret."""
     if not summary["runs"]:
         return "–"
     if not summary["hits"]:
         final = f"regret {summary['median_final']:.2g}" if summary["median_final"] is not None else ""
-        if summary["stopped"] == summary["runs"]:
-            return f"stopped, {final}"
-        if summary["stopped"] == 0:
-            return f">{budget:,}, {final}"
-        return f">{budget:,} or stopped ({summary['stopped']}/{summary['runs']}), {final}"
+        names = {"censored": f">{budget:,}", "stopped": "stopped", "diverged": "diverged"}
+        missed = summary["missed"]
+        if len(missed) == 1:
+            return f"{names[next(iter(missed))]}, {final}"
+        return " / ".join(f"{names[kind]} {count}" for kind, count in sorted(missed.items())) + f", {final}"
     text = f"{summary['median_hit']:,.0f}"
     return text if summary["hits"] == summary["runs"] else f"{text} ({summary['hits']}/{summary['runs']})"
 
@@ -218,7 +226,9 @@ def plot_heatmaps(documents: Sequence[dict[str, Any]], args: argparse.Namespace,
                 missed = summary["runs"] and not summary["hits"]
                 if missed:
                     axis.add_patch(_hatch(j, i))
-                    label = "stop" if summary["stopped"] == summary["runs"] else "cens."
+                    kinds = summary["missed"]
+                    labels = {"censored": "cens.", "stopped": "stop", "diverged": "div."}
+                    label = labels[next(iter(kinds))] if len(kinds) == 1 else "miss"
                 else:
                     label = cell_text(summary, args.budget).replace(",", "")
                 axis.text(j, i, _short(label), ha="center", va="center", fontsize=7, color="w")
@@ -228,7 +238,7 @@ def plot_heatmaps(documents: Sequence[dict[str, Any]], args: argparse.Namespace,
     figure.colorbar(image, ax=list(axes), label="episodes to regret 1e-5 (median)")
     figure.suptitle(
         f"{method_text(args)}, {args.samples} samples/iteration, budget {args.budget:,}; hatched: target not "
-        "reached (cens. = budget spent, stop = the optimiser stopped first: premature convergence)"
+        "reached (cens. = budget spent, stop = premature convergence, div. = diverged)"
     )
     figure.savefig(path, dpi=110)
     return path
@@ -346,7 +356,9 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
         "Cells: median training episodes until the mean regret of the mean policy on 16 test contexts is "
         "<= 1e-5 ((seeds that got there / seeds) when not all did). No seed got there: `>budget` = censored "
         "(the budget ran out), `stopped` = the optimiser's own stop criteria (covariance condition > 1e14 or "
-        "step size < 1e-12) ended every run first, i.e. premature convergence; with the median final regret.",
+        "step size < 1e-12) ended every run first, i.e. premature convergence, `diverged` = the search "
+        f"distribution spread out until its largest standard deviation was {DIVERGENCE_GROWTH:g} times the "
+        "initial one; with the median final regret.",
         "",
     ]
     for name in args.functions:

@@ -90,6 +90,8 @@ class RunSpec:
     max_interpolation : float
         CREPS-CMA's cap of λ (1: Eq. (14) as published). Since φ_eff <= N, a cap >= samples / dim² never
         binds: such a spec *is* the uncapped run and shares its key.
+    divide_by_z : bool
+        CREPS-CMA's ``divide_by_z`` (True: Eqs. (12) and (15) as published).
     """
 
     function: str
@@ -100,6 +102,7 @@ class RunSpec:
     budget: int
     samples: int = 50
     max_interpolation: float = 1.0
+    divide_by_z: bool = True
 
     def __post_init__(self) -> None:
         function_spec(self.function)  # raises for an unknown function
@@ -114,8 +117,11 @@ class RunSpec:
                 raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
         if not 0.0 < self.max_interpolation <= 1.0:
             raise ValueError(f"max_interpolation: expected a value in (0, 1], got {self.max_interpolation!r}")
-        if self.max_interpolation < 1.0 and self.method not in ("creps-cma-old", "creps-cma-current"):
+        variants = ("creps-cma-old", "creps-cma-current")
+        if self.max_interpolation < 1.0 and self.method not in variants:
             raise ValueError(f"max_interpolation: expected 1 for method {self.method!r}, got a cap")
+        if not self.divide_by_z and self.method not in variants:
+            raise ValueError(f"divide_by_z: expected True for method {self.method!r}, got False")
         if self.max_interpolation >= self.samples / self.dim**2 * (1.0 + 1e-9):  # (rounding of φ_eff)
             object.__setattr__(self, "max_interpolation", 1.0)  # never binds: the same run as uncapped
 
@@ -123,6 +129,7 @@ class RunSpec:
     def prefix(self) -> str:
         """The key without the budget: the runs that differ only in their budget share it."""
         cap = "" if self.max_interpolation == 1.0 else f"-cap{self.max_interpolation!r}"
+        cap += "" if self.divide_by_z else "-noz"
         return f"{self.function}-p{self.dim}-z{self.context_dim}-{self.method}{cap}-s{self.seed}"
 
     @property
@@ -216,9 +223,11 @@ def paper_method_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> di
     if checkpoint_dir is not None and (checkpoint_dir / "config.json").exists():
         history = resume(checkpoint_dir, callbacks=callbacks)
     else:
-        options: dict[str, float] = {"max_std_growth": DIVERGENCE_GROWTH}
+        options: dict[str, Any] = {"max_std_growth": DIVERGENCE_GROWTH}
         if spec.max_interpolation < 1.0:
             options["max_interpolation"] = spec.max_interpolation
+        if not spec.divide_by_z:
+            options["divide_by_z"] = False
         history = run(
             spec.method,
             spec.env_id,

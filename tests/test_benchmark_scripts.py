@@ -245,12 +245,22 @@ def test_a_cap_that_cannot_bind_is_the_uncapped_run() -> None:
     assert capped.key == study_tools.RunSpec("Sphere", 16, 1, "creps-cma-old", 0, 1000).key  # 50/256 < 0.2
     binding = study_tools.RunSpec("Sphere", 4, 1, "creps-cma-old", 0, 1000, max_interpolation=0.2)
     assert binding.key == "Sphere-p4-z1-creps-cma-old-cap0.2-s0-b1000-n50"
+    no_z = dataclasses.replace(binding, divide_by_z=False)
+    assert no_z.key == "Sphere-p4-z1-creps-cma-old-cap0.2-noz-s0-b1000-n50"
+    with pytest.raises(ValueError, match="divide_by_z: expected True for method 'cma-fixed'"):
+        study_tools.RunSpec("Sphere", 4, 1, "cma-fixed", 0, 1000, divide_by_z=False)
     with pytest.raises(ValueError, match="max_interpolation: expected 1 for method 'creps'"):
         study_tools.RunSpec("Sphere", 4, 1, "creps", 0, 1000, max_interpolation=0.2)
     # The cap reaches the optimiser: at p = 4, λ = 1 without it, so the runs differ from the first update.
     uncapped = study_tools.execute(study_tools.RunSpec("Sphere", 4, 1, "creps-cma-old", 0, 500))
     capped = study_tools.execute(dataclasses.replace(binding, budget=500))
     assert capped["values"][0] == uncapped["values"][0] and capped["values"][1:] != uncapped["values"][1:]
+    without_z = study_tools.execute(
+        dataclasses.replace(binding, budget=500, max_interpolation=1.0, divide_by_z=False)
+    )
+    assert (
+        without_z["values"][0] == uncapped["values"][0] and without_z["values"][1:] != uncapped["values"][1:]
+    )
 
 
 def test_a_regression_baseline_is_never_reused_for_another_budget(tmp_path: Path) -> None:

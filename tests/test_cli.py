@@ -5,12 +5,13 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+from dataclasses import fields
 
 import pytest
 from helpers import SPHERE, cli_command
 
 from creps_gym.cli import main
-from creps_gym.optimizers import optimizer_names
+from creps_gym.optimizers import CREPSCMAConfig, optimizer_names
 from creps_gym.runner import History, RunDir, run
 
 
@@ -75,6 +76,10 @@ def test_progress_bar_on_request_and_plot_and_export_and_resume(tmp_path):
     assert resumed.returncode == 0 and (a / RunDir.HISTORY_JSON).read_text() == before  # finished: unchanged
 
 
+#: The options of the default optimiser, as its error message lists them (the config's init fields).
+CREPS_CMA_OPTIONS = sorted(
+    f.name for f in fields(CREPSCMAConfig) if f.init and f.name not in ("n_params", "n_context_dims")
+)
 BAD_FLAGS = [
     (["--samples", "1"], "argument --samples: expected an integer >= 2, got '1'"),
     (["--iterations", "ten"], "argument --iterations: expected an integer >= 1, got 'ten'"),
@@ -93,10 +98,7 @@ BAD_FLAGS = [
     (["--opt", "epsilon=-1"], "argument --opt: epsilon: expected a"),  # the optimiser's own message follows
     (
         ["--opt", "bogus=1"],
-        "argument --opt: options: expected names in ['baseline_features', 'epsilon', 'initial_cov', "
-        "'initial_mean', 'max_condition', 'max_interpolation', 'max_std_growth', 'mean_features', 'min_std', "
-        "'ridge', 'seed', 'variant'], "
-        "got unknown ['bogus']",
+        f"argument --opt: options: expected names in {CREPS_CMA_OPTIONS}, got unknown ['bogus']",
     ),
     (["--initial-mean", "centre"], "argument --initial-mean: expected 'uniform', a number or p comma"),
     (["--initial-std", "uniform"], "argument --initial-std: expected a number or comma-separated numbers"),

@@ -557,3 +557,40 @@ def test_max_std_growth_stops_a_diverging_search():
     assert set(met) == {"max_std_growth"} and met["max_std_growth"] > 3.0 and 10 < iterations < 500
     with pytest.raises(ValueError, match=r"max_std_growth: expected a finite value in \(1.0, 1e\+300\]"):
         CREPSCMA(4, 1, max_std_growth=0.5)
+
+
+def test_old_mean_sample_covariance_is_unbiased_without_z_under_random_selection():
+    """Weights that ignore θ: around the true (old) mean, E[Σ d_k ε_k ε_kᵀ] = Σ, so dividing by Z biases S
+    up by 1/Z; around a mean fitted to the same samples, Z is what removes the bias (Eqs. 12 and 15)."""
+    rng = np.random.default_rng(0)
+    cov = np.array([[2.0, 0.5, 0.0], [0.5, 1.0, 0.2], [0.0, 0.2, 0.5]])
+    weights = rng.dirichlet(np.ones(50))  # fixed, independent of the samples
+    z = 1.0 - weights @ weights
+    batches = rng.multivariate_normal(np.zeros(3), cov, size=(20_000, 50))  # around the true mean 0
+    plain = np.mean([weighted_sample_covariance(b, np.zeros(3), weights, False) for b in batches], axis=0)
+    with_z = np.mean([weighted_sample_covariance(b, np.zeros(3), weights) for b in batches], axis=0)
+    np.testing.assert_allclose(plain, cov, atol=0.02)
+    np.testing.assert_allclose(with_z, cov / z, atol=0.02)
+    assert np.all(np.diag(with_z) - np.diag(cov) > 0.5 * (1 / z - 1) * np.diag(cov))  # the bias is resolved
+    fitted = np.mean(  # the weighted mean of each batch as the centre: now Z corrects
+        [weighted_sample_covariance(b, weights @ b, weights) for b in batches[:5000]], axis=0
+    )
+    np.testing.assert_allclose(fitted, cov, atol=0.04)
+
+
+def test_divide_by_z_reaches_the_covariance_update():
+    rng = np.random.default_rng(3)
+    contexts = rng.uniform(0, 3, (60, 1))
+    covs = []
+    for divide in (True, False):
+        optimizer = CREPSCMA(25, 1, initial_mean=1.0, initial_cov=0.5, divide_by_z=divide, seed=0)
+        optimizer.tell(contexts, optimizer.ask(contexts), np.full(60, 1.0))  # uniform weights: Z = 1 − 1/60
+        covs.append(optimizer.cov)
+    lam = 60 / 25**2
+    np.testing.assert_allclose(
+        (covs[0] - (1 - lam) * 0.5 * np.eye(25)) * (1 - 1 / 60),
+        covs[1] - (1 - lam) * 0.5 * np.eye(25),
+        atol=1e-12,
+    )
+    with pytest.raises(TypeError, match="divide_by_z: expected a bool, got int 0"):
+        CREPSCMA(4, 1, divide_by_z=0)

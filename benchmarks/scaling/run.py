@@ -96,6 +96,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="cap of CREPS-CMA's λ (default 1: Eq. (14) as published); binds only where samples/p² > cap",
     )
     parser.add_argument(
+        "--no-z",
+        dest="divide_by_z",
+        action="store_false",
+        help="CREPS-CMA without Z in the old-mean covariance (default: Eq. (15) as published)",
+    )
+    parser.add_argument(
         "--baselines", nargs="*", choices=BASELINE_METHODS, default=list(BASELINE_METHODS), help="none: skip"
     )
     parser.add_argument("--baseline-dims", nargs="+", type=int, help="problem dimensions of the baselines")
@@ -111,8 +117,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     if not 0.0 < args.max_interpolation <= 1.0:
         parser.error(f"--max-interpolation: expected a value in (0, 1], got {args.max_interpolation}")
     capped = args.max_interpolation < 1.0
-    args.label = f"{args.mode}-cap{args.max_interpolation:g}" if capped else args.mode
+    args.label = args.mode + (f"-cap{args.max_interpolation:g}" if capped else "")
     args.flags = f"--{args.mode}" + (f" --max-interpolation {args.max_interpolation:g}" if capped else "")
+    if not args.divide_by_z:
+        args.label, args.flags = args.label + "-noz", args.flags + " --no-z"
     args.index = REPO / "docs" / "results" / "README.md" if args.out is None else None
     args.out = args.out or REPO / "docs" / "results" / "scaling" / args.label
     args.dims = sorted(args.dims or preset["dims"])
@@ -135,7 +143,7 @@ def make_specs(args: argparse.Namespace) -> list[RunSpec]:
     """Every run: the grid (smallest problems first, and per p every cell's seed 0 before any seed 1), then
     the baselines on ``args.baseline_dims``."""
     grid_specs = [
-        RunSpec(name, p, z, METHOD, seed, args.budget, args.samples, args.max_interpolation)
+        RunSpec(name, p, z, METHOD, seed, args.budget, args.samples, args.max_interpolation, args.divide_by_z)
         for p in args.dims
         for seed in range(args.seeds)
         for name in args.functions
@@ -245,10 +253,12 @@ def plot_heatmaps(documents: Sequence[dict[str, Any]], args: argparse.Namespace,
 
 
 def method_text(args: argparse.Namespace) -> str:
-    """The method as the reports name it: with its cap of λ when there is one."""
-    if args.max_interpolation < 1.0:
-        return f"CREPS-CMA-old with λ capped at {args.max_interpolation:g}"
-    return "CREPS-CMA-old (λ of Eq. (14) as published)"
+    """The method as the reports name it: with its options when they differ from the paper's."""
+    changes = [f"λ capped at {args.max_interpolation:g}"] if args.max_interpolation < 1.0 else []
+    changes += [] if args.divide_by_z else ["no Z in the old-mean covariance"]
+    if changes:
+        return "CREPS-CMA-old with " + " and ".join(changes)
+    return "CREPS-CMA-old (Eqs. (14)-(16) as published)"
 
 
 def baseline_cell(summary: dict[str, Any], method: str, budget: int) -> str:

@@ -89,8 +89,10 @@ def weighted_ml_fit(
     return coefficients
 
 
-def weighted_sample_covariance(params: Array, means: Array, weights: Array) -> Array:
-    """Weighted sample covariance with the unbiased normaliser, Eqs. (12) and (15).
+def weighted_sample_covariance(
+    params: Array, means: Array, weights: Array, divide_by_z: bool = True
+) -> Array:
+    """Weighted sample covariance with the normaliser of Eqs. (12) and (15).
 
     S = Σ_k d_k (θ_k − m_k)(θ_k − m_k)ᵀ / Z with Z = 1 − Σ_k d_k², for weights summing to one.
 
@@ -98,9 +100,11 @@ def weighted_sample_covariance(params: Array, means: Array, weights: Array) -> A
     ----------
     params, means : ndarray, shape (N, p)
     weights : ndarray, shape (N,)
+    divide_by_z : bool
+        False leaves out Z: the right estimate around means that were not fitted to these samples.
     """
     deviations = params - means
-    normaliser = 1.0 - float(weights @ weights)
+    normaliser = 1.0 - float(weights @ weights) if divide_by_z else 1.0
     if normaliser <= 1e-12:
         normaliser = 1.0  # a single effective sample: Z is undefined, fall back to plain ML
     return (deviations.T * weights) @ deviations / normaliser

@@ -20,6 +20,13 @@ iteration φ_eff ≈ 25–30, so Eq. (14) gives λ = 1 for n ≤ 5 and λ ≈ 0.
 switched off (or nearly) and the old-mean variant can collapse like CREPS on small problems
 (``benchmarks/scaling/`` measures it). A cap of 0.2 removes that failure there and changes nothing where
 φ_eff/n² ≤ 0.2 already, e.g. for every n ≥ 16 with N ≤ 50 samples.
+
+``divide_by_z=False`` leaves Z = 1 − Σ_k d_k² out of S. Z makes S unbiased around a mean *fitted* to the same
+weighted samples (the new mean); around the old mean, which the samples did not estimate, S without Z is the
+unbiased one (CMA-ES's rank-μ update has no Z). With Z, every direction the weights do not select grows by
+1/Z ≈ φ_eff/(φ_eff − 1) per update, scaled by λ: negligible on small problems, but over the ~10⁵ updates of
+p = 64 it makes the old-mean variant diverge on Rosenbrock with z ≥ 4 (``benchmarks/scaling/``). The default
+keeps Eq. (15) as published.
 """
 
 from __future__ import annotations
@@ -30,7 +37,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import check_real_in_range
+from creps_gym._validation import check_bool, check_real_in_range
 from creps_gym.optimizers.creps import CREPS, CREPSConfig, weighted_sample_covariance
 
 __all__ = ["CREPSCMA", "CREPSCMAConfig", "interpolation_factor", "regularised_covariance"]
@@ -77,18 +84,21 @@ class CREPSCMAConfig(CREPSConfig):
     ----------
     variant : str               ``"old"`` (default, Eqs. 15–16) or ``"current"`` (Eqs. 12–13).
     max_interpolation : float   cap of λ in (0, 1]; 1 (default) is Eq. (14) as published.
+    divide_by_z : bool          divide S by Z = 1 − Σd² (default, Eqs. 12 and 15); see the module docstring.
 
     See :class:`~creps_gym.optimizers.creps.CREPSConfig` for the other fields.
     """
 
     variant: str = "old"
     max_interpolation: float = 1.0
+    divide_by_z: bool = True
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise ValueError(f"variant: expected one of {VARIANTS}, got {self.variant!r}")
         cap = check_real_in_range(self.max_interpolation, "max_interpolation", 0.0, 1.0, low_inclusive=False)
         object.__setattr__(self, "max_interpolation", cap)
+        object.__setattr__(self, "divide_by_z", check_bool(self.divide_by_z, "divide_by_z"))
         super().__post_init__()
 
 
@@ -107,7 +117,9 @@ class CREPSCMA(CREPS):
 
     def _covariance_update(self, params: Array, old_means: Array, new_means: Array, weights: Array) -> tuple:
         centre = old_means if self.config.variant == "old" else new_means
-        sample_cov = weighted_sample_covariance(params, centre, weights)  # Eq. (15) old / Eq. (12) current
+        sample_cov = weighted_sample_covariance(  # Eq. (15) old / Eq. (12) current
+            params, centre, weights, self.config.divide_by_z
+        )
         interpolation = interpolation_factor(
             weights, self.n_params, self.config.max_interpolation
         )  # Eq. (14)

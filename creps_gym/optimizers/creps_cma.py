@@ -25,8 +25,9 @@ switched off (or nearly) and the old-mean variant can collapse like CREPS on sma
 weighted samples (the new mean); around the old mean, which the samples did not estimate, S without Z is the
 unbiased one (CMA-ES's rank-μ update has no Z). With Z, every direction the weights do not select grows by
 1/Z ≈ φ_eff/(φ_eff − 1) per update, scaled by λ: negligible on small problems, but over the ~10⁵ updates of
-p = 64 it makes the old-mean variant diverge on Rosenbrock with z ≥ 4 (``benchmarks/scaling/``). The default
-keeps Eq. (15) as published.
+p = 64 it makes the old-mean variant diverge with z = 5 (``benchmarks/scaling/``). The drift also guards
+against collapse (without Z, Rosenbrock with p = 16, z = 5 converges prematurely), so the default keeps
+Eq. (15) as published.
 """
 
 from __future__ import annotations

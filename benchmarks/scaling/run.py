@@ -239,7 +239,9 @@ def plot_heatmaps(documents: Sequence[dict[str, Any]], args: argparse.Namespace,
                     label = labels[next(iter(kinds))] if len(kinds) == 1 else "miss"
                 else:
                     label = cell_text(summary, args.budget).replace(",", "")
-                axis.text(j, i, _short(label), ha="center", va="center", fontsize=7, color="w")
+                bright = not missed and summary["median_hit"] and norm(summary["median_hit"]) > 0.75
+                colour = "k" if bright else "w"
+                axis.text(j, i, _short(label), ha="center", va="center", fontsize=7, color=colour)
         axis.set_xticks(range(len(args.context_dims)), [str(z) for z in args.context_dims])
         axis.set_yticks(range(len(args.dims)), [str(p) for p in args.dims])
         axis.set(xlabel="context dimension z", ylabel="problem dimension p", title=TITLES[name])
@@ -342,10 +344,12 @@ def _hatch(column: int, row: int) -> Any:
 
 
 def _short(label: str) -> str:
-    """Compact number for a heatmap cell: 12345 -> 12.3k."""
+    """Compact number for a heatmap cell: 12345 -> 12.3k, 2637250 -> 2.64M."""
     head = label.split(" ")[0]
     if head.isdigit():
         value = int(head)
+        if value >= 1_000_000:
+            return f"{value / 1e6:.2f}M"
         return f"{value / 1000:.1f}k" if value >= 1000 else head
     return label
 

@@ -419,7 +419,7 @@ def invocation_timing(out: str | os.PathLike[str], wall: float, computed: int, t
     path = Path(out) / "timing.json"
     stored = _load(path) if computed == 0 else None
     if stored is not None:
-        return stored
+        return {**stored, "expected": total}  # this invocation's run count, for the completeness check
     timing = {"wall_seconds": round(wall, 1), "computed": computed, "total": total, "cores": os.cpu_count()}
     path.parent.mkdir(parents=True, exist_ok=True)
     _write_text(path, json.dumps(timing) + "\n")
@@ -438,8 +438,9 @@ def timing_text(timing: dict[str, Any], documents: Sequence[dict[str, Any]]) -> 
     else:
         text = "Rendered from cached runs only (no invocation that computed runs has finished)"
     text += f"; per-run times summed over the {len(documents)} runs shown: {cpu:.0f} s."
-    if len(documents) < timing["total"]:
-        text += f" **Partial: {len(documents)} of {timing['total']} runs have finished.**"
+    expected = timing.get("expected", timing["total"])
+    if len(documents) < expected:
+        text += f" **Partial: {len(documents)} of {expected} runs have finished.**"
     return text
 
 

@@ -290,3 +290,11 @@ def test_scaling_cells_say_why_every_seed_missed() -> None:
     assert scaling.cell_text(row[0], 1000) == ">1,000 1 / diverged 1 / stopped 1, regret 3"
     (row,) = scaling.grid(runs[:1], "Sphere", args)
     assert scaling.cell_text(row[0], 1000) == "diverged, regret 1e+09"
+
+
+def test_a_render_of_a_larger_study_reports_it_partial(tmp_path: Path) -> None:
+    computed = study_tools.invocation_timing(tmp_path, wall=3.0, computed=5, total=5)
+    assert "Partial" not in study_tools.timing_text(computed, [{"seconds": 1.0}] * 5)
+    rendered = study_tools.invocation_timing(tmp_path, wall=0.1, computed=0, total=10)  # the study grew
+    text = study_tools.timing_text(rendered, [{"seconds": 1.0}] * 8)
+    assert "3 s wall" in text and "**Partial: 8 of 10 runs have finished.**" in text

@@ -215,14 +215,16 @@ def paper_method_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> di
     """Run one of the paper's methods through the runner and return its result document.
 
     Episodes run on the functions' native vector env (bit-identical to one env per episode, and about
-    twice as fast). With ``checkpoint_dir``, the run checkpoints there every :data:`CHECKPOINT_EVERY`
-    iterations and a run interrupted earlier continues from its last checkpoint instead of restarting.
+    twice as fast); the optimiser stops a diverging run (:data:`DIVERGENCE_GROWTH`). With ``checkpoint_dir``,
+    the run checkpoints there (at most :data:`MAX_CHECKPOINTS` times, at least :data:`CHECKPOINT_EVERY`
+    iterations apart) and a run interrupted earlier continues from its last checkpoint instead of restarting.
     """
     bounded = is_bounded(spec.function)
     callbacks = () if bounded else (_reached_f_target,)
     if checkpoint_dir is not None and (checkpoint_dir / "config.json").exists():
         history = resume(checkpoint_dir, callbacks=callbacks)
     else:
+        iterations = max(1, spec.budget // spec.samples)
         options: dict[str, Any] = {"max_std_growth": DIVERGENCE_GROWTH}
         if spec.max_interpolation < 1.0:
             options["max_interpolation"] = spec.max_interpolation
@@ -231,7 +233,7 @@ def paper_method_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> di
         history = run(
             spec.method,
             spec.env_id,
-            iterations=max(1, spec.budget // spec.samples),
+            iterations=iterations,
             samples_per_iteration=spec.samples,
             seed=spec.seed,
             env_kwargs=spec.env_kwargs,
@@ -242,7 +244,7 @@ def paper_method_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> di
             backend="vector",
             vector_mode="native",
             run_dir=checkpoint_dir,
-            checkpoint_every=max(CHECKPOINT_EVERY, spec.budget // spec.samples // MAX_CHECKPOINTS),
+            checkpoint_every=max(CHECKPOINT_EVERY, iterations // MAX_CHECKPOINTS),
         )
     values = history.column("eval_regret") if bounded else -history.column("eval_return")
     seconds = history.records[-1].wall_time if history.records else 0.0  # summed over resumes

@@ -116,8 +116,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     preset = PRESETS[args.mode]
     if not 0.0 < args.max_interpolation <= 1.0:
         parser.error(f"--max-interpolation: expected a value in (0, 1], got {args.max_interpolation}")
-    capped = args.max_interpolation < 1.0
-    args.label = args.mode + (f"-cap{args.max_interpolation:g}" if capped else "")
+    args.label = args.mode + (f"-cap{args.max_interpolation:g}" if args.max_interpolation < 1.0 else "")
     args.label += "" if args.divide_by_z else "-noz"
     given = sys.argv[1:] if argv is None else list(argv)
     args.flags = " ".join(a for a in given if a != "--render-only") or f"--{args.mode}"  # what computes it
@@ -254,13 +253,17 @@ def plot_heatmaps(documents: Sequence[dict[str, Any]], args: argparse.Namespace,
     return path
 
 
-def method_text(args: argparse.Namespace) -> str:
-    """The method as the reports name it: with its options when they differ from the paper's."""
+def method_name(args: argparse.Namespace) -> str:
+    """The method with its options where they differ from the paper's (the figures' legends)."""
     changes = [f"λ capped at {args.max_interpolation:g}"] if args.max_interpolation < 1.0 else []
     changes += [] if args.divide_by_z else ["no Z in the old-mean covariance"]
-    if changes:
-        return "CREPS-CMA-old with " + " and ".join(changes)
-    return "CREPS-CMA-old (Eqs. (14)-(16) as published)"
+    return "CREPS-CMA-old" + (" with " + " and ".join(changes) if changes else "")
+
+
+def method_text(args: argparse.Namespace) -> str:
+    """The method as the reports name it: :func:`method_name`, or that the update is the published one."""
+    name = method_name(args)
+    return name if name != "CREPS-CMA-old" else f"{name} (Eqs. (14)-(16) as published)"
 
 
 def baseline_cell(summary: dict[str, Any], method: str, budget: int) -> str:
@@ -296,7 +299,7 @@ def plot_baselines(documents: Sequence[dict[str, Any]], args: argparse.Namespace
     handles = [
         matplotlib.lines.Line2D([], [], color="k", linestyle=style, marker=marker, label=label)
         for (style, marker), label in (
-            (styles[METHOD], f"{method_text(args).split(' (')[0]}, every context"),
+            (styles[METHOD], f"{method_name(args)}, every context"),
             *((styles[m], LEGEND_LABELS[m]) for m in args.baselines),
         )
     ]

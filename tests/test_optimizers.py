@@ -5,13 +5,29 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from creps_gym.optimizers import CREPS, CREPSCMA, RBFFeatures, interpolation_factor, regularised_covariance
+from creps_gym.optimizers import (
+    CREPS,
+    CREPSCMA,
+    RBFFeatures,
+    interpolation_factor,
+    make_optimizer,
+    optimizer_names,
+    regularised_covariance,
+)
 from creps_gym.optimizers.creps import spd_factor, weighted_ml_fit, weighted_sample_covariance
+from creps_gym.optimizers.registry import optimizer_class
 
+
+def _native(name: str):
+    def build(n_params, n_context_dims, seed=None, initial_mean=0.0, initial_cov=1.0, **options):
+        return make_optimizer(name, n_params, n_context_dims, seed, initial_mean, initial_cov, **options)
+
+    return build
+
+
+#: Every registered optimiser of this package (the adapters have their own tests), by registry name.
 OPTIMIZERS = {
-    "creps": lambda **kw: CREPS(**kw),
-    "creps-cma-old": lambda **kw: CREPSCMA(variant="old", **kw),
-    "creps-cma-current": lambda **kw: CREPSCMA(variant="current", **kw),
+    name: _native(name) for name in optimizer_names() if ".adapters." not in optimizer_class(name).__module__
 }
 
 

@@ -1,10 +1,11 @@
-"""Ask/tell optimisers: CREPS and CREPS-CMA (plus adapters for pycma, nevergrad and optuna).
+"""Ask/tell optimisers: CREPS, CREPS-CMA and contextual CMA-ES, plus adapters (pycma, nevergrad, optuna).
 
 Returns are maximised. Optimisers never see an environment: ``ask(contexts) -> params``,
 ``tell(contexts, params, returns)``, ``recommend(contexts) -> params``.
 """
 
 from creps_gym.optimizers.base import AskTellOptimizer, ContextualOptimizer, load_state, save_state
+from creps_gym.optimizers.ccmaes import CCMAES, CCMAESConfig, recommended_batch_size
 from creps_gym.optimizers.creps import (
     CREPS,
     CREPSConfig,
@@ -22,11 +23,13 @@ from creps_gym.optimizers.features import (
     AffineFeatures,
     BaselineFeatures,
     FeatureMap,
+    PolynomialFeatures,
     QuadraticFeatures,
     RBFFeatures,
     make_features,
     register_feature_map,
 )
+from creps_gym.optimizers.policies import LinearGaussianPolicy, spd_factor
 from creps_gym.optimizers.registry import (
     describe_optimizers,
     make_optimizer,
@@ -36,15 +39,19 @@ from creps_gym.optimizers.registry import (
 )
 
 __all__ = [
+    "CCMAES",
     "CREPS",
     "CREPSCMA",
     "AffineFeatures",
     "AskTellOptimizer",
     "BaselineFeatures",
+    "CCMAESConfig",
     "CREPSCMAConfig",
     "CREPSConfig",
     "ContextualOptimizer",
     "FeatureMap",
+    "LinearGaussianPolicy",
+    "PolynomialFeatures",
     "QuadraticFeatures",
     "RBFFeatures",
     "describe_optimizers",
@@ -53,12 +60,14 @@ __all__ = [
     "make_features",
     "make_optimizer",
     "optimizer_names",
+    "recommended_batch_size",
     "register_feature_map",
     "register_optimizer",
     "regularised_covariance",
     "restore_optimizer",
     "save_state",
     "solve_dual",
+    "spd_factor",
     "weighted_ml_fit",
     "weighted_sample_covariance",
 ]

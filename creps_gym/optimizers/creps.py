@@ -24,10 +24,18 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from creps_gym._validation import as_float_array, check_real_in_range
+from creps_gym._validation import check_real_in_range
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.dual import DUAL_KL_TOL, DualSolution, solve_dual
 from creps_gym.optimizers.features import FeatureMap, make_features
+from creps_gym.optimizers.policies import (
+    LinearGaussianPolicy,
+    PolicyAccess,
+    initial_coefficients,
+    initial_covariance,
+    spd_factor,
+    weighted_ml_fit,
+)
 
 __all__ = [
     "CREPS",
@@ -40,53 +48,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-
-
-def weighted_ml_fit(
-    mean_features: Array, params: Array, weights: Array, ridge: float, constant_column: int | None = None
-) -> Array:
-    """Weighted ridge maximum-likelihood fit of the mean coefficients, Eq. (7).
-
-    Parameters
-    ----------
-    mean_features : ndarray, shape (N, m)   ϕ(s_k)
-    params : ndarray, shape (N, p)          θ_k
-    weights : ndarray, shape (N,)           d_k, summing to one
-    ridge : float
-        Ridge of the regularised normal equations (ΦᵀDΦ + ridge·I)A = ΦᵀDU, relative to the features' scale.
-    constant_column : int, optional
-        Index of a constant feature (the 1 of ϕ(s) = [1, s]). The ridge then acts on the other columns after
-        weighted centring and standardising, and the intercept is not shrunk, so the fit does not depend on
-        where the context box lies (contexts in [1000, 1003] fit like contexts in [0, 3]). Without it, the
-        ridge is relative to the mean diagonal of ΦᵀDΦ.
-
-    Returns
-    -------
-    ndarray, shape (m, p)
-        The coefficients A; Aᵀϕ(s) is the new mean.
-    """
-    if constant_column is None:
-        weighted = mean_features.T * weights
-        gram = weighted @ mean_features
-        gram.flat[:: gram.shape[0] + 1] += ridge * max(gram.trace() / gram.shape[0], 1e-300)
-        return linalg.solve(gram, weighted @ params, assume_a="pos", check_finite=False)
-    others = np.delete(np.arange(mean_features.shape[1]), constant_column)
-    columns = mean_features[:, others]
-    centre = weights @ columns
-    centred = columns - centre
-    spread = np.sqrt(weights @ centred**2)
-    informative = spread > 1e-12 * (np.abs(centre) + spread)  # constant context dimensions carry nothing
-    standardised = np.where(informative, centred / np.where(informative, spread, 1.0), 0.0)
-    mean_params = weights @ params
-    weighted = standardised.T * weights
-    gram = weighted @ standardised
-    gram.flat[:: gram.shape[0] + 1] += ridge + (~informative)
-    slopes = linalg.solve(gram, weighted @ (params - mean_params), assume_a="pos", check_finite=False)
-    slopes /= np.where(informative, spread, 1.0)[:, None]
-    coefficients = np.empty((mean_features.shape[1], params.shape[1]))
-    coefficients[others] = slopes
-    coefficients[constant_column] = mean_params - centre @ slopes
-    return coefficients
 
 
 def weighted_sample_covariance(
@@ -110,62 +71,6 @@ def weighted_sample_covariance(
     return (deviations.T * weights) @ deviations / normaliser
 
 
-def spd_factor(cov: Array, floor: float = 1e-12) -> tuple[Array, Array, bool]:
-    """Symmetrise ``cov`` and return (Σ, lower Cholesky factor, repaired).
-
-    If the Cholesky factorisation fails (Σ lost positive-definiteness to round-off, or a sample covariance
-    from fewer samples than dimensions is singular), eigenvalues are clipped to ``floor · max eigenvalue``
-    (and to at least 1e-300) and Σ is rebuilt; ``repaired`` is then True.
-    """
-    cov = 0.5 * (cov + cov.T)
-    try:
-        return cov, np.linalg.cholesky(cov), False
-    except np.linalg.LinAlgError:
-        values, vectors = np.linalg.eigh(cov)
-        values = np.maximum(values, max(floor * values.max(), 1e-300))
-        cov = (vectors * values) @ vectors.T
-        cov = 0.5 * (cov + cov.T)
-        return cov, np.linalg.cholesky(cov), True
-
-
-def _initial_coefficients(value: Any, features: FeatureMap, n_params: int) -> Array:
-    array = as_float_array(value, "initial_mean")
-    if array.ndim == 0:
-        return features.constant_coefficients(np.full(n_params, float(array)))
-    if array.shape == (n_params,):
-        return features.constant_coefficients(array)
-    if array.shape == (features.n_features, n_params):
-        return array.copy()
-    raise ValueError(
-        f"initial_mean: expected a scalar, shape ({n_params},) or ({features.n_features}, {n_params}), "
-        f"got shape {array.shape}"
-    )
-
-
-def _initial_covariance(value: Any, n_params: int) -> Array:
-    array = as_float_array(value, "initial_cov")
-    if array.ndim == 0:
-        array = np.full(n_params, float(array))
-    if array.shape == (n_params,):
-        if (array <= 0).any():
-            raise ValueError(f"initial_cov: expected variances > 0, got min {array.min()}")
-        return np.diag(array)
-    if array.shape != (n_params, n_params):
-        raise ValueError(
-            f"initial_cov: expected a scalar, shape ({n_params},) or ({n_params}, {n_params}), "
-            f"got {array.shape}"
-        )
-    if not np.allclose(array, array.T, rtol=1e-10, atol=0.0):
-        raise ValueError("initial_cov: expected a symmetric matrix, got an asymmetric one")
-    try:
-        np.linalg.cholesky(array)
-    except np.linalg.LinAlgError:
-        raise ValueError(
-            "initial_cov: expected a symmetric positive-definite matrix, got one that is not"
-        ) from None
-    return array.copy()
-
-
 @dataclass(frozen=True, eq=False)
 class CREPSConfig:
     """Configuration of :class:`CREPS`; validates itself on construction.
@@ -183,6 +88,8 @@ class CREPSConfig:
     seed : int or None          seed of the sampling Generator.
     min_std, max_condition, max_std_growth : float   stop criteria: √λ_max(Σ) < min_std, cond(Σ) >
         max_condition, or √λ_max(Σ) > max_std_growth·√λ_max(Σ₀) (divergence, like pycma's tolupsigma).
+    tolflatfitness : int        stop after this many consecutive batches whose returns are all equal
+        (like pycma's option of that name: no signal, and Σ would grow without bound).
     """
 
     n_params: int
@@ -197,11 +104,12 @@ class CREPSConfig:
     min_std: float = 1e-12
     max_condition: float = 1e14
     max_std_growth: float = 1e20
+    tolflatfitness: int = 1
     mean_map: FeatureMap = field(init=False, repr=False)
     baseline_map: FeatureMap = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        for name, minimum in (("n_params", 1), ("n_context_dims", 0)):
+        for name, minimum in (("n_params", 1), ("n_context_dims", 0), ("tolflatfitness", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
                 raise ValueError(f"{name}: expected an integer >= {minimum}, got {value!r}")
@@ -229,9 +137,9 @@ class CREPSConfig:
                     f"n_features says, got {width[1:]} columns for n = 2"
                 )
         object.__setattr__(
-            self, "initial_mean", _initial_coefficients(self.initial_mean, self.mean_map, self.n_params)
+            self, "initial_mean", initial_coefficients(self.initial_mean, self.mean_map, self.n_params)
         )
-        object.__setattr__(self, "initial_cov", _initial_covariance(self.initial_cov, self.n_params))
+        object.__setattr__(self, "initial_cov", initial_covariance(self.initial_cov, self.n_params))
 
     def to_json(self) -> dict[str, Any]:
         """JSON-serialisable scalars and feature specs (the initial arrays are saved separately)."""
@@ -249,7 +157,7 @@ class CREPSConfig:
         return data
 
 
-class CREPS(ContextualOptimizer):
+class CREPS(PolicyAccess, ContextualOptimizer):
     """Contextual REPS with the maximum-likelihood covariance Σ = S (Eq. 12).
 
     ``CREPS(n_params, n_context_dims, **options)`` or ``CREPS.from_config(config)``; see
@@ -280,26 +188,24 @@ class CREPS(ContextualOptimizer):
         self.config = config
         self.n_params, self.n_context_dims = config.n_params, config.n_context_dims
         self.rng = np.random.default_rng(config.seed)
-        self.coefficients = config.initial_mean.copy()
-        self.cov, self._chol, _ = spd_factor(config.initial_cov)
+        self.policy = LinearGaussianPolicy(config.mean_map, config.initial_mean.copy(), config.initial_cov)
         self._initial_max_std = float(np.sqrt(np.linalg.eigvalsh(config.initial_cov)[-1]))
         self._eta = 1.0  # the dual's warm start, normalised units
+        self.flat_iterations = 0
 
-    # -- the distribution --------------------------------------------------------------------------------
     def mean(self, contexts: Array) -> Array:
         """Policy mean Aᵀϕ(s) for validated contexts (n, z): shape (n, p)."""
-        return self.config.mean_map(contexts) @ self.coefficients
+        return self.policy.mean(contexts)
 
-    def recommend(self, contexts: Any) -> Array:
-        return self.mean(self._check_contexts(contexts, "contexts"))
+    def _covariance_update(
+        self, policy: LinearGaussianPolicy, params: Array, old_means: Array, new_means: Array, weights: Array
+    ) -> tuple[float, bool]:
+        """CREPS: Σ = S around the new mean (Eq. 12), set on ``policy`` (whose coefficients are the new ones).
 
-    def _sample(self, contexts: Array) -> Array:
-        noise = self.rng.standard_normal((contexts.shape[0], self.n_params))
-        return self.mean(contexts) + noise @ self._chol.T
-
-    def _covariance_update(self, params: Array, old_means: Array, new_means: Array, weights: Array) -> tuple:
-        """CREPS: Σ = S computed around the new mean (Eq. 12); returns (Σ, interpolation factor)."""
-        return weighted_sample_covariance(params, new_means, weights), 1.0
+        Returns (interpolation factor λ, whether Σ needed an SPD repair).
+        """
+        sample_cov = weighted_sample_covariance(params, new_means, weights)  # Eq. (12)
+        return 1.0, policy.set_cov(sample_cov)
 
     def _update(self, contexts: Array, params: Array, returns: Array) -> None:
         n, k = returns.shape[0], self.config.baseline_map.n_features
@@ -328,16 +234,22 @@ class CREPS(ContextualOptimizer):
                 f"{self.config.ridge}; use a ridge > 0 or more varied contexts. The optimiser was left "
                 "unchanged"
             ) from None
-        cov, interpolation = self._covariance_update(params, old_means, phi @ coefficients, dual.weights)
-        cov, chol, repaired = spd_factor(cov)
-        if not (np.isfinite(coefficients).all() and np.isfinite(chol).all()):
+        policy = self.policy.copy()
+        policy.coefficients = coefficients
+        interpolation, repaired = self._covariance_update(
+            policy, params, old_means, phi @ coefficients, dual.weights
+        )
+        if not policy.is_finite():
             raise RuntimeError(
                 "tell(): the update produced non-finite values; the optimiser was left unchanged"
             )
-        self.coefficients, self.cov, self._chol = coefficients, cov, chol
+        self.policy = policy
         if abs(dual.kl - self.config.epsilon) <= DUAL_KL_TOL:  # warm-start only from an active constraint
             self._eta = dual.eta
         self._diagnostics = self._describe(dual, returns, interpolation, repaired)
+        spread = float(returns.max() - returns.min())
+        flat = spread <= 1e-12 * max(float(np.abs(returns).max()), 1e-300)
+        self.flat_iterations = self.flat_iterations + 1 if flat else 0
 
     @property
     def diagnostics(self) -> dict[str, float]:
@@ -360,15 +272,16 @@ class CREPS(ContextualOptimizer):
             "kl": dual.kl,
             "ess": 1.0 / float(dual.weights @ dual.weights),
             "interpolation": float(interpolation),
-            "logdet_cov": 2.0 * float(np.log(np.diag(self._chol)).sum()),
+            "logdet_cov": 2.0 * float(np.log(np.diag(self.policy.chol)).sum())
+            + 2.0 * self.n_params * float(np.log(self.policy.step_size)),
             "mean_return": float(np.mean(returns / magnitude) * magnitude) if magnitude > 0 else 0.0,
             "dual_iterations": float(dual.iterations),
             "cov_repaired": float(repaired),
         }
 
     def stop(self) -> dict[str, Any]:
-        """``min_std``, ``max_condition`` and ``max_std_growth`` criteria that are met (empty before the first
-        update)."""
+        """``min_std``, ``max_condition``, ``max_std_growth`` and ``tolflatfitness`` criteria that are met
+        (empty before the first update)."""
         met: dict[str, Any] = {}
         diagnostics = self.diagnostics
         if not diagnostics:
@@ -379,19 +292,15 @@ class CREPS(ContextualOptimizer):
             met["max_condition"] = diagnostics["cond_cov"]
         if diagnostics["max_std"] > self.config.max_std_growth * self._initial_max_std:
             met["max_std_growth"] = diagnostics["max_std"] / self._initial_max_std
+        if self.flat_iterations >= self.config.tolflatfitness:
+            met["tolflatfitness"] = self.flat_iterations
         return met
 
     # -- checkpoints ---------------------------------------------------------------------------------------
     def _state(self) -> dict[str, Any]:
-        return {
-            "config": self.config.to_json(),
-            "rng": self.rng.bit_generator.state,
-            "initial_mean": self.config.initial_mean.copy(),
-            "initial_cov": self.config.initial_cov.copy(),
-            "coefficients": self.coefficients.copy(),
-            "cov": self.cov.copy(),
-            "dual_eta": self._eta,
-        }
+        state = self._policy_state()
+        state["dual_eta"] = self._eta
+        return state
 
     @classmethod
     def _from_state(cls, state: Mapping[str, Any]) -> CREPS:
@@ -403,7 +312,7 @@ class CREPS(ContextualOptimizer):
         )
         optimizer = cls.from_config(config)
         optimizer.rng.bit_generator.state = state["rng"]
-        optimizer.coefficients = np.array(state["coefficients"], dtype=np.float64)
-        optimizer.cov, optimizer._chol, _ = spd_factor(np.asarray(state["cov"], dtype=np.float64))
+        optimizer.policy = LinearGaussianPolicy.from_state(config.mean_map, config.n_params, state)
         optimizer._eta = float(state["dual_eta"])
+        optimizer.flat_iterations = int(state.get("flat_iterations", 0))
         return optimizer

@@ -32,19 +32,23 @@ Eq. (15) as published.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import check_bool, check_real_in_range
+from creps_gym._validation import as_float_array, check_bool, check_real_in_range
+from creps_gym.optimizers.cma_rules import cma_constants, csa_step, inverse_sqrt, update_paths_and_cov
 from creps_gym.optimizers.creps import CREPS, CREPSConfig, weighted_sample_covariance
+from creps_gym.optimizers.policies import LinearGaussianPolicy
 
 __all__ = ["CREPSCMA", "CREPSCMAConfig", "interpolation_factor", "regularised_covariance"]
 
 Array = NDArray[np.float64]
 VARIANTS = ("old", "current")
+STEP_SIZE_RULES = ("none", "csa")
 
 
 def interpolation_factor(weights: Array, n_params: int, maximum: float = 1.0) -> float:
@@ -86,6 +90,10 @@ class CREPSCMAConfig(CREPSConfig):
     variant : str               ``"old"`` (default, Eqs. 15–16) or ``"current"`` (Eqs. 12–13).
     max_interpolation : float   cap of λ in (0, 1]; 1 (default) is Eq. (14) as published.
     divide_by_z : bool          divide S by Z = 1 − Σd² (default, Eqs. 12 and 15); see the module docstring.
+    step_size : str             ``"none"`` (default, the paper) or ``"csa"``: the paper's future work, a
+        global step size σ by cumulative step-size adaptation, with CMA-ES's rank-one and rank-μ covariance
+        update weighted by the CREPS weights d_k (Eqs. C4–C9 of ``docs/algorithms.md``, μ_eff = φ_eff). Then
+        ``variant``, ``max_interpolation`` and ``divide_by_z`` do not apply.
 
     See :class:`~creps_gym.optimizers.creps.CREPSConfig` for the other fields.
     """
@@ -93,8 +101,11 @@ class CREPSCMAConfig(CREPSConfig):
     variant: str = "old"
     max_interpolation: float = 1.0
     divide_by_z: bool = True
+    step_size: str = "none"
 
     def __post_init__(self) -> None:
+        if self.step_size not in STEP_SIZE_RULES:
+            raise ValueError(f"step_size: expected one of {STEP_SIZE_RULES}, got {self.step_size!r}")
         if self.variant not in VARIANTS:
             raise ValueError(f"variant: expected one of {VARIANTS}, got {self.variant!r}")
         cap = check_real_in_range(self.max_interpolation, "max_interpolation", 0.0, 1.0, low_inclusive=False)
@@ -116,7 +127,24 @@ class CREPSCMA(CREPS):
     def __init__(self, n_params: int, n_context_dims: int, variant: str = "old", **options: Any) -> None:
         super().__init__(n_params, n_context_dims, variant=variant, **options)
 
-    def _covariance_update(self, params: Array, old_means: Array, new_means: Array, weights: Array) -> tuple:
+    def _init_from_config(self, config: CREPSConfig) -> None:
+        super()._init_from_config(config)
+        self.path_sigma = np.zeros((self.n_params, 1))
+        self.path_cov = np.zeros(self.n_params)
+        self._new_paths: tuple[Array, Array] | None = None
+
+    def _update(self, contexts: Array, params: Array, returns: Array) -> None:
+        super()._update(contexts, params, returns)
+        if self._new_paths is not None:  # committed with the policy, after every check passed
+            self.path_sigma, self.path_cov = self._new_paths
+            self._new_paths = None
+            self._diagnostics["step_size"] = self.policy.step_size
+
+    def _covariance_update(
+        self, policy: LinearGaussianPolicy, params: Array, old_means: Array, new_means: Array, weights: Array
+    ) -> tuple[float, bool]:
+        if self.config.step_size == "csa":
+            return self._csa_update(policy, params, old_means, weights)
         centre = old_means if self.config.variant == "old" else new_means
         sample_cov = weighted_sample_covariance(  # Eq. (15) old / Eq. (12) current
             params, centre, weights, self.config.divide_by_z
@@ -124,4 +152,44 @@ class CREPSCMA(CREPS):
         interpolation = interpolation_factor(
             weights, self.n_params, self.config.max_interpolation
         )  # Eq. (14)
-        return regularised_covariance(self.cov, sample_cov, interpolation), interpolation  # Eq. (16) / (13)
+        cov = regularised_covariance(policy.cov, sample_cov, interpolation)  # Eq. (16) / (13)
+        return interpolation, policy.set_cov(cov)
+
+    def _csa_update(
+        self, policy: LinearGaussianPolicy, params: Array, old_means: Array, weights: Array
+    ) -> tuple[float, bool]:
+        """CMA-ES's covariance and step-size update with the CREPS weights (Eqs. C4–C9)."""
+        sigma = policy.step_size
+        deviations = (params - old_means) / sigma  # y_k ~ N(0, C)
+        constants = cma_constants(self.n_params, weights, active=False)
+        shift = constants.weights @ deviations  # Eq. (C4)
+        signal = np.sqrt(constants.mu_eff) * (inverse_sqrt(policy.cov) @ shift)[:, None]
+        path_sigma, path_cov, cov, _ = update_paths_and_cov(  # Eqs. (C5)-(C8)
+            policy.cov,
+            self.path_sigma,
+            self.path_cov,
+            signal,
+            shift,
+            deviations,
+            constants.weights,
+            constants,
+            self.iteration,
+        )
+        repaired = policy.set_cov(cov)
+        policy.step_size = csa_step(sigma, path_sigma, constants)  # Eq. (C9)
+        self._new_paths = (path_sigma, path_cov)
+        return constants.c_mu, repaired
+
+    def _state(self) -> dict[str, Any]:
+        state = super()._state()
+        state.update(path_sigma=self.path_sigma.copy(), path_cov=self.path_cov.copy())
+        return state
+
+    @classmethod
+    def _from_state(cls, state: Mapping[str, Any]) -> CREPSCMA:
+        optimizer = cast(CREPSCMA, super()._from_state(state))
+        p = optimizer.n_params
+        if "path_sigma" in state:  # checkpoints written before step-size control have none
+            optimizer.path_sigma = as_float_array(state["path_sigma"], "state['path_sigma']", (p, 1)).copy()
+            optimizer.path_cov = as_float_array(state["path_cov"], "state['path_cov']", (p,)).copy()
+        return optimizer

@@ -15,6 +15,8 @@ free of pickle. Users add their own map with :func:`register_feature_map`.
 
 from __future__ import annotations
 
+import itertools
+import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -25,6 +27,7 @@ __all__ = [
     "AffineFeatures",
     "BaselineFeatures",
     "FeatureMap",
+    "PolynomialFeatures",
     "QuadraticFeatures",
     "RBFFeatures",
     "make_features",
@@ -103,6 +106,50 @@ class QuadraticFeatures(FeatureMap):
 
     def __call__(self, contexts: Array) -> Array:
         return np.concatenate([np.ones((contexts.shape[0], 1)), contexts, contexts**2], axis=1)
+
+
+@dataclass(frozen=True)
+class PolynomialFeatures(FeatureMap):
+    """ϕ(s) = every monomial of s up to ``degree``, cross terms included: [1, s_i, s_i s_j (i ≤ j), ...].
+
+    Contextual CMA-ES fits its context baseline V(s) on these (a full quadratic by default).
+
+    Parameters
+    ----------
+    context_dim : int
+    degree : int
+        Highest total degree, ≥ 0 (0 is the constant alone).
+    """
+
+    degree: int = 2
+    name: ClassVar[str] = "polynomial"
+    constant_column: ClassVar[int | None] = 0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if isinstance(self.degree, bool) or not isinstance(self.degree, (int, np.integer)) or self.degree < 0:
+            raise ValueError(f"degree: expected an int >= 0, got {self.degree!r}")
+        object.__setattr__(self, "degree", int(self.degree))
+
+    @property
+    def monomials(self) -> list[tuple[int, ...]]:
+        """The context indices multiplied in each feature, constant first."""
+        return [
+            combination
+            for order in range(self.degree + 1)
+            for combination in itertools.combinations_with_replacement(range(self.context_dim), order)
+        ]
+
+    @property
+    def n_features(self) -> int:
+        return math.comb(self.context_dim + self.degree, self.degree)
+
+    def __call__(self, contexts: Array) -> Array:
+        columns = [np.prod(contexts[:, list(term)], axis=1) for term in self.monomials]
+        return np.stack(columns, axis=1)
+
+    def spec(self) -> dict[str, Any]:
+        return {**super().spec(), "degree": self.degree}
 
 
 @dataclass(frozen=True)
@@ -192,7 +239,8 @@ class RBFFeatures(FeatureMap):
 
 
 _REGISTRY: dict[str, type[FeatureMap]] = {
-    cls.name: cls for cls in (AffineFeatures, QuadraticFeatures, BaselineFeatures, RBFFeatures)
+    cls.name: cls
+    for cls in (AffineFeatures, QuadraticFeatures, PolynomialFeatures, BaselineFeatures, RBFFeatures)
 }
 
 

@@ -11,6 +11,8 @@ name                 optimiser
 ``creps``            :class:`~creps_gym.optimizers.creps.CREPS`
 ``creps-cma-old``    :class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``variant="old"``
 ``creps-cma-current``:class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``variant="current"``
+``creps-cma-csa``    :class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``step_size="csa"``
+``c-cma-es``         :class:`~creps_gym.optimizers.ccmaes.CCMAES`
 ``cma``              :class:`~creps_gym.optimizers.adapters.pycma.CMAAdapter`
 ``nevergrad``        :class:`~creps_gym.optimizers.adapters.nevergrad.NevergradAdapter`
 ``optuna``           :class:`~creps_gym.optimizers.adapters.optuna.OptunaAdapter`
@@ -169,6 +171,10 @@ _DEFAULTS = (
      "creps_gym.optimizers.creps_cma:CREPSCMA", {"variant": "old"}),
     ("creps-cma-current", "CREPS-CMA, current-mean variant: rank-mu covariance around the new mean (Eq. 13)",
      "creps_gym.optimizers.creps_cma:CREPSCMA", {"variant": "current"}),
+    ("creps-cma-csa", "CREPS-CMA with step-size control: CREPS weights and mean, CMA covariance and CSA",
+     "creps_gym.optimizers.creps_cma:CREPSCMA", {"step_size": "csa"}),
+    ("c-cma-es", "Contextual CMA-ES: rank weights on context-baselined returns, step-size control (CSA)",
+     "creps_gym.optimizers.ccmaes:CCMAES", {}),
     ("cma", "pycma CMA-ES (non-contextual: ignores the context; extra 'adapters')",
      "creps_gym.optimizers.adapters.pycma:CMAAdapter", {}),
     ("nevergrad", "nevergrad optimiser, TwoPointsDE by default (non-contextual; extra 'adapters')",

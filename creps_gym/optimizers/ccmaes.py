@@ -1,0 +1,373 @@
+"""Contextual CMA-ES (C-CMA-ES): CMA-ES with a context-dependent mean and step-size control.
+
+References: A. Abdolmaleki, B. Price, N. Lau, L. P. Reis, G. Neumann, "Contextual Covariance Matrix Adaptation
+Evolutionary Strategies", IJCAI 2017 (the contextual mean and the context baseline), and N. Hansen, "The CMA
+Evolution Strategy: A Tutorial", arXiv:1604.00772 (the weights, the evolution paths and every default). The
+project's reading, with the equations (C1)–(C9) tagged below and the derivation of the step-size signal, is
+in ``docs/algorithms.md``.
+
+One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N(Aᵀϕ(s), σ²C):
+
+1. Advantages (C1): a_k = R_k − V(s_k), with V a ridge least-squares fit of the returns on a full quadratic in
+   s (cross terms included); smaller batches fall back to an affine or a constant baseline.
+2. Weights (C2): CMA-ES rank weights on the advantages, positive for the best ⌊N/2⌋, negative for the rest
+   (active CMA, ``active=True``).
+3. Mean (C3): A = weighted least squares of θ on ϕ(s) over the positively weighted samples.
+4. Step-size signal (C4): y_w = Σ_{w_k>0} w_k (θ_k − m_old(s_k))/σ, the shift of the mean at the selected
+   samples' weighted mean context. Under random selection y_w ~ N(0, C/μ_eff) exactly, as in CMA-ES.
+5. Paths, covariance and step size (C5)–(C9): CMA-ES's cumulative step-size adaptation, rank-one and rank-μ
+   updates with y_k = (θ_k − m_old(s_k))/σ.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg
+
+from creps_gym._validation import as_float_array, check_bool, check_real_in_range
+from creps_gym.optimizers.base import ContextualOptimizer
+from creps_gym.optimizers.cma_rules import (
+    CMAConstants,
+    cma_constants,
+    csa_step,
+    expected_norm,
+    inverse_sqrt,
+    rank_weights,
+    stagnated,
+    update_paths_and_cov,
+)
+from creps_gym.optimizers.contextual import (
+    baseline_features,
+    coefficient_shift,
+    context_advantages,
+    contextual_mean,
+)
+from creps_gym.optimizers.features import FeatureMap, make_features
+from creps_gym.optimizers.policies import (
+    LinearGaussianPolicy,
+    PolicyAccess,
+    initial_coefficients,
+    initial_covariance,
+)
+
+__all__ = [
+    "CCMAES",
+    "CCMAESConfig",
+    "baseline_features",
+    "context_advantages",
+    "contextual_mean",
+    "recommended_batch_size",
+]
+
+Array = NDArray[np.float64]
+SIGNALS = ("coefficients", "mean")
+
+
+def recommended_batch_size(n_params: int, n_context_dims: int) -> int:
+    """Default batch size: CMA-ES's population 4 + ⌊3 ln p⌋ times (1 + z), the number of mean features of
+    ϕ(s) = [1, s], and at least 2k + 2 for the k full-quadratic baseline features (a regression, not an
+    interpolation)."""
+    population = 4 + int(3 * math.log(n_params))
+    quadratic = 1 + n_context_dims + n_context_dims * (n_context_dims + 1) // 2
+    return max(population * (1 + n_context_dims), 2 * quadratic + 2)
+
+
+class _Step(NamedTuple):
+    policy: LinearGaussianPolicy
+    path_sigma: Array
+    path_cov: Array
+    diagnostics: dict[str, float]
+
+
+def _split_initial_cov(cov: Array) -> tuple[float, Array]:
+    """σ0 = det(Σ0)^(1/2p) and C0 = Σ0/σ0², so that det C0 = 1."""
+    _, logdet = np.linalg.slogdet(cov)
+    sigma = float(np.exp(logdet / (2 * cov.shape[0])))
+    return sigma, cov / sigma**2
+
+
+def _check_optional(value: Any, name: str, low: float, high: float) -> float | None:
+    if value is None:
+        return None
+    return check_real_in_range(value, name, low, high)
+
+
+@dataclass(frozen=True, eq=False)
+class CCMAESConfig:
+    """Configuration of :class:`CCMAES`; validates itself on construction.
+
+    Parameters
+    ----------
+    n_params : int                  p, the dimension of θ.
+    n_context_dims : int            z, the dimension of s (0 for a plain CMA-ES).
+    initial_mean : scalar, (p,) or (k, p)   initial mean (constant over contexts) or coefficients A.
+    initial_cov : scalar, (p,) or (p, p)    initial Σ0 = σ0²C0, split with det C0 = 1.
+    mean_features : str, dict or FeatureMap ϕ(s) of the mean; ``"affine"`` = [1, s].
+    active : bool                   negative weights for the worst half (active CMA).
+    baseline_degree : int           degree of the context baseline's polynomial (2: a full quadratic).
+    ridge, baseline_ridge : float   relative ridges of the mean fit (C3) and of the baseline (C1).
+    c_sigma, d_sigma, c_c, c_1, c_mu : float or None   learning rates; None = the tutorial's defaults.
+    seed : int or None              seed of the sampling Generator.
+    tolx, tolupsigma, max_condition, tolstagnation, tolflatfitness : stop criteria like pycma's
+        (``tolstagnation=None`` means 100 + 100·p^1.5/N iterations).
+    """
+
+    n_params: int
+    n_context_dims: int
+    initial_mean: Any = 0.0
+    initial_cov: Any = 1.0
+    mean_features: Any = "affine"
+    active: bool = True
+    baseline_degree: int = 2
+    step_size_signal: str = "mean"
+    ridge: float = 1e-8
+    baseline_ridge: float = 1e-10
+    c_sigma: float | None = None
+    d_sigma: float | None = None
+    c_c: float | None = None
+    c_1: float | None = None
+    c_mu: float | None = None
+    seed: int | None = None
+    tolx: float = 1e-11
+    tolupsigma: float = 1e20
+    max_condition: float = 1e14
+    tolstagnation: int | None = None
+    tolflatfitness: int = 1
+    mean_map: FeatureMap = field(init=False, repr=False)
+    initial_step_size: float = field(init=False, repr=False)
+    initial_shape: Array = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        for name, minimum in (
+            ("n_params", 1),
+            ("n_context_dims", 0),
+            ("tolflatfitness", 1),
+            ("baseline_degree", 0),
+        ):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+                raise ValueError(f"{name}: expected an integer >= {minimum}, got {value!r}")
+            object.__setattr__(self, name, int(value))
+        if self.tolstagnation is not None:
+            value = self.tolstagnation
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"tolstagnation: expected an integer >= 1 or None, got {value!r}")
+            object.__setattr__(self, "tolstagnation", int(value))
+        object.__setattr__(self, "active", check_bool(self.active, "active"))
+        if self.step_size_signal not in SIGNALS:
+            raise ValueError(f"step_size_signal: expected one of {SIGNALS}, got {self.step_size_signal!r}")
+        for name, low, high in (
+            ("ridge", 0.0, 1.0),
+            ("baseline_ridge", 0.0, 1.0),
+            ("tolx", 0.0, 1e300),
+            ("tolupsigma", 1.0, 1e300),
+            ("max_condition", 1.0, 1e300),
+        ):
+            object.__setattr__(self, name, check_real_in_range(getattr(self, name), name, low, high))
+        for name, high in (("c_sigma", 1.0), ("d_sigma", 1e6), ("c_c", 1.0), ("c_1", 1.0), ("c_mu", 1.0)):
+            value = _check_optional(getattr(self, name), name, 0.0, high)
+            if value is not None and value <= 0.0:
+                raise ValueError(f"{name}: expected a value in (0, {high}] or None, got {value}")
+            object.__setattr__(self, name, value)
+        if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
+            raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
+        if self.seed is not None:
+            if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
+                raise TypeError(f"seed: expected an int >= 0 or None, got {type(self.seed).__name__}")
+            if self.seed < 0:
+                raise ValueError(f"seed: expected an int >= 0 or None, got {self.seed}")
+            object.__setattr__(self, "seed", int(self.seed))
+        mean_map = make_features(self.mean_features, self.n_context_dims)
+        object.__setattr__(self, "mean_map", mean_map)
+        object.__setattr__(
+            self, "initial_mean", initial_coefficients(self.initial_mean, mean_map, self.n_params)
+        )
+        object.__setattr__(self, "initial_cov", initial_covariance(self.initial_cov, self.n_params))
+        sigma, shape = _split_initial_cov(self.initial_cov)
+        object.__setattr__(self, "initial_step_size", sigma)
+        object.__setattr__(self, "initial_shape", shape)
+
+    def constants(self, n_samples: int) -> CMAConstants:
+        """The strategy constants for a batch of ``n_samples``, with this config's overrides."""
+        return cma_constants(
+            self.n_params,
+            rank_weights(n_samples),
+            active=self.active,
+            overrides={n: getattr(self, n) for n in ("c_sigma", "d_sigma", "c_c", "c_1", "c_mu")},
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-serialisable scalars and the feature spec (the initial arrays are saved separately)."""
+        skip = {"initial_mean", "initial_cov", "mean_features"}
+        data = {f.name: getattr(self, f.name) for f in fields(self) if f.init and f.name not in skip}
+        data["mean_features"] = self.mean_map.spec()
+        return data
+
+
+class CCMAES(PolicyAccess, ContextualOptimizer):
+    """Contextual CMA-ES with cumulative step-size adaptation and active covariance updates.
+
+    ``CCMAES(n_params, n_context_dims, **options)``; see :class:`CCMAESConfig` for the options and
+    :mod:`creps_gym.optimizers.base` for the protocol. Any batch size of at least two works; the weights and
+    learning rates follow it, and :func:`recommended_batch_size` is the default the runner uses.
+    """
+
+    kind: ClassVar[str] = "c-cma-es"
+
+    def __init__(self, n_params: int, n_context_dims: int, **options: Any) -> None:
+        valid = {f.name for f in fields(CCMAESConfig) if f.init} - {"n_params", "n_context_dims"}
+        unknown = set(options) - valid
+        if unknown:
+            raise TypeError(f"options: expected names in {sorted(valid)}, got unknown {sorted(unknown)}")
+        self._init_from_config(CCMAESConfig(n_params=n_params, n_context_dims=n_context_dims, **options))
+
+    def _init_from_config(self, config: CCMAESConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.n_params, self.n_context_dims = config.n_params, config.n_context_dims
+        self.rng = np.random.default_rng(config.seed)
+        self.policy = LinearGaussianPolicy(
+            config.mean_map, config.initial_mean.copy(), config.initial_shape, config.initial_step_size
+        )
+        columns = config.mean_map.n_features if config.step_size_signal == "coefficients" else 1
+        self.path_sigma = np.zeros((config.n_params, columns))
+        self.path_cov = np.zeros(config.n_params)
+        self.mean_returns: list[float] = []  # per iteration, for the stagnation criterion
+        self.flat_iterations = 0
+
+    def _update(self, contexts: Array, params: Array, returns: Array) -> None:
+        advantages, explained = context_advantages(  # Eq. (C1)
+            contexts, returns, self.config.baseline_degree, self.config.baseline_ridge
+        )
+        constants = self.config.constants(returns.shape[0])
+        order = np.argsort(-advantages, kind="stable")
+        weights = np.empty_like(constants.weights)
+        weights[order] = constants.weights  # Eq. (C2): the k-th best advantage gets the k-th weight
+        step = self._step(contexts, params, weights, constants)
+        if not (step.policy.is_finite() and np.isfinite(step.path_sigma).all()):
+            raise RuntimeError(
+                "tell(): the update produced non-finite values; the optimiser was left unchanged"
+            )
+        self.policy, self.path_sigma, self.path_cov = step.policy, step.path_sigma, step.path_cov
+        spread = float(advantages.max() - advantages.min())
+        flat = spread <= 1e-12 * max(float(np.abs(returns).max()), 1e-300)
+        self.flat_iterations = self.flat_iterations + 1 if flat else 0
+        self.mean_returns.append(float(np.mean(returns)))
+        self._diagnostics = dict(step.diagnostics, baseline_r2=explained, mean_return=self.mean_returns[-1])
+
+    def _step(self, contexts: Array, params: Array, weights: Array, constants: CMAConstants) -> _Step:
+        policy = self.policy.copy()
+        sigma = policy.step_size
+        deviations = (params - policy.mean(contexts)) / sigma  # y_k ~ N(0, C)
+        try:
+            policy.coefficients = contextual_mean(  # Eq. (C3)
+                policy.mean_map, contexts, params, weights, self.config.ridge
+            )
+        except linalg.LinAlgError:
+            raise RuntimeError(
+                "tell(): the weighted mean regression (C3) is singular for this batch; use a ridge > 0 or "
+                "more varied contexts. The optimiser was left unchanged"
+            ) from None
+        selected = weights > 0
+        shift = weights[selected] @ deviations[selected]  # Eq. (C4): N(0, C/μ_eff) if selection is blind
+        inv_sqrt = inverse_sqrt(self.policy.cov)
+        if self.config.step_size_signal == "mean":
+            signal = math.sqrt(constants.mu_eff) * (inv_sqrt @ shift)[:, None]  # Eq. (C4)
+        else:
+            signal = inv_sqrt @ coefficient_shift(  # Eq. (C4'): every coefficient's shift, whitened
+                policy.mean_map, contexts[selected], deviations[selected], weights[selected]
+            )
+        path_sigma, path_cov, cov, hsig = update_paths_and_cov(  # Eqs. (C5)-(C8)
+            self.policy.cov,
+            self.path_sigma,
+            self.path_cov,
+            signal,
+            shift,
+            deviations,
+            weights,
+            constants,
+            self.iteration,
+        )
+        repaired = policy.set_cov(cov)
+        policy.step_size = csa_step(sigma, path_sigma, constants)  # Eq. (C9)
+        diagnostics = {
+            "step_size": policy.step_size,
+            "mu_eff": constants.mu_eff,
+            "path_sigma_ratio": float(np.linalg.norm(path_sigma)) / expected_norm(path_sigma.size),
+            "hsig": float(hsig),
+            "cov_repaired": float(repaired),
+        }
+        return _Step(policy, path_sigma, path_cov, diagnostics)
+
+    @property
+    def diagnostics(self) -> dict[str, float]:
+        """σ, μ_eff, ‖p_σ‖/E‖N(0,I)‖, h_σ, R² of the baseline, mean return, max std and cond of σ²C."""
+        if self._diagnostics and "cond_cov" not in self._diagnostics:
+            eigenvalues = np.linalg.eigvalsh(self.policy.cov)
+            self._diagnostics["cond_cov"] = float(eigenvalues[-1] / max(eigenvalues[0], 1e-300))
+            self._diagnostics["max_std"] = self.step_size * float(np.sqrt(eigenvalues[-1]))
+        return dict(self._diagnostics)
+
+    def stop(self) -> dict[str, Any]:
+        """pycma-like criteria that are met: tolx, tolupsigma, max_condition, tolstagnation and
+        tolflatfitness (empty before the first update)."""
+        met: dict[str, Any] = {}
+        diagnostics = self.diagnostics
+        if not diagnostics:
+            return met
+        sigma, config = self.step_size, self.config
+        stds = sigma * np.sqrt(np.diag(self.policy.cov))
+        if stds.max() < config.tolx and sigma * np.abs(self.path_cov).max() < config.tolx:
+            met["tolx"] = float(stds.max())
+        growth = sigma / config.initial_step_size
+        if growth > config.tolupsigma * diagnostics["max_std"] / sigma:  # σ/σ0 > tolupsigma·√λ_max(C)
+            met["tolupsigma"] = growth
+        if diagnostics["cond_cov"] > config.max_condition:
+            met["max_condition"] = diagnostics["cond_cov"]
+        if self.flat_iterations >= config.tolflatfitness:
+            met["tolflatfitness"] = self.flat_iterations
+        window = config.tolstagnation or int(100 + 100 * self.n_params**1.5 / max(self._last_batch, 1))
+        if stagnated(self.mean_returns, window):
+            met["tolstagnation"] = window
+        return met
+
+    @property
+    def _last_batch(self) -> int:
+        return int(self.evaluations / self.iteration) if self.iteration else 1
+
+    # -- checkpoints ---------------------------------------------------------------------------------------
+    def _state(self) -> dict[str, Any]:
+        state = self._policy_state()
+        state.update(
+            path_sigma=self.path_sigma.copy(),
+            path_cov=self.path_cov.copy(),
+            mean_returns=np.asarray(self.mean_returns, dtype=np.float64),
+        )
+        return state
+
+    @classmethod
+    def _from_state(cls, state: Mapping[str, Any]) -> CCMAES:
+        config = CCMAESConfig(
+            initial_mean=np.asarray(state["initial_mean"]),
+            initial_cov=np.asarray(state["initial_cov"]),
+            **dict(state["config"]),
+        )
+        optimizer = cls.__new__(cls)
+        optimizer._init_from_config(config)
+        optimizer.rng.bit_generator.state = state["rng"]
+        optimizer.policy = LinearGaussianPolicy.from_state(config.mean_map, config.n_params, state)
+        p = config.n_params
+        optimizer.path_sigma = as_float_array(
+            state["path_sigma"], "state['path_sigma']", optimizer.path_sigma.shape
+        ).copy()
+        optimizer.path_cov = as_float_array(state["path_cov"], "state['path_cov']", (p,)).copy()
+        history = as_float_array(state["mean_returns"], "state['mean_returns']", (None,))
+        optimizer.mean_returns = [float(v) for v in history]
+        optimizer.flat_iterations = int(state["flat_iterations"])
+        return optimizer

@@ -1,0 +1,286 @@
+"""The linear-Gaussian search distribution shared by every creps_gym optimiser.
+
+π(θ|s) = N(Aᵀϕ(s), σ²C): a mean linear in the context features ϕ(s) (affine ``[1, s]`` by default, see
+:mod:`creps_gym.optimizers.features`), a covariance matrix C with its lower Cholesky factor, and a global step
+size σ. CREPS and CREPS-CMA keep σ = 1, so C is their Σ; contextual CMA-ES adapts σ and C separately.
+
+The module holds the pure maths the update rules share: the weighted ridge fit of the mean coefficients
+(Eq. 7 of the CREPS paper; see ``docs/algorithms.md``), the SPD repair of a covariance
+(:func:`spd_factor`) and the validation of an initial or restored distribution. :class:`LinearGaussianPolicy`
+is the thin state holder: sampling, the mean, and a state dict that is checked on restore like a
+constructor argument.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg
+
+from creps_gym._validation import as_float_array
+from creps_gym.optimizers.features import FeatureMap
+
+__all__ = [
+    "LinearGaussianPolicy",
+    "PolicyAccess",
+    "initial_coefficients",
+    "initial_covariance",
+    "spd_factor",
+    "weighted_ml_fit",
+]
+
+Array = NDArray[np.float64]
+
+
+def weighted_ml_fit(
+    mean_features: Array, params: Array, weights: Array, ridge: float, constant_column: int | None = None
+) -> Array:
+    """Weighted ridge maximum-likelihood fit of the mean coefficients, Eq. (7).
+
+    Parameters
+    ----------
+    mean_features : ndarray, shape (N, m)   ϕ(s_k)
+    params : ndarray, shape (N, p)          θ_k
+    weights : ndarray, shape (N,)           d_k ≥ 0, summing to one
+    ridge : float
+        Ridge of the regularised normal equations (ΦᵀDΦ + ridge·I)A = ΦᵀDU, relative to the features' scale.
+    constant_column : int, optional
+        Index of a constant feature (the 1 of ϕ(s) = [1, s]). The ridge then acts on the other columns after
+        weighted centring and standardising, and the intercept is not shrunk, so the fit does not depend on
+        where the context box lies (contexts in [1000, 1003] fit like contexts in [0, 3]), and the weighted
+        residuals sum to zero: Σ_k d_k (θ_k − Aᵀϕ(s_k)) = 0. Without it, the ridge is relative to the mean
+        diagonal of ΦᵀDΦ.
+
+    Returns
+    -------
+    ndarray, shape (m, p)
+        The coefficients A; Aᵀϕ(s) is the new mean.
+    """
+    if constant_column is None:
+        weighted = mean_features.T * weights
+        gram = weighted @ mean_features
+        gram.flat[:: gram.shape[0] + 1] += ridge * max(gram.trace() / gram.shape[0], 1e-300)
+        return linalg.solve(gram, weighted @ params, assume_a="pos", check_finite=False)
+    others = np.delete(np.arange(mean_features.shape[1]), constant_column)
+    columns = mean_features[:, others]
+    centre = weights @ columns
+    centred = columns - centre
+    spread = np.sqrt(weights @ centred**2)
+    informative = spread > 1e-12 * (np.abs(centre) + spread)  # constant context dimensions carry nothing
+    standardised = np.where(informative, centred / np.where(informative, spread, 1.0), 0.0)
+    mean_params = weights @ params
+    weighted = standardised.T * weights
+    gram = weighted @ standardised
+    gram.flat[:: gram.shape[0] + 1] += ridge + (~informative)
+    slopes = linalg.solve(gram, weighted @ (params - mean_params), assume_a="pos", check_finite=False)
+    slopes /= np.where(informative, spread, 1.0)[:, None]
+    coefficients = np.empty((mean_features.shape[1], params.shape[1]))
+    coefficients[others] = slopes
+    coefficients[constant_column] = mean_params - centre @ slopes
+    return coefficients
+
+
+def spd_factor(cov: Array, floor: float = 1e-12) -> tuple[Array, Array, bool]:
+    """Symmetrise ``cov`` and return (Σ, lower Cholesky factor, repaired).
+
+    If the Cholesky factorisation fails (Σ lost positive-definiteness to round-off, or a sample covariance
+    from fewer samples than dimensions is singular), eigenvalues are clipped to ``floor · max eigenvalue``
+    (and to at least 1e-300) and Σ is rebuilt; ``repaired`` is then True.
+    """
+    cov = 0.5 * (cov + cov.T)
+    try:
+        return cov, np.linalg.cholesky(cov), False
+    except np.linalg.LinAlgError:
+        values, vectors = np.linalg.eigh(cov)
+        values = np.maximum(values, max(floor * values.max(), 1e-300))
+        cov = (vectors * values) @ vectors.T
+        cov = 0.5 * (cov + cov.T)
+        return cov, np.linalg.cholesky(cov), True
+
+
+def initial_coefficients(
+    value: Any, features: FeatureMap, n_params: int, name: str = "initial_mean"
+) -> Array:
+    """Coefficients A (k, p) from a scalar, a constant mean (p,) or full coefficients (k, p)."""
+    array = as_float_array(value, name)
+    if array.ndim == 0:
+        return features.constant_coefficients(np.full(n_params, float(array)))
+    if array.shape == (n_params,):
+        return features.constant_coefficients(array)
+    if array.shape == (features.n_features, n_params):
+        return array.copy()
+    raise ValueError(
+        f"{name}: expected a scalar, shape ({n_params},) or ({features.n_features}, {n_params}), "
+        f"got shape {array.shape}"
+    )
+
+
+def initial_covariance(value: Any, n_params: int, name: str = "initial_cov") -> Array:
+    """An SPD matrix (p, p) from a variance, variances (p,) or a matrix; raises on anything else."""
+    array = as_float_array(value, name)
+    if array.ndim == 0:
+        array = np.full(n_params, float(array))
+    if array.shape == (n_params,):
+        if (array <= 0).any():
+            raise ValueError(f"{name}: expected variances > 0, got min {array.min()}")
+        return np.diag(array)
+    if array.shape != (n_params, n_params):
+        raise ValueError(
+            f"{name}: expected a scalar, shape ({n_params},) or ({n_params}, {n_params}), got {array.shape}"
+        )
+    if not np.allclose(array, array.T, rtol=1e-10, atol=0.0):
+        raise ValueError(f"{name}: expected a symmetric matrix, got an asymmetric one")
+    try:
+        np.linalg.cholesky(array)
+    except np.linalg.LinAlgError:
+        raise ValueError(
+            f"{name}: expected a symmetric positive-definite matrix, got one that is not"
+        ) from None
+    return array.copy()
+
+
+class LinearGaussianPolicy:
+    """π(θ|s) = N(Aᵀϕ(s), σ²C), the search distribution of every creps_gym optimiser.
+
+    Parameters
+    ----------
+    mean_map : FeatureMap
+        ϕ(s), k features.
+    coefficients : ndarray, shape (k, p)
+        A.
+    cov : ndarray, shape (p, p)
+        C, symmetric positive definite.
+    step_size : float
+        σ > 0 (1 for CREPS and CREPS-CMA, whose Σ is C).
+    """
+
+    def __init__(self, mean_map: FeatureMap, coefficients: Array, cov: Array, step_size: float = 1.0) -> None:
+        self.mean_map = mean_map
+        self.coefficients = coefficients
+        self.cov, self.chol, _ = spd_factor(cov)
+        self.step_size = float(step_size)
+
+    @property
+    def n_params(self) -> int:
+        """p, the dimension of θ."""
+        return int(self.coefficients.shape[1])
+
+    @property
+    def covariance(self) -> Array:
+        """The full covariance σ²C, shape (p, p)."""
+        return self.step_size**2 * self.cov
+
+    def mean(self, contexts: Array) -> Array:
+        """Policy mean Aᵀϕ(s) for contexts (n, z): shape (n, p)."""
+        return self.mean_map(contexts) @ self.coefficients
+
+    def sample(self, contexts: Array, rng: np.random.Generator) -> Array:
+        """θ ~ N(Aᵀϕ(s), σ²C) for each context row: shape (n, p)."""
+        noise = rng.standard_normal((contexts.shape[0], self.n_params))
+        return self.mean(contexts) + (noise @ self.chol.T) * self.step_size
+
+    def set_cov(self, cov: Array) -> bool:
+        """Replace C by the SPD repair of ``cov``; returns whether a repair was needed."""
+        self.cov, self.chol, repaired = spd_factor(cov)
+        return repaired
+
+    def copy(self) -> LinearGaussianPolicy:
+        """An independent copy (a ``tell`` updates a copy and commits it only when everything is finite)."""
+        twin = LinearGaussianPolicy.__new__(LinearGaussianPolicy)
+        twin.mean_map, twin.step_size = self.mean_map, self.step_size
+        twin.coefficients, twin.cov, twin.chol = self.coefficients.copy(), self.cov.copy(), self.chol.copy()
+        return twin
+
+    def is_finite(self) -> bool:
+        """True when A, the factor of C and σ are all finite (and σ > 0)."""
+        return bool(
+            np.isfinite(self.coefficients).all()
+            and np.isfinite(self.chol).all()
+            and np.isfinite(self.step_size)
+            and self.step_size > 0.0
+        )
+
+    # -- state ---------------------------------------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        """Arrays and scalars that restore the policy exactly (see :meth:`from_state`)."""
+        return {"coefficients": self.coefficients.copy(), "cov": self.cov.copy(), "step_size": self.step_size}
+
+    @classmethod
+    def from_state(
+        cls, mean_map: FeatureMap, n_params: int, state: Mapping[str, Any]
+    ) -> LinearGaussianPolicy:
+        """Rebuild a policy from :meth:`state`, checking it like a constructor argument.
+
+        Raises
+        ------
+        ValueError, TypeError
+            Missing entries, wrong shapes or dtypes, non-finite values, an asymmetric or not positive-definite
+            C, or σ ≤ 0. The messages name the state entry.
+        """
+        for key in ("coefficients", "cov"):
+            if key not in state:
+                raise ValueError(f"state: expected an entry {key!r}, got keys {sorted(state)}")
+        k = mean_map.n_features
+        coefficients = as_float_array(state["coefficients"], "state['coefficients']", (k, n_params)).copy()
+        cov = as_float_array(state["cov"], "state['cov']", (n_params, n_params)).copy()
+        if not np.array_equal(cov, cov.T):
+            raise ValueError("state['cov']: expected a symmetric matrix, got an asymmetric one")
+        try:
+            np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:
+            raise ValueError(
+                "state['cov']: expected a positive-definite matrix, got one that is not"
+            ) from None
+        step_size = state.get("step_size", 1.0)
+        if isinstance(step_size, (bool, str)) or (not np.isscalar(step_size) and np.ndim(step_size) != 0):
+            raise TypeError(f"state['step_size']: expected a real number, got {step_size!r}")
+        step_size = float(step_size)
+        if not (np.isfinite(step_size) and step_size > 0.0):
+            raise ValueError(f"state['step_size']: expected a finite value > 0, got {step_size}")
+        return cls(mean_map, coefficients, cov, step_size)
+
+
+class PolicyAccess:
+    """Mixin for optimisers that keep a :class:`LinearGaussianPolicy` in ``self.policy`` and a Generator in
+    ``self.rng``: the read-only views, ``recommend`` and sampling."""
+
+    policy: LinearGaussianPolicy
+    rng: np.random.Generator
+
+    @property
+    def coefficients(self) -> Array:
+        """The mean coefficients A, shape (k, p)."""
+        return self.policy.coefficients
+
+    @property
+    def cov(self) -> Array:
+        """The search covariance σ²C (Σ for CREPS and CREPS-CMA), shape (p, p)."""
+        return self.policy.covariance
+
+    @property
+    def step_size(self) -> float:
+        """σ (1 unless the optimiser adapts it)."""
+        return self.policy.step_size
+
+    def recommend(self, contexts: Any) -> Array:
+        """The mean policy Aᵀϕ(s) for contexts (n, z): shape (n, p)."""
+        return self.policy.mean(self._check_contexts(contexts, "contexts"))  # type: ignore[attr-defined]
+
+    def _sample(self, contexts: Array) -> Array:
+        return self.policy.sample(contexts, self.rng)
+
+    def _policy_state(self) -> dict[str, Any]:
+        """The config, the Generator, the initial distribution and the policy: what every checkpoint holds."""
+        config = self.config  # type: ignore[attr-defined]
+        state = {
+            "config": config.to_json(),
+            "rng": self.rng.bit_generator.state,
+            "initial_mean": config.initial_mean.copy(),
+            "initial_cov": config.initial_cov.copy(),
+            "flat_iterations": self.flat_iterations,  # type: ignore[attr-defined]
+        }
+        state.update(self.policy.state())
+        return state

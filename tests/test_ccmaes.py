@@ -1,0 +1,234 @@
+"""Contextual CMA-ES and CREPS-CMA with step-size control: the maths of the step size, the invariances,
+convergence with golden sample counts, and every bad option."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from creps_gym.envs.evaluation import contextual_model
+from creps_gym.optimizers import CCMAES, CREPSCMA, make_optimizer
+from creps_gym.optimizers.ccmaes import recommended_batch_size
+from creps_gym.optimizers.cma_rules import cma_constants, inverse_sqrt, rank_weights
+from creps_gym.optimizers.contextual import coefficient_shift, context_advantages, contextual_mean
+from creps_gym.optimizers.features import make_features
+
+STEP_SIZE_OPTIMIZERS = {
+    "c-cma-es": lambda **kw: CCMAES(**kw),
+    "c-cma-es-coefficients": lambda **kw: CCMAES(step_size_signal="coefficients", **kw),
+    "creps-cma-csa": lambda **kw: CREPSCMA(step_size="csa", **kw),
+}
+
+
+def _drive(optimizer, returns_of, iterations: int, samples: int, seed: int = 0, context_dim: int = 1):
+    rng = np.random.default_rng(seed)
+    sigmas = []
+    for _ in range(iterations):
+        contexts = rng.uniform(0, 3, (samples, context_dim))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, returns_of(contexts, params, rng))
+        sigmas.append(optimizer.policy.step_size)
+    return np.array(sigmas)
+
+
+@pytest.mark.parametrize("name", sorted(STEP_SIZE_OPTIMIZERS))
+def test_step_size_grows_on_a_linear_function_and_shrinks_on_a_sphere(name):
+    make = STEP_SIZE_OPTIMIZERS[name]
+    linear = make(n_params=8, n_context_dims=1, initial_cov=1.0, seed=0)
+    sigmas = _drive(linear, lambda s, th, rng: th[:, 0] + s[:, 0], 40, 30)
+    assert sigmas[-1] > 20.0  # grows geometrically on a slope
+    sphere = make(n_params=8, n_context_dims=1, initial_mean=0.1, initial_cov=1.0, seed=0)
+    sigmas = _drive(sphere, lambda s, th, rng: -(th**2).sum(axis=1), 150, 30)
+    assert sigmas[-1] < 1e-3
+
+
+@pytest.mark.parametrize("name", sorted(STEP_SIZE_OPTIMIZERS))
+def test_log_step_size_does_not_drift_under_random_returns(name):
+    """Unbiasedness: with returns independent of θ, log σ is a random walk without drift.
+
+    Over 6 seeds × 300 updates the fitted drift of log σ is about ±0.003 per update; a step-size signal whose
+    variance were inflated by the regression's leverage (the shift at the batch's unweighted mean context)
+    drifts by several times 0.01 per update. (C itself shrinks under random selection, as in CMA-ES, so the
+    runs are kept short of the condition-number stop.)
+    """
+    drifts = []
+    for seed in range(6):
+        optimizer = STEP_SIZE_OPTIMIZERS[name](n_params=6, n_context_dims=2, initial_cov=1.0, seed=seed)
+        sigmas = _drive(optimizer, lambda s, th, rng: rng.standard_normal(len(th)), 300, 24, seed, 2)
+        drifts.append(np.polyfit(np.arange(sigmas.size), np.log(sigmas), 1)[0])
+    assert abs(np.mean(drifts)) < 0.005, drifts
+
+
+def test_the_mean_shift_signal_is_n_0_c_over_mu_eff_under_random_selection():
+    """y_w = Σ w_k y_k is the mean's shift at the selected samples' weighted mean context, and √μ_eff·C^(−1/2)
+    y_w and every whitened coefficient shift are N(0, I) when the selection ignores θ (Monte Carlo)."""
+    rng = np.random.default_rng(0)
+    p, n, mean_map = 4, 20, make_features("affine", 2)
+    cov = np.cov(rng.standard_normal((p, 3 * p)))
+    chol, inv_sqrt = np.linalg.cholesky(cov), inverse_sqrt(cov)
+    constants = cma_constants(p, rank_weights(n))
+    means, coefficient_signals = [], []
+    for _ in range(3000):
+        contexts = rng.uniform(0, 3, (n, 2))
+        deviations = rng.standard_normal((n, p)) @ chol.T
+        weights = constants.weights[rng.permutation(n)]
+        selected = weights > 0
+        shift = weights[selected] @ deviations[selected]
+        means.append(np.sqrt(constants.mu_eff) * inv_sqrt @ shift)
+        coefficient_signals.append(
+            inv_sqrt
+            @ coefficient_shift(mean_map, contexts[selected], deviations[selected], weights[selected])
+        )
+        if len(means) == 1:  # the identity behind y_w, on one batch
+            old = np.zeros((3, p))
+            new = contextual_mean(mean_map, contexts, deviations, weights, ridge=0.0)
+            centre = weights[selected] @ contexts[selected]
+            at_centre = mean_map(centre[None])[0]
+            np.testing.assert_allclose(at_centre @ (new - old), shift, atol=1e-12)
+    for samples in (np.array(means), np.array(coefficient_signals).reshape(3000, -1)):
+        np.testing.assert_allclose(samples.mean(axis=0), 0.0, atol=0.07)
+        np.testing.assert_allclose(np.cov(samples.T), np.eye(samples.shape[1]), atol=0.1)
+
+
+def _states_after(returns_of, context_dim: int, iterations: int = 8):
+    optimizer = CCMAES(5, context_dim, initial_mean=1.0, initial_cov=0.5, seed=3)
+    rng = np.random.default_rng(4)
+    for _ in range(iterations):
+        contexts = rng.uniform(0, 3, (20, context_dim))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, returns_of(contexts, params))
+    return optimizer.state_dict()
+
+
+def _sphere_returns(contexts, params):
+    return -((params - 0.3 * contexts.sum(axis=1, keepdims=True)) ** 2).sum(axis=1)
+
+
+def _assert_same_state(first, second):
+    for key in ("coefficients", "cov", "path_sigma", "path_cov"):
+        np.testing.assert_array_equal(first[key], second[key])
+    assert first["step_size"] == second["step_size"]
+
+
+@pytest.mark.parametrize(
+    "transform", [lambda r: np.exp(r / 5.0), lambda r: r**3, lambda r: np.arctan(r) - 7.0]
+)
+def test_a_strictly_monotone_transformation_of_the_returns_gives_identical_updates(transform):
+    """Without contexts (z = 0) the update depends on the returns only through their ranks. With contexts,
+    only positive affine transformations leave it unchanged: no method can be invariant to both monotone
+    transformations and added functions of the context (docs/algorithms.md)."""
+    reference = _states_after(_sphere_returns, 0)
+    _assert_same_state(reference, _states_after(lambda s, th: transform(_sphere_returns(s, th)), 0))
+
+
+def test_a_positive_affine_transformation_gives_identical_contextual_updates():
+    reference = _states_after(_sphere_returns, 2)
+    _assert_same_state(reference, _states_after(lambda s, th: 1e4 * _sphere_returns(s, th) - 3.0, 2))
+
+
+def test_adding_a_quadratic_function_of_the_context_gives_identical_updates():
+    def quadratic(contexts):
+        s1, s2 = contexts[:, 0], contexts[:, 1]
+        return 40.0 * s1 * s2 - 25.0 * s2**2 + 9.0 * s1 + 100.0
+
+    reference = _states_after(_sphere_returns, 2)
+    shifted = _states_after(lambda s, th: _sphere_returns(s, th) + quadratic(s), 2)
+    _assert_same_state(reference, shifted)
+
+
+def test_the_baseline_removes_a_quadratic_of_the_context_exactly():
+    rng = np.random.default_rng(0)
+    contexts = rng.uniform(0, 3, (30, 2))
+    returns = rng.standard_normal(30)
+    extra = 3 * contexts[:, 0] * contexts[:, 1] - contexts[:, 1] ** 2 + 5
+    plain, _ = context_advantages(contexts, returns, degree=2, ridge=0.0)
+    shifted, explained = context_advantages(contexts, returns + 1e3 * extra, degree=2, ridge=0.0)
+    np.testing.assert_allclose(shifted, plain, atol=1e-9)
+    assert explained > 0.99
+
+
+# Golden sample counts at seed 0 (episodes until the mean policy's mean regret on 100 test contexts is
+# <= 1e-5; p = 15, N = 50, z = 1, sigma0 = 1, initial mean U[-5, 5]^p), recorded with this code.
+GOLDEN_EPISODES = {"Sphere": 5050, "Rosenbrock": 23650, "ShiftedRotatedElliptic": 12900}
+
+
+def episodes_to_target(function: str, seed: int = 0, samples: int = 50, budget: int = 60_000) -> int:
+    model = contextual_model(gym.make(f"creps_gym/{function}-v0", dim=15, context_dim=1))
+    rng = np.random.default_rng(seed)
+    test = rng.uniform(0, 3, (100, 1))
+    optimizer = make_optimizer("c-cma-es", 15, 1, seed, initial_mean=rng.uniform(-5, 5, 15), initial_cov=1.0)
+    for iteration in range(1, budget // samples + 1):
+        contexts = rng.uniform(0, 3, (samples, 1))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -model.objective(contexts, params))
+        if model.regret(test, optimizer.recommend(test)).mean() <= 1e-5:
+            return iteration * samples
+    return budget + 1
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("function", sorted(GOLDEN_EPISODES))
+def test_contextual_cma_es_reaches_1e_5_with_golden_sample_counts(function):
+    episodes = episodes_to_target(function)
+    assert episodes <= 40_000
+    assert episodes == GOLDEN_EPISODES[function]
+
+
+def test_recommended_batch_size_grows_with_dimension_and_context():
+    assert recommended_batch_size(15, 1) == 24  # (4 + ⌊3 ln 15⌋)·(1 + z)
+    assert recommended_batch_size(15, 3) > recommended_batch_size(15, 1) > recommended_batch_size(2, 1)
+    assert recommended_batch_size(2, 5) >= 2 * 21 + 2  # the full quadratic baseline of z = 5 has 21 features
+
+
+@pytest.mark.parametrize(
+    ("options", "error", "match"),
+    [
+        ({"active": "yes"}, TypeError, "active"),
+        ({"baseline_degree": -1}, ValueError, "baseline_degree: expected an integer >= 0"),
+        ({"baseline_degree": 2.5}, ValueError, "baseline_degree"),
+        ({"step_size_signal": "both"}, ValueError, "step_size_signal: expected one of"),
+        ({"ridge": -1e-3}, ValueError, "ridge"),
+        ({"baseline_ridge": float("nan")}, ValueError, "baseline_ridge"),
+        ({"c_sigma": 0.0}, ValueError, "c_sigma"),
+        ({"c_sigma": 1.5}, ValueError, "c_sigma"),
+        ({"d_sigma": -2.0}, ValueError, "d_sigma"),
+        ({"c_c": float("inf")}, ValueError, "c_c"),
+        ({"c_1": 0.6, "c_mu": 0.6}, ValueError, "c_1 \\+ c_mu <= 1"),
+        ({"tolx": -1.0}, ValueError, "tolx"),
+        ({"tolupsigma": 0.5}, ValueError, "tolupsigma"),
+        ({"max_condition": 0.0}, ValueError, "max_condition"),
+        ({"tolstagnation": 0}, ValueError, "tolstagnation"),
+        ({"tolflatfitness": 0}, ValueError, "tolflatfitness"),
+        ({"seed": -1}, ValueError, "seed: expected an int >= 0"),
+        ({"seed": 1.5}, TypeError, "seed"),
+        ({"initial_cov": -1.0}, ValueError, "initial_cov"),
+        ({"initial_mean": [1.0, 2.0]}, ValueError, "initial_mean"),
+        ({"mean_features": "cubic"}, ValueError, "features"),
+        ({"popsize": 10}, TypeError, "unknown \\['popsize'\\]"),
+    ],
+)
+def test_every_bad_option_raises_a_clear_error(options, error, match):
+    with pytest.raises(error, match=match):
+        CCMAES(5, 1, **options)
+
+
+def test_creps_cma_rejects_an_unknown_step_size_rule():
+    with pytest.raises(ValueError, match="step_size: expected one of"):
+        CREPSCMA(5, 1, step_size="tpa")
+
+
+@pytest.mark.parametrize("name", ["creps", "creps-cma-old", "creps-cma-csa", "c-cma-es"])
+def test_flat_returns_stop_every_native_optimizer(name):
+    optimizer = make_optimizer(name, 3, 1, 0, initial_cov=1.0)
+    _drive(optimizer, lambda s, th, rng: np.full(len(th), 2.5), 2, 20)
+    assert optimizer.stop() == {"tolflatfitness": 2}
+
+
+def test_contextual_cma_es_stops_on_tolx_and_tolupsigma():
+    optimizer = CCMAES(3, 1, initial_cov=1e-24, seed=0)
+    _drive(optimizer, lambda s, th, rng: -(th**2).sum(axis=1), 1, 20)
+    assert "tolx" in optimizer.stop()
+    optimizer = CCMAES(3, 1, initial_cov=1.0, seed=0, tolupsigma=10.0)
+    _drive(optimizer, lambda s, th, rng: th[:, 0], 12, 20)
+    assert "tolupsigma" in optimizer.stop()

@@ -32,7 +32,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array
+from creps_gym._validation import as_float_array, check_bool
 
 __all__ = [
     "AskTellOptimizer",
@@ -43,6 +43,8 @@ __all__ = [
 
 Array = NDArray[np.float64]
 JSON_KEY = "__state__.json"
+#: Largest context magnitude accepted: s² and products of two contexts stay far below the float64 range.
+MAX_CONTEXT = 1e100
 
 
 @runtime_checkable
@@ -195,6 +197,7 @@ class ContextualOptimizer(ABC):
         ValueError, TypeError
             Shapes, non-finite values, or fewer than two samples.
         """
+        allow_external = check_bool(allow_external, "allow_external")
         contexts = self._check_contexts(contexts, "contexts")
         n = contexts.shape[0]
         params = as_float_array(params, "params", (n, self.n_params))
@@ -279,6 +282,12 @@ class ContextualOptimizer(ABC):
         contexts = as_float_array(contexts, name, (None, self.n_context_dims))
         if contexts.shape[0] < 1:
             raise ValueError(f"{name}: expected at least one row, got shape {contexts.shape}")
+        largest = float(np.abs(contexts).max()) if contexts.size else 0.0
+        if largest > MAX_CONTEXT:  # quadratic features and baselines would overflow to inf
+            raise ValueError(
+                f"{name}: expected |s| <= {MAX_CONTEXT:g}, so that quadratic context features stay finite, "
+                f"got max |s| = {largest:g}; rescale the contexts"
+            )
         return contexts
 
     def _match_told_rows(self, contexts: Array, params: Array, allow_external: bool) -> NDArray[np.int64]:

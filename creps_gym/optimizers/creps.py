@@ -125,7 +125,9 @@ class CREPSConfig:
             object.__setattr__(self, name, value)
         if self.seed is not None:
             if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
-                raise TypeError(f"seed: expected an int or None, got {type(self.seed).__name__}")
+                raise TypeError(f"seed: expected an int >= 0 or None, got {type(self.seed).__name__}")
+            if self.seed < 0:
+                raise ValueError(f"seed: expected an int >= 0 or None, got {self.seed}")
             object.__setattr__(self, "seed", int(self.seed))
         object.__setattr__(self, "mean_map", make_features(self.mean_features, self.n_context_dims))
         object.__setattr__(self, "baseline_map", make_features(self.baseline_features, self.n_context_dims))

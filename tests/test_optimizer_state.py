@@ -97,7 +97,7 @@ def test_huge_contexts_are_refused_by_ask_and_tell_with_the_state_unchanged(name
     )
     before = optimizer.state_dict()
     with pytest.raises(
-        ValueError, match="contexts: expected \\|s\\| <= 1e\\+100.*got max \\|s\\| = 1e\\+160"
+        ValueError, match=r"contexts: expected \|s\| <= 1e\+100.*got max \|s\| = 1e\+160"
     ):
         optimizer.ask(np.full((5, 1), 1e160))
     contexts = np.linspace(0, 1, 20)[:, None]

@@ -141,12 +141,17 @@ def _add_run(commands: Any) -> None:
         ("--env", _env_id, "registered env id (see `creps-gym list`)"),
         ("--optimizer", _optimizer_name, "optimiser name (see `creps-gym list`)"),
         ("--iterations", _integer(1), "maximum number of iterations"),
-        ("--samples", _integer(2), "episodes per iteration (>= 2)"),
         ("--seed", _integer(0), "master seed (>= 0)"),
         ("--out", str, "new run directory"),
     ]
     for flag, parse, text in required:
         run.add_argument(flag, required=True, type=parse, help=text)
+    run.add_argument(
+        "--samples",
+        type=_integer(2),
+        default=None,
+        help="episodes per iteration (>= 2; default: the optimiser's recommended batch size)",
+    )
     run.add_argument("--overwrite", action="store_true", help="replace a run already in --out (deletes it)")
     run.add_argument(
         "--backend", default=run_defaults["backend"], choices=BACKENDS, help="where episodes run"

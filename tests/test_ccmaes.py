@@ -220,9 +220,11 @@ def test_creps_cma_rejects_an_unknown_step_size_rule():
 
 @pytest.mark.parametrize("name", ["creps", "creps-cma-old", "creps-cma-csa", "c-cma-es"])
 def test_flat_returns_stop_every_native_optimizer(name):
-    optimizer = make_optimizer(name, 3, 1, 0, initial_cov=1.0)
+    optimizer = make_optimizer(name, 3, 1, 0, initial_cov=1.0, tolflatfitness=3)
     _drive(optimizer, lambda s, th, rng: np.full(len(th), 2.5), 2, 20)
-    assert optimizer.stop() == {"tolflatfitness": 2}
+    assert optimizer.stop() == {}
+    _drive(optimizer, lambda s, th, rng: np.full(len(th), 2.5), 1, 20)
+    assert optimizer.stop() == {"tolflatfitness": 3}
 
 
 def test_contextual_cma_es_stops_on_tolx_and_tolupsigma():
@@ -232,3 +234,19 @@ def test_contextual_cma_es_stops_on_tolx_and_tolupsigma():
     optimizer = CCMAES(3, 1, initial_cov=1.0, seed=0, tolupsigma=10.0)
     _drive(optimizer, lambda s, th, rng: th[:, 0], 12, 20)
     assert "tolupsigma" in optimizer.stop()
+
+
+def test_the_runner_and_cli_take_the_recommended_batch_size_when_none_is_given(tmp_path):
+    import subprocess
+    import sys
+
+    from creps_gym.optimizers import recommended_samples
+    from creps_gym.runner import run
+
+    history = run("c-cma-es", "creps_gym/Sphere-v0", 2, None, 0, env_kwargs={"dim": 15, "context_dim": 1})
+    assert history.records[-1].episodes == 2 * recommended_samples("c-cma-es", 15, 1) == 2 * 24
+    assert recommended_samples("cma", 15, 3) == 12  # pycma's default population; it ignores the context
+    command = [sys.executable, "-m", "creps_gym.cli", "run", "--env", "creps_gym/Sphere-v0", "--optimizer"]
+    command += ["c-cma-es", "--iterations", "1", "--seed", "0", "--out", str(tmp_path / "run")]
+    subprocess.run(command, check=True, capture_output=True, timeout=120)
+    assert '"samples": 24' in (tmp_path / "run" / "config.json").read_text()

@@ -34,6 +34,7 @@ from creps_gym.optimizers.registry import (
     describe_optimizers,
     make_optimizer,
     optimizer_names,
+    recommended_samples,
     register_optimizer,
     restore_optimizer,
 )
@@ -61,6 +62,7 @@ __all__ = [
     "make_optimizer",
     "optimizer_names",
     "recommended_batch_size",
+    "recommended_samples",
     "register_feature_map",
     "register_optimizer",
     "regularised_covariance",

@@ -69,13 +69,7 @@ Array = NDArray[np.float64]
 SIGNALS = ("coefficients", "mean")
 
 
-def recommended_batch_size(n_params: int, n_context_dims: int) -> int:
-    """Default batch size: CMA-ES's population 4 + ⌊3 ln p⌋ times (1 + z), the number of mean features of
-    ϕ(s) = [1, s], and at least 2k + 2 for the k full-quadratic baseline features (a regression, not an
-    interpolation)."""
-    population = 4 + int(3 * math.log(n_params))
-    quadratic = 1 + n_context_dims + n_context_dims * (n_context_dims + 1) // 2
-    return max(population * (1 + n_context_dims), 2 * quadratic + 2)
+recommended_batch_size = PolicyAccess.recommended_batch_size
 
 
 class _Step(NamedTuple):
@@ -138,7 +132,7 @@ class CCMAESConfig:
     tolupsigma: float = 1e20
     max_condition: float = 1e14
     tolstagnation: int | None = None
-    tolflatfitness: int = 1
+    tolflatfitness: int = 10
     mean_map: FeatureMap = field(init=False, repr=False)
     initial_step_size: float = field(init=False, repr=False)
     initial_shape: Array = field(init=False, repr=False)

@@ -89,7 +89,7 @@ class CREPSConfig:
     min_std, max_condition, max_std_growth : float   stop criteria: √λ_max(Σ) < min_std, cond(Σ) >
         max_condition, or √λ_max(Σ) > max_std_growth·√λ_max(Σ₀) (divergence, like pycma's tolupsigma).
     tolflatfitness : int        stop after this many consecutive batches whose returns are all equal
-        (like pycma's option of that name: no signal, and Σ would grow without bound).
+        (default 10; like pycma's option of that name: no signal, and Σ would grow without bound).
     """
 
     n_params: int
@@ -104,7 +104,7 @@ class CREPSConfig:
     min_std: float = 1e-12
     max_condition: float = 1e14
     max_std_growth: float = 1e20
-    tolflatfitness: int = 1
+    tolflatfitness: int = 10
     mean_map: FeatureMap = field(init=False, repr=False)
     baseline_map: FeatureMap = field(init=False, repr=False)
 

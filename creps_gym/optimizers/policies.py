@@ -13,6 +13,7 @@ constructor argument.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -249,6 +250,14 @@ class PolicyAccess:
 
     policy: LinearGaussianPolicy
     rng: np.random.Generator
+
+    @staticmethod
+    def recommended_batch_size(n_params: int, n_context_dims: int) -> int:
+        """CMA-ES's population 4 + ⌊3 ln p⌋ per mean feature of ϕ(s) = [1, s], so (4 + ⌊3 ln p⌋)·(1 + z),
+        and at least 2k + 2 for the k features of a full quadratic in s (the baselines are regressions)."""
+        population = 4 + int(3 * math.log(n_params))
+        quadratic = 1 + n_context_dims + n_context_dims * (n_context_dims + 1) // 2
+        return max(population * (1 + n_context_dims), 2 * quadratic + 2)
 
     @property
     def coefficients(self) -> Array:

@@ -32,6 +32,7 @@ __all__ = [
     "make_optimizer",
     "optimizer_class",
     "optimizer_names",
+    "recommended_samples",
     "register_optimizer",
     "restore_optimizer",
 ]
@@ -157,6 +158,20 @@ def make_optimizer(
         raise ValueError(f"options: expected no option fixed by {name!r} ({dict(entry.fixed)}), got {clash}")
     kwargs = {"initial_mean": initial_mean, "initial_cov": initial_cov, "seed": seed}
     return cls(n_params, n_context_dims, **kwargs, **entry.fixed, **options)
+
+
+def recommended_samples(optimizer: str | Any, n_params: int, n_context_dims: int) -> int:
+    """The batch size N to use when the user gives none, for a registry name or an optimiser object.
+
+    The optimiser's class decides through a ``recommended_batch_size(n_params, n_context_dims)`` method
+    (contextual CMA-ES's rule for this package's optimisers, CMA-ES's 4 + ⌊3 ln p⌋ for the adapters);
+    classes without one get :func:`creps_gym.optimizers.ccmaes.recommended_batch_size`.
+    """
+    cls = optimizer_class(optimizer) if isinstance(optimizer, str) else type(optimizer)
+    rule = getattr(cls, "recommended_batch_size", None)
+    if rule is None:
+        from creps_gym.optimizers.ccmaes import recommended_batch_size as rule
+    return int(rule(n_params, n_context_dims))
 
 
 def restore_optimizer(name: str, state: Mapping[str, Any]) -> Any:

@@ -18,7 +18,7 @@ def run(
     optimizer: Any,
     env: Any,
     iterations: int,
-    samples_per_iteration: int,
+    samples_per_iteration: int | None,
     seed: int,
     *,
     run_dir: str | os.PathLike[str] | None = None,
@@ -38,8 +38,9 @@ def run(
         A registered id (made with ``env_kwargs``) or an env object.
     iterations : int
         Maximum number of iterations.
-    samples_per_iteration : int
-        Episodes per iteration (>= 2).
+    samples_per_iteration : int or None
+        Episodes per iteration (>= 2); None takes the optimiser's recommended batch size
+        (:func:`creps_gym.optimizers.recommended_samples`).
     seed : int
         Master seed (>= 0).
     run_dir : path-like, optional
@@ -71,7 +72,7 @@ def run(
     objects = {"env": None if by_id else env, "optimizer": None if by_name else optimizer}
     runner = Runner(config, **objects, callbacks=callbacks)
     if run_dir is not None:
-        runner.run_dir = RunDir.create(run_dir, config, runner.history.meta)
+        runner.run_dir = RunDir.create(run_dir, runner.config, runner.history.meta)
     return runner.run()
 
 

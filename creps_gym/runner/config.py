@@ -86,7 +86,7 @@ class RunConfig:
     env: str | None
     optimizer: str | None
     iterations: int
-    samples: int
+    samples: int | None
     seed: int
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     optimizer_options: dict[str, Any] = field(default_factory=dict)
@@ -109,7 +109,8 @@ class RunConfig:
             if value is not None and (not isinstance(value, str) or not value):
                 raise TypeError(f"{name}: expected a non-empty str or None, got {value!r}")
         check_positive_int(self.iterations, "iterations")
-        check_positive_int(self.samples, "samples", minimum=2)
+        if self.samples is not None:  # None: the optimiser's recommended batch size, resolved by the runner
+            check_positive_int(self.samples, "samples", minimum=2)
         check_positive_int(self.seed, "seed", minimum=0)
         check_positive_int(self.eval_every, "eval_every")
         check_positive_int(self.eval_contexts, "eval_contexts")
@@ -132,7 +133,7 @@ class RunConfig:
                 self, "initial_mean", _vector_or_scalar(self.initial_mean, "initial_mean", False)
             )
         object.__setattr__(self, "initial_std", _vector_or_scalar(self.initial_std, "initial_std", True))
-        if self.max_episodes is not None and self.max_episodes < self.samples:
+        if self.max_episodes is not None and self.samples and self.max_episodes < self.samples:
             raise ValueError(
                 f"max_episodes: expected at least one iteration's samples ({self.samples}), "
                 f"got {self.max_episodes}"

@@ -18,6 +18,7 @@ exceed the budget), ``"target_regret"``, ``"max_time"``, ``"optimizer: <criteria
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -28,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import contextual_model, evaluate_policy, test_contexts
-from creps_gym.optimizers.registry import make_optimizer, restore_optimizer
+from creps_gym.optimizers.registry import make_optimizer, recommended_samples, restore_optimizer
 from creps_gym.runner.backends import EnvSource, EpisodeError, make_backend, retry, run_episodes
 from creps_gym.runner.callbacks import as_callback
 from creps_gym.runner.config import RunConfig
@@ -104,6 +105,9 @@ class Runner:
         self.env_rng, optimizer_seed, eval_seed = split_seed(config.seed)
         self.n_context_dims = int(np.prod(self.env.observation_space.shape))
         self.n_params = int(np.prod(self.env.action_space.shape))
+        if config.samples is None:
+            batch = recommended_samples(config.optimizer or optimizer, self.n_params, self.n_context_dims)
+            self.config = config = dataclasses.replace(config, samples=batch)
         self.optimizer = optimizer
         if optimizer is None and config.optimizer is not None:
             self.optimizer = self._make_optimizer(optimizer_seed)

@@ -20,6 +20,7 @@ as much optimiser time (not evaluation time) as the run so far.
 from __future__ import annotations
 
 import importlib
+import math
 from abc import abstractmethod
 from collections.abc import Mapping
 from typing import Any, ClassVar
@@ -117,6 +118,11 @@ class MinimizerAdapter(ContextualOptimizer):
 
     kind: ClassVar[str] = "adapter"
     fixed_batch: ClassVar[bool] = False
+
+    @staticmethod
+    def recommended_batch_size(n_params: int, n_context_dims: int) -> int:
+        """CMA-ES's default population 4 + ⌊3 ln p⌋ (the libraries ignore the context)."""
+        return 4 + int(3 * math.log(n_params))
 
     def __init__(
         self,

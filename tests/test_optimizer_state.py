@@ -96,9 +96,7 @@ def test_huge_contexts_are_refused_by_ask_and_tell_with_the_state_unchanged(name
         else (make_optimizer(name, 3, 1, 0))
     )
     before = optimizer.state_dict()
-    with pytest.raises(
-        ValueError, match=r"contexts: expected \|s\| <= 1e\+100.*got max \|s\| = 1e\+160"
-    ):
+    with pytest.raises(ValueError, match=r"contexts: expected \|s\| <= 1e\+100.*got max \|s\| = 1e\+160"):
         optimizer.ask(np.full((5, 1), 1e160))
     contexts = np.linspace(0, 1, 20)[:, None]
     params = optimizer.ask(contexts)

@@ -2,7 +2,7 @@
 
 Reference: A. Abdolmaleki, D. Simões, N. Lau, L. P. Reis, G. Neumann, "Contextual Direct Policy Search With
 Regularized Covariance Matrix Estimation", J. Intell. Robot. Syst. (2019), doi:10.1007/s10846-018-0968-4,
-Algorithm 2 with Σ = S; the places where the text is ambiguous are read as in ``shared/notes/algorithm.md``.
+Algorithm 2 with Σ = S; the places where the text is ambiguous are read as ``docs/algorithms.md`` explains.
 
 One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N(Aᵀϕ(s), Σ):
 

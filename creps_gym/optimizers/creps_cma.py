@@ -2,7 +2,7 @@
 
 Reference: A. Abdolmaleki, D. Simões, N. Lau, L. P. Reis, G. Neumann, "Contextual Direct Policy Search With
 Regularized Covariance Matrix Estimation", J. Intell. Robot. Syst. (2019), doi:10.1007/s10846-018-0968-4,
-sections 3.2.2 and 4, read as in ``shared/notes/algorithm.md``.
+sections 3.2.2 and 4, read as ``docs/algorithms.md`` explains.
 
 The weights and the mean are those of CREPS (:mod:`creps_gym.optimizers.creps`). The covariance is a convex
 combination of the old covariance and the weighted sample covariance, CMA-ES's rank-μ update:

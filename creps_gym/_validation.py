@@ -19,6 +19,7 @@ __all__ = [
     "check_positive_int",
     "check_real",
     "check_real_in_range",
+    "check_seed",
 ]
 
 
@@ -100,6 +101,17 @@ def check_positive_int(value: Any, name: str, minimum: int = 1) -> int:
         raise TypeError(f"{name}: expected an integer >= {minimum}, got {type(value).__name__} {value!r}")
     if value < minimum:
         raise ValueError(f"{name}: expected an integer >= {minimum}, got {value}")
+    return int(value)
+
+
+def check_seed(value: Any, name: str = "seed") -> int | None:
+    """Return a seed as an int >= 0, or None; raise ``TypeError``/``ValueError`` naming ``name`` otherwise."""
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name}: expected an int >= 0 or None, got {type(value).__name__}")
+    if value < 0:
+        raise ValueError(f"{name}: expected an int >= 0 or None, got {value}")
     return int(value)
 
 

@@ -91,8 +91,16 @@ def test_the_mean_shift_signal_is_n_0_c_over_mu_eff_under_random_selection():
         np.testing.assert_allclose(np.cov(samples.T), np.eye(samples.shape[1]), atol=0.1)
 
 
-def _states_after(returns_of, context_dim: int, iterations: int = 8):
-    optimizer = CCMAES(5, context_dim, initial_mean=1.0, initial_cov=0.5, seed=3)
+BASELINE_OPTIONS = {
+    "default": {},
+    "reuse": {"baseline_batches": 3},
+    "standardised": {"standardise_advantages": True},
+    "cubic": {"baseline_degree": 3},
+}
+
+
+def _states_after(returns_of, context_dim: int, iterations: int = 8, **options):
+    optimizer = CCMAES(5, context_dim, initial_mean=1.0, initial_cov=0.5, seed=3, **options)
     rng = np.random.default_rng(4)
     for _ in range(iterations):
         contexts = rng.uniform(0, 3, (20, context_dim))
@@ -122,19 +130,41 @@ def test_a_strictly_monotone_transformation_of_the_returns_gives_identical_updat
     _assert_same_state(reference, _states_after(lambda s, th: transform(_sphere_returns(s, th)), 0))
 
 
-def test_a_positive_affine_transformation_gives_identical_contextual_updates():
-    reference = _states_after(_sphere_returns, 2)
-    _assert_same_state(reference, _states_after(lambda s, th: 1e4 * _sphere_returns(s, th) - 3.0, 2))
+@pytest.mark.parametrize("options", sorted(BASELINE_OPTIONS))
+def test_a_positive_affine_transformation_gives_identical_contextual_updates(options):
+    reference = _states_after(_sphere_returns, 2, **BASELINE_OPTIONS[options])
+    transformed = _states_after(
+        lambda s, th: 1e4 * _sphere_returns(s, th) - 3.0, 2, **BASELINE_OPTIONS[options]
+    )
+    _assert_same_state(reference, transformed)
 
 
-def test_adding_a_quadratic_function_of_the_context_gives_identical_updates():
+@pytest.mark.parametrize("options", sorted(BASELINE_OPTIONS))
+def test_adding_a_quadratic_function_of_the_context_gives_identical_updates(options):
     def quadratic(contexts):
         s1, s2 = contexts[:, 0], contexts[:, 1]
         return 40.0 * s1 * s2 - 25.0 * s2**2 + 9.0 * s1 + 100.0
 
-    reference = _states_after(_sphere_returns, 2)
-    shifted = _states_after(lambda s, th: _sphere_returns(s, th) + quadratic(s), 2)
+    reference = _states_after(_sphere_returns, 2, **BASELINE_OPTIONS[options])
+    shifted = _states_after(
+        lambda s, th: _sphere_returns(s, th) + quadratic(s), 2, **BASELINE_OPTIONS[options]
+    )
     _assert_same_state(reference, shifted)
+
+
+def test_sample_reuse_fits_the_baseline_on_the_last_batches_and_survives_a_checkpoint(tmp_path):
+    optimizer = CCMAES(4, 1, baseline_batches=3, seed=0)
+    rng = np.random.default_rng(0)
+    for iteration in range(1, 6):
+        contexts = rng.uniform(0, 3, (10, 1))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -(params**2).sum(axis=1))
+        assert optimizer.past_returns.shape == (10 * min(iteration, 2),)  # (3 − 1) batches of 10
+    np.testing.assert_array_equal(optimizer.past_contexts[-10:], contexts)
+    restored = CCMAES.load(optimizer.save(tmp_path / "c.npz"))
+    np.testing.assert_array_equal(restored.past_returns, optimizer.past_returns)
+    contexts = rng.uniform(0, 3, (10, 1))
+    np.testing.assert_array_equal(restored.ask(contexts), optimizer.ask(contexts))
 
 
 def test_the_baseline_removes_a_quadratic_of_the_context_exactly():
@@ -186,7 +216,9 @@ def test_recommended_batch_size_grows_with_dimension_and_context():
     [
         ({"active": "yes"}, TypeError, "active"),
         ({"baseline_degree": -1}, ValueError, "baseline_degree: expected an integer >= 0"),
-        ({"baseline_degree": 2.5}, ValueError, "baseline_degree"),
+        ({"baseline_degree": 2.5}, TypeError, "baseline_degree: expected an integer >= 0, got float"),
+        ({"baseline_batches": 0}, ValueError, "baseline_batches: expected an integer >= 1"),
+        ({"standardise_advantages": 1}, TypeError, "standardise_advantages"),
         ({"step_size_signal": "both"}, ValueError, "step_size_signal: expected one of"),
         ({"ridge": -1e-3}, ValueError, "ridge"),
         ({"baseline_ridge": float("nan")}, ValueError, "baseline_ridge"),

@@ -30,7 +30,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from creps_gym._validation import as_float_array, check_bool, check_real_in_range
+from creps_gym._validation import (
+    as_float_array,
+    check_bool,
+    check_positive_int,
+    check_real_in_range,
+    check_seed,
+)
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.cma_rules import (
     CMAConstants,
@@ -47,6 +53,7 @@ from creps_gym.optimizers.contextual import (
     coefficient_shift,
     context_advantages,
     contextual_mean,
+    recent_samples,
 )
 from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import (
@@ -54,6 +61,7 @@ from creps_gym.optimizers.policies import (
     PolicyAccess,
     initial_coefficients,
     initial_covariance,
+    split_step_size,
 )
 
 __all__ = [
@@ -79,13 +87,6 @@ class _Step(NamedTuple):
     diagnostics: dict[str, float]
 
 
-def _split_initial_cov(cov: Array) -> tuple[float, Array]:
-    """σ0 = det(Σ0)^(1/2p) and C0 = Σ0/σ0², so that det C0 = 1."""
-    _, logdet = np.linalg.slogdet(cov)
-    sigma = float(np.exp(logdet / (2 * cov.shape[0])))
-    return sigma, cov / sigma**2
-
-
 def _check_optional(value: Any, name: str, low: float, high: float) -> float | None:
     if value is None:
         return None
@@ -105,9 +106,13 @@ class CCMAESConfig:
     mean_features : str, dict or FeatureMap ϕ(s) of the mean; ``"affine"`` = [1, s].
     active : bool                   negative weights for the worst half (active CMA).
     baseline_degree : int           degree of the context baseline's polynomial (2: a full quadratic).
+    baseline_batches : int          batches the baseline is fitted on: the current one and the last
+        (``baseline_batches`` − 1)·N samples before it (sample reuse; 1: the current batch only).
     ridge, baseline_ridge : float   relative ridges of the mean fit (C3) and of the baseline (C1).
     c_sigma, d_sigma, c_c, c_1, c_mu : float or None   learning rates; None = the tutorial's defaults.
     seed : int or None              seed of the sampling Generator.
+    restarts : int                  restarts from the initial distribution when a stop criterion is met
+        (``stop()`` reports criteria only once they are used up).
     tolx, tolupsigma, max_condition, tolstagnation, tolflatfitness : stop criteria like pycma's
         (``tolstagnation=None`` means 100 + 100·p^1.5/N iterations).
     """
@@ -119,6 +124,9 @@ class CCMAESConfig:
     mean_features: Any = "affine"
     active: bool = True
     baseline_degree: int = 2
+    baseline_batches: int = 1
+    standardise_advantages: bool = False
+    restarts: int = 0
     step_size_signal: str = "mean"
     ridge: float = 1e-8
     baseline_ridge: float = 1e-10
@@ -143,17 +151,15 @@ class CCMAESConfig:
             ("n_context_dims", 0),
             ("tolflatfitness", 1),
             ("baseline_degree", 0),
+            ("baseline_batches", 1),
+            ("restarts", 0),
         ):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-                raise ValueError(f"{name}: expected an integer >= {minimum}, got {value!r}")
-            object.__setattr__(self, name, int(value))
+            object.__setattr__(self, name, check_positive_int(getattr(self, name), name, minimum))
         if self.tolstagnation is not None:
-            value = self.tolstagnation
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(f"tolstagnation: expected an integer >= 1 or None, got {value!r}")
-            object.__setattr__(self, "tolstagnation", int(value))
+            object.__setattr__(self, "tolstagnation", check_positive_int(self.tolstagnation, "tolstagnation"))
         object.__setattr__(self, "active", check_bool(self.active, "active"))
+        standardise = check_bool(self.standardise_advantages, "standardise_advantages")
+        object.__setattr__(self, "standardise_advantages", standardise)
         if self.step_size_signal not in SIGNALS:
             raise ValueError(f"step_size_signal: expected one of {SIGNALS}, got {self.step_size_signal!r}")
         for name, low, high in (
@@ -171,19 +177,14 @@ class CCMAESConfig:
             object.__setattr__(self, name, value)
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
-        if self.seed is not None:
-            if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
-                raise TypeError(f"seed: expected an int >= 0 or None, got {type(self.seed).__name__}")
-            if self.seed < 0:
-                raise ValueError(f"seed: expected an int >= 0 or None, got {self.seed}")
-            object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "seed", check_seed(self.seed))
         mean_map = make_features(self.mean_features, self.n_context_dims)
         object.__setattr__(self, "mean_map", mean_map)
         object.__setattr__(
             self, "initial_mean", initial_coefficients(self.initial_mean, mean_map, self.n_params)
         )
         object.__setattr__(self, "initial_cov", initial_covariance(self.initial_cov, self.n_params))
-        sigma, shape = _split_initial_cov(self.initial_cov)
+        sigma, shape = split_step_size(self.initial_cov)
         object.__setattr__(self, "initial_step_size", sigma)
         object.__setattr__(self, "initial_shape", shape)
 
@@ -226,6 +227,12 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         self.config = config
         self.n_params, self.n_context_dims = config.n_params, config.n_context_dims
         self.rng = np.random.default_rng(config.seed)
+        self.restarts_done = 0
+        self._reset_search()
+
+    def _reset_search(self) -> None:
+        """The initial distribution and empty paths and histories (at the start and at each restart)."""
+        config = self.config
         self.policy = LinearGaussianPolicy(
             config.mean_map, config.initial_mean.copy(), config.initial_shape, config.initial_step_size
         )
@@ -233,11 +240,20 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         self.path_sigma = np.zeros((config.n_params, columns))
         self.path_cov = np.zeros(config.n_params)
         self.mean_returns: list[float] = []  # per iteration, for the stagnation criterion
+        self.past_contexts = np.empty((0, config.n_context_dims))  # for the baseline (baseline_batches > 1)
+        self.past_returns = np.empty(0)
         self.flat_iterations = 0
 
     def _update(self, contexts: Array, params: Array, returns: Array) -> None:
+        config = self.config
         advantages, explained = context_advantages(  # Eq. (C1)
-            contexts, returns, self.config.baseline_degree, self.config.baseline_ridge
+            contexts,
+            returns,
+            config.baseline_degree,
+            config.baseline_ridge,
+            self.past_contexts,
+            self.past_returns,
+            config.standardise_advantages,
         )
         constants = self.config.constants(returns.shape[0])
         order = np.argsort(-advantages, kind="stable")
@@ -253,7 +269,17 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         flat = spread <= 1e-12 * max(float(np.abs(returns).max()), 1e-300)
         self.flat_iterations = self.flat_iterations + 1 if flat else 0
         self.mean_returns.append(float(np.mean(returns)))
+        if config.baseline_batches > 1:
+            self.past_contexts, self.past_returns = recent_samples(
+                self.past_contexts, self.past_returns, contexts, returns, config.baseline_batches - 1
+            )
         self._diagnostics = dict(step.diagnostics, baseline_r2=explained, mean_return=self.mean_returns[-1])
+        if self.restarts_done < config.restarts and self.stop():
+            self._reset_search()
+            self.restarts_done += 1
+            for stale in ("cond_cov", "max_std"):  # they described the abandoned distribution
+                self._diagnostics.pop(stale, None)
+        self._diagnostics["restarts"] = float(self.restarts_done)
 
     def _step(self, contexts: Array, params: Array, weights: Array, constants: CMAConstants) -> _Step:
         policy = self.policy.copy()
@@ -302,7 +328,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
     @property
     def diagnostics(self) -> dict[str, float]:
         """σ, μ_eff, ‖p_σ‖/E‖N(0,I)‖, h_σ, R² of the baseline, mean return, max std and cond of σ²C."""
-        if self._diagnostics and "cond_cov" not in self._diagnostics:
+        if "step_size" in self._diagnostics and "cond_cov" not in self._diagnostics:
             eigenvalues = np.linalg.eigvalsh(self.policy.cov)
             self._diagnostics["cond_cov"] = float(eigenvalues[-1] / max(eigenvalues[0], 1e-300))
             self._diagnostics["max_std"] = self.step_size * float(np.sqrt(eigenvalues[-1]))
@@ -342,6 +368,9 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             path_sigma=self.path_sigma.copy(),
             path_cov=self.path_cov.copy(),
             mean_returns=np.asarray(self.mean_returns, dtype=np.float64),
+            past_contexts=self.past_contexts.copy(),
+            past_returns=self.past_returns.copy(),
+            restarts_done=self.restarts_done,
         )
         return state
 
@@ -363,5 +392,11 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         optimizer.path_cov = as_float_array(state["path_cov"], "state['path_cov']", (p,)).copy()
         history = as_float_array(state["mean_returns"], "state['mean_returns']", (None,))
         optimizer.mean_returns = [float(v) for v in history]
+        z = config.n_context_dims
+        optimizer.past_contexts = as_float_array(state["past_contexts"], "state['past_contexts']", (None, z))
+        optimizer.past_returns = as_float_array(
+            state["past_returns"], "state['past_returns']", (optimizer.past_contexts.shape[0],)
+        )
         optimizer.flat_iterations = int(state["flat_iterations"])
+        optimizer.restarts_done = int(state["restarts_done"])
         return optimizer

@@ -14,7 +14,13 @@ from creps_gym.optimizers.cma_rules import inverse_sqrt
 from creps_gym.optimizers.features import FeatureMap, PolynomialFeatures
 from creps_gym.optimizers.policies import weighted_ml_fit
 
-__all__ = ["baseline_features", "coefficient_shift", "context_advantages", "contextual_mean"]
+__all__ = [
+    "baseline_features",
+    "coefficient_shift",
+    "context_advantages",
+    "contextual_mean",
+    "recent_samples",
+]
 
 Array = NDArray[np.float64]
 
@@ -28,11 +34,19 @@ def baseline_features(n_samples: int, context_dim: int, degree: int) -> Polynomi
     return PolynomialFeatures(context_dim, 0)
 
 
-def context_advantages(contexts: Array, returns: Array, degree: int, ridge: float) -> tuple[Array, float]:
-    """a_k = R_k − V(s_k), Eq. (C1), and the fraction of the returns' variance that V explains.
+def context_advantages(
+    contexts: Array,
+    returns: Array,
+    degree: int,
+    ridge: float,
+    past_contexts: Array | None = None,
+    past_returns: Array | None = None,
+    standardise: bool = False,
+) -> tuple[Array, float]:
+    """a_k = R_k − V(s_k), Eq. (C1), and the fraction of the batch returns' variance that V explains.
 
     V is a ridge least-squares fit of the returns on a polynomial in s with cross terms (a full quadratic for
-    ``degree=2``); a batch too small for it uses the richest lower degree it can fit
+    ``degree=2``); too few samples for it give the richest lower degree they can fit
     (:func:`baseline_features`). Contexts are standardised first, which leaves the span of the features, and
     so V, unchanged but keeps the fit well conditioned.
 
@@ -44,19 +58,37 @@ def context_advantages(contexts: Array, returns: Array, degree: int, ridge: floa
         Highest degree of the baseline polynomial.
     ridge : float
         Ridge on the standardised non-constant features.
+    past_contexts, past_returns : ndarray, shape (M, z) and (M,), optional
+        Samples of earlier batches that the fit of V reuses (the advantages are the current batch's only).
+    standardise : bool
+        Divide each advantage by a context-dependent scale √v(s), with v a least-squares fit of the squared
+        advantages on the same features (floored at 1 % of their mean), so that contexts where the returns
+        spread widely do not take all the top and bottom ranks.
     """
     n, z = contexts.shape
-    features = baseline_features(n, z, degree)
+    all_contexts, all_returns = contexts, returns
+    if past_returns is not None and past_returns.size:
+        all_contexts = np.concatenate([past_contexts, contexts])
+        all_returns = np.concatenate([past_returns, returns])
+    features = baseline_features(all_returns.shape[0], z, degree)
     if features.degree == 0:
-        return returns - returns.mean(), 0.0
-    spread = contexts.std(axis=0)
-    phi = features((contexts - contexts.mean(axis=0)) / np.where(spread > 0, spread, 1.0))
-    uniform = np.full(n, 1.0 / n)
-    scale = float(np.abs(returns).max()) or 1.0  # the fit is linear in R; scaling keeps it in range
-    fit = weighted_ml_fit(phi, returns[:, None] / scale, uniform, ridge, features.constant_column)
-    advantages = returns - (phi @ fit)[:, 0] * scale
+        return returns - all_returns.mean(), 0.0
+    spread = all_contexts.std(axis=0)
+    centre, spread = all_contexts.mean(axis=0), np.where(spread > 0, spread, 1.0)
+    phi = features((all_contexts - centre) / spread)
+    uniform = np.full(all_returns.shape[0], 1.0 / all_returns.shape[0])
+    scale = float(np.abs(all_returns).max()) or 1.0  # the fit is linear in R; scaling keeps it in range
+    fit = weighted_ml_fit(phi, all_returns[:, None] / scale, uniform, ridge, features.constant_column)
+    residuals = all_returns / scale - (phi @ fit)[:, 0]
+    advantages = residuals[-n:] * scale
     total = float(np.sum((returns - returns.mean()) ** 2))
     explained = 1.0 - float(advantages @ advantages) / total if total > 0 else 0.0
+    if standardise:
+        squares = residuals**2
+        variance = (phi @ weighted_ml_fit(phi, squares[:, None], uniform, ridge, features.constant_column))[
+            :, 0
+        ]
+        advantages = advantages / np.sqrt(np.maximum(variance[-n:], 0.01 * squares.mean()))
     return advantages, explained
 
 
@@ -100,3 +132,13 @@ def coefficient_shift(mean_map: FeatureMap, contexts: Array, deviations: Array, 
     inverse = (vectors[:, keep] / values[keep]) @ vectors[:, keep].T
     hat = (phi * weights[:, None]) @ inverse  # M, shape (μ, k)
     return deviations.T @ hat @ inverse_sqrt(hat.T @ hat)
+
+
+def recent_samples(
+    past_contexts: Array, past_returns: Array, contexts: Array, returns: Array, batches: int
+) -> tuple[Array, Array]:
+    """The last ``batches``·N samples, N the newest batch's size (its samples included)."""
+    kept = batches * returns.shape[0]
+    contexts = np.concatenate([past_contexts, contexts])[-kept:]
+    returns = np.concatenate([past_returns, returns])[-kept:]
+    return contexts, returns

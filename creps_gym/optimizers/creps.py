@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from creps_gym._validation import check_real_in_range
+from creps_gym._validation import check_real_in_range, check_seed
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.dual import DUAL_KL_TOL, DualSolution, solve_dual
 from creps_gym.optimizers.features import FeatureMap, make_features
@@ -123,12 +123,7 @@ class CREPSConfig:
         ):
             value = check_real_in_range(getattr(self, name), name, low, high, low_inclusive=low_inclusive)
             object.__setattr__(self, name, value)
-        if self.seed is not None:
-            if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
-                raise TypeError(f"seed: expected an int >= 0 or None, got {type(self.seed).__name__}")
-            if self.seed < 0:
-                raise ValueError(f"seed: expected an int >= 0 or None, got {self.seed}")
-            object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "seed", check_seed(self.seed))
         object.__setattr__(self, "mean_map", make_features(self.mean_features, self.n_context_dims))
         object.__setattr__(self, "baseline_map", make_features(self.baseline_features, self.n_context_dims))
         for name, feature_map in (("mean_features", self.mean_map), ("baseline_features", self.baseline_map)):

@@ -30,6 +30,7 @@ __all__ = [
     "initial_coefficients",
     "initial_covariance",
     "spd_factor",
+    "split_step_size",
     "weighted_ml_fit",
 ]
 
@@ -141,6 +142,13 @@ def initial_covariance(value: Any, n_params: int, name: str = "initial_cov") -> 
             f"{name}: expected a symmetric positive-definite matrix, got one that is not"
         ) from None
     return array.copy()
+
+
+def split_step_size(cov: Array) -> tuple[float, Array]:
+    """σ0 = det(Σ0)^(1/2p) and C0 = Σ0/σ0², so that det C0 = 1."""
+    _, logdet = np.linalg.slogdet(cov)
+    sigma = float(np.exp(logdet / (2 * cov.shape[0])))
+    return sigma, cov / sigma**2
 
 
 class LinearGaussianPolicy:

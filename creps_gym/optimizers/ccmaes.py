@@ -124,9 +124,9 @@ class CCMAESConfig:
     mean_features: Any = "affine"
     active: bool = True
     baseline_degree: int = 2
-    baseline_batches: int = 1
+    baseline_batches: int = 3
     standardise_advantages: bool = False
-    restarts: int = 0
+    restarts: int = 3
     step_size_signal: str = "mean"
     ridge: float = 1e-8
     baseline_ridge: float = 1e-10

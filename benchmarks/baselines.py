@@ -26,17 +26,15 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
-from study_tools import BASELINE_METHODS, RunSpec, function_spec, is_bounded, result_document
 
+from benchmarks.study_tools import RunSpec, function_spec, is_bounded, result_document
 from creps_gym.envs.evaluation import contextual_model, test_contexts
 from creps_gym.optimizers import make_optimizer
 from creps_gym.runner import default_initial_distribution, split_seed
 
-__all__ = ["BASELINES", "fixed_context_cma", "run_baseline", "training_contexts"]
+__all__ = ["BASELINES", "fixed_context_cma", "training_contexts"]
 
 Array = NDArray[np.float64]
-#: Baseline method names (the ``method`` of a :class:`~study_tools.RunSpec`).
-BASELINES = BASELINE_METHODS
 #: Number of test contexts (the runner's default ``eval_contexts``).
 EVAL_CONTEXTS = 16
 
@@ -151,10 +149,6 @@ def _regression(spec: RunSpec) -> dict[str, Any]:
     )
 
 
-def run_baseline(spec: RunSpec) -> dict[str, Any]:
-    """Run a baseline spec (``spec.method`` in :data:`BASELINES`) and return its result document."""
-    if spec.method == "cma-fixed":
-        return _fixed(spec)
-    if spec.method == "cma-regression":
-        return _regression(spec)
-    raise ValueError(f"method: expected one of {list(BASELINES)}, got {spec.method!r}")
+#: The baselines' runners by method name (the ``method`` of a :class:`~benchmarks.study_tools.RunSpec`), as
+#: the studies pass them to :func:`benchmarks.study_tools.run_study`.
+BASELINES = {"cma-fixed": _fixed, "cma-regression": _regression}

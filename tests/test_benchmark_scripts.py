@@ -1,14 +1,18 @@
 """Smoke tests of the paper-reproduction studies (``benchmarks/functions``, ``benchmarks/scaling``).
 
-The scripts run as users run them (a subprocess) on tiny configurations into a temporary directory; the tests
-check that the tables and figures appear, that the tables are computed from the cached run results, and that
-cached runs are not recomputed (the studies resume).
+The scripts run as users run them (a subprocess, by path or with ``python -m``) on tiny configurations into a
+temporary directory; the tests check that the tables and figures appear, that the tables are computed from
+the cached run results, and that cached runs are not recomputed (the studies resume). The committed
+renderings under ``docs/results/`` must be what ``--render-only`` draws from the committed run caches.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import importlib
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -19,20 +23,24 @@ import pytest
 pytest.importorskip("matplotlib")
 pytest.importorskip("cma")
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
-sys.path.insert(0, str(BENCHMARKS))
+# The repository root is on sys.path (pyproject.toml: pytest's `pythonpath`), as for `python -m pytest`.
+from benchmarks import baselines, study_report, study_tools
 
-import baselines  # noqa: E402
-import study_tools  # noqa: E402
+REPO = Path(__file__).resolve().parents[1]
+BENCHMARKS = REPO / "benchmarks"
+with_baselines = functools.partial(study_tools.execute, baselines=baselines.BASELINES)
 
 
-def _script(study: str, *args: str) -> str:
+def _script(study: str, *args: str, as_module: bool = False) -> str:
+    """Run a study's script from the repository root, by path or as ``python -m benchmarks.<study>.run``."""
+    command = ["-m", f"benchmarks.{study}.run"] if as_module else [str(BENCHMARKS / study / "run.py")]
     result = subprocess.run(
-        [sys.executable, str(BENCHMARKS / study / "run.py"), *args],
+        [sys.executable, *command, *args],
         capture_output=True,
         text=True,
         timeout=120,
         check=False,
+        cwd=REPO,
     )
     assert result.returncode == 0, result.stderr
     return result.stdout
@@ -73,7 +81,7 @@ def test_scaling_study_writes_heatmaps_and_marks_censored_cells(tmp_path: Path) 
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--functions", "Sphere", "Rosenbrock", "--dims", "2", "4", "--context-dims", "1", "2"]
     args += ["--seeds", "1", "--budget", "1500", "--workers", "1", "--cache", str(cache), "--out", str(out)]
-    _script("scaling", *args, "--baseline-dims", "2")
+    _script("scaling", *args, "--baseline-dims", "2", as_module=True)
     documents = _documents(cache)
     assert len(documents) == 2 * 2 * 2 + 2 * 2 * 2  # the grid + 2 baselines x 2 functions x 2 z at p = 2
     assert (out / "heatmaps.png").stat().st_size > 10_000 and (out / "baselines.png").stat().st_size > 10_000
@@ -135,9 +143,9 @@ def test_curve_indices_thin_long_curves_but_keep_both_ends() -> None:
 def test_update_block_replaces_only_its_block(tmp_path: Path) -> None:
     path = tmp_path / "README.md"
     path.write_text("# Results\n\nkept\n")
-    study_tools.update_block(path, "a", "first")
-    study_tools.update_block(path, "b", "other")
-    study_tools.update_block(path, "a", "second")
+    study_report.update_block(path, "a", "first")
+    study_report.update_block(path, "b", "other")
+    study_report.update_block(path, "a", "second")
     text = path.read_text()
     assert text.startswith("# Results\n\nkept\n")
     assert "second" in text and "first" not in text and "other" in text
@@ -155,10 +163,15 @@ def test_regression_baseline_training_contexts_span_the_box() -> None:
 def test_unknown_function_or_baseline_is_rejected() -> None:
     with pytest.raises(ValueError, match="function: expected one of"):
         study_tools.function_spec("Nope")
-    with pytest.raises(ValueError, match="method: expected one of"):
-        study_tools.RunSpec("Sphere", 3, 1, "cma-nope", 0, 100)
-    with pytest.raises(ValueError, match="method: expected one of"):
-        baselines.run_baseline(study_tools.RunSpec("Sphere", 3, 1, "creps", 0, 100))
+    with pytest.raises(ValueError, match="method: expected a name of letters"):
+        study_tools.RunSpec("Sphere", 3, 1, "cma/nope", 0, 100)
+    unknown = study_tools.RunSpec("Sphere", 3, 1, "cma-nope", 0, 100)
+    with pytest.raises(ValueError, match=r"method: expected a registered optimiser .* or a baseline"):
+        study_tools.execute(unknown, baselines=baselines.BASELINES)
+    assert study_report.available_methods(["creps", "cma-nope", "cma-fixed"], baselines.BASELINES, str) == [
+        "creps",
+        "cma-fixed",
+    ]
     with pytest.raises(ValueError, match="budget: expected an integer >= 50"):
         study_tools.RunSpec("Sphere", 3, 1, "creps", 0, 10)
     with pytest.raises(ValueError, match="dim: expected an integer >= 2"):
@@ -168,8 +181,7 @@ def test_unknown_function_or_baseline_is_rejected() -> None:
 
 
 def test_stalled_runs_are_those_that_missed_the_target_and_stopped_improving() -> None:
-    sys.path.insert(0, str(BENCHMARKS / "functions"))
-    import report
+    from benchmarks.functions import report
 
     spec = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-current", 0, 1000)
     episodes = [100, 200, 300, 400]
@@ -265,17 +277,13 @@ def test_a_cap_that_cannot_bind_is_the_uncapped_run() -> None:
 
 def test_a_regression_baseline_is_never_reused_for_another_budget(tmp_path: Path) -> None:
     small = study_tools.RunSpec("Sphere", 2, 1, "cma-regression", 0, 2000)
-    (document,) = study_tools.run_all([small], tmp_path, workers=1, log=str)
+    (document,) = study_tools.run_all([small], tmp_path, workers=1, worker=with_baselines, log=str)
     assert document["hit"] is not None and not study_tools.ended_early(document)
     assert study_tools.cached_result(tmp_path, dataclasses.replace(small, budget=4000)) is None
 
 
 def test_scaling_cells_say_why_every_seed_missed() -> None:
-    import importlib.util
-
-    module_spec = importlib.util.spec_from_file_location("scaling_run", BENCHMARKS / "scaling" / "run.py")
-    scaling = importlib.util.module_from_spec(module_spec)
-    module_spec.loader.exec_module(scaling)
+    from benchmarks.scaling import run as scaling
 
     def document(reason: str, final: float) -> dict:
         spec = {"function": "Sphere", "method": "creps-cma-old", "dim": 4, "context_dim": 1}
@@ -293,8 +301,63 @@ def test_scaling_cells_say_why_every_seed_missed() -> None:
 
 
 def test_a_render_of_a_larger_study_reports_it_partial(tmp_path: Path) -> None:
-    computed = study_tools.invocation_timing(tmp_path, wall=3.0, computed=5, total=5)
-    assert "Partial" not in study_tools.timing_text(computed, [{"seconds": 1.0}] * 5)
-    rendered = study_tools.invocation_timing(tmp_path, wall=0.1, computed=0, total=10)  # the study grew
-    text = study_tools.timing_text(rendered, [{"seconds": 1.0}] * 8)
+    computed = study_report.invocation_timing(tmp_path, wall=3.0, computed=5, total=5)
+    assert "Partial" not in study_report.timing_text(computed, [{"seconds": 1.0}] * 5)
+    rendered = study_report.invocation_timing(tmp_path, wall=0.1, computed=0, total=10)  # the study grew
+    text = study_report.timing_text(rendered, [{"seconds": 1.0}] * 8)
     assert "3 s wall" in text and "**Partial: 8 of 10 runs have finished.**" in text
+
+
+def test_the_study_tools_import_no_baseline() -> None:
+    """The import circle baselines <-> study_tools is gone: the baselines are passed in as a mapping."""
+    code = "import sys, benchmarks.study_tools; print('benchmarks.baselines' in sys.modules)"
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True
+    )
+    assert result.stdout.strip() == "False"
+    assert set(baselines.BASELINES) >= {"cma-fixed", "cma-regression"}
+
+
+def test_the_reported_command_leaves_out_what_does_not_change_the_results() -> None:
+    flags = [
+        "--full",
+        "--workers",
+        "4",
+        "--no-z",
+        "--out=/tmp/x",
+        "--render-only",
+        "--cache",
+        "c",
+        "--seeds",
+        "2",
+    ]
+    assert study_report.command_flags(flags, "full") == "--full --no-z --seeds 2"
+    assert study_report.command_flags(["--render-only"], "quick") == "--quick"
+
+
+#: Every committed rendering under docs/results/ (study, the options that computed it).
+COMMITTED_RENDERINGS = [
+    ("functions", ["--quick"]),
+    ("functions", ["--full"]),
+    ("scaling", ["--quick"]),
+    ("scaling", ["--full"]),
+    ("scaling", ["--full", "--max-interpolation", "0.2", "--baselines"]),
+    ("scaling", ["--full", "--no-z", "--max-interpolation", "0.2", "--baselines"]),
+]
+
+
+@pytest.mark.parametrize(
+    ("study", "flags"), COMMITTED_RENDERINGS, ids=lambda v: v if isinstance(v, str) else " ".join(v)
+)
+def test_committed_renderings_are_drawn_from_the_committed_runs(
+    study: str, flags: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--render-only`` on the committed run caches reproduces each committed table exactly (the figures,
+    which depend on the matplotlib version, are not drawn here)."""
+    module = importlib.import_module(f"benchmarks.{study}.run")
+    committed = module.parse_args(flags).out
+    for name in [n for n in dir(module) if n.startswith("plot_")]:
+        monkeypatch.setattr(module, name, lambda *args: Path(args[-1]))
+    shutil.copy(committed / "timing.json", tmp_path / "timing.json")  # the computing invocation's timing
+    assert module.main([*flags, "--render-only", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "results.md").read_text() == (committed / "results.md").read_text()

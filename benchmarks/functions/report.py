@@ -7,7 +7,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from study_tools import PAPER_METHODS, function_spec, summarise
+
+from benchmarks.study_report import summarise
+from benchmarks.study_tools import PAPER_METHODS, function_spec
 
 __all__ = ["LABELS", "METHODS", "claims", "plot_function", "results_table", "stalled"]
 

@@ -8,6 +8,8 @@ process pool; the heatmaps (PNG) and the table (``results.md``) are written from
 
     python benchmarks/scaling/run.py --quick     # p <= 16, 1 seed, < 10 min on 2 cores
     python benchmarks/scaling/run.py --full      # p up to 64, 3 seeds
+
+(or ``python -m benchmarks.scaling.run ...``, from the repository root).
 """
 
 from __future__ import annotations
@@ -23,26 +25,21 @@ from typing import Any
 for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")  # one BLAS thread per process: the pool already fills the cores
 
-import numpy as np  # noqa: E402
-
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))  # benchmarks/: study_tools
+# Run by path: the repository root first on sys.path, as `python -m` puts it (see benchmarks/__init__.py).
+if not __package__:
+    sys.path[0] = str(Path(__file__).resolve().parents[2])
 
 import matplotlib  # noqa: E402
 import matplotlib.lines  # noqa: E402
+import numpy as np  # noqa: E402
 
 matplotlib.use("Agg")
 
-from study_tools import (  # noqa: E402
-    BASELINE_METHODS,
-    DIVERGENCE_GROWTH,
-    RunSpec,
-    function_spec,
-    run_study,
-    summarise,
-    timing_text,
-)
+from benchmarks.baselines import BASELINES  # noqa: E402
+from benchmarks.study_report import command_flags, run_study, summarise, timing_text  # noqa: E402
+from benchmarks.study_tools import DIVERGENCE_GROWTH, RunSpec, function_spec  # noqa: E402
 
+HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
 FUNCTIONS = ("Rosenbrock", "Sphere", "ShiftedSchwefel", "ShiftedRotatedElliptic")
 METHOD = "creps-cma-old"
@@ -68,6 +65,7 @@ PRESETS = {
         "baseline_dims": (2, 4, 8, 16),
     },
 }
+BASELINE_NAMES = ("cma-fixed", "cma-regression")
 LEGEND_LABELS = {"cma-fixed": "pycma, 1 fixed context", "cma-regression": "indep. CMA-ES + regression"}
 BASELINE_LABELS = {
     "cma-fixed": "pycma on one fixed context",
@@ -102,7 +100,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="CREPS-CMA without Z in the old-mean covariance (default: Eq. (15) as published)",
     )
     parser.add_argument(
-        "--baselines", nargs="*", choices=BASELINE_METHODS, default=list(BASELINE_METHODS), help="none: skip"
+        "--baselines", nargs="*", choices=BASELINE_NAMES, default=list(BASELINE_NAMES), help="none: skip"
     )
     parser.add_argument("--baseline-dims", nargs="+", type=int, help="problem dimensions of the baselines")
     parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
@@ -118,8 +116,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         parser.error(f"--max-interpolation: expected a value in (0, 1], got {args.max_interpolation}")
     args.label = args.mode + (f"-cap{args.max_interpolation:g}" if args.max_interpolation < 1.0 else "")
     args.label += "" if args.divide_by_z else "-noz"
-    given = sys.argv[1:] if argv is None else list(argv)
-    args.flags = " ".join(a for a in given if a != "--render-only") or f"--{args.mode}"  # what computes it
+    args.flags = command_flags(argv, args.mode)  # what computes it
     args.index = REPO / "docs" / "results" / "README.md" if args.out is None else None
     args.out = args.out or REPO / "docs" / "results" / "scaling" / args.label
     args.dims = sorted(args.dims or preset["dims"])
@@ -166,7 +163,7 @@ def grid(
     method: str = METHOD,
     dims: Sequence[int] | None = None,
 ) -> list[list[dict]]:
-    """Summaries (see :func:`study_tools.summarise`) of one function and method, indexed [p][z].
+    """Summaries (see :func:`benchmarks.study_report.summarise`) of one function and method, indexed [p][z].
 
     Each summary also has ``missed``: how many runs missed the target, by :func:`missed_kind`.
     """
@@ -401,6 +398,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args,
         make_specs(args),
         write_report,
+        baselines=BASELINES,
         title="Scaling study (Fig. 3)",
         script="benchmarks/scaling/run.py",
         figures_marker="\n![heatmaps]",

@@ -1,11 +1,11 @@
-"""Shared machinery of the paper-reproduction studies (``functions/``, ``scaling/``).
+"""Shared machinery of the studies (``functions/``, ``scaling/``, ``ccmaes/``): runs and their cache.
 
 One *run* is one (function, p, z, method, seed) with an episode budget. :func:`execute` runs it: a method
 that is a registered optimiser (the paper's ``creps``, ``creps-cma-old``, ``creps-cma-current``, or any other
 registry name) through :func:`creps_gym.runner.run`, a baseline through the runner the study passes in (a
 mapping from method name to a callable, e.g. :data:`benchmarks.baselines.BASELINES`: this module imports no
-baseline). Every run's result is a small JSON document cached on disk (:func:`run_all` skips runs whose file
-exists, so an interrupted study resumes) and computed in a process pool.
+baseline). Every run's result is a small JSON document cached on disk; :mod:`benchmarks.study_runner` skips
+runs whose file exists (an interrupted study resumes) and computes the others in a process pool.
 
 The metric is the paper's: the mean over a fixed set of test contexts of the regret of the mean policy, with
 the target 1e-5; for the functions unbounded below (Plane, the ridges) it is the mean of f, with the target
@@ -17,37 +17,40 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym.envs.functions import SPECS
 from creps_gym.envs.functions.specs import UNBOUNDED_TARGET
 from creps_gym.optimizers import optimizer_names
-from creps_gym.runner import resume, run
+from creps_gym.runner import default_initial_distribution, resume, run
 
 __all__ = [
     "CHECKPOINT_EVERY",
     "CURVE_POINTS",
     "DIVERGENCE_GROWTH",
     "EARLY_STOPS",
+    "INITIALS",
     "MAX_CHECKPOINTS",
     "PAPER_METHODS",
     "Baselines",
     "RunSpec",
     "cached_result",
+    "curve_indices",
     "ended_early",
     "execute",
     "function_spec",
+    "initial_distribution",
     "is_bounded",
     "load_document",
-    "run_all",
+    "result_document",
+    "store_document",
     "write_text",
 ]
 
@@ -55,13 +58,15 @@ __all__ = [
 PAPER_METHODS = ("creps", "creps-cma-old", "creps-cma-current")
 #: Maximum number of curve points stored per run.
 CURVE_POINTS = 300
-#: Fewest iterations between the checkpoints of a run computed by :func:`run_all` (seconds of work at p = 64).
+#: Fewest iterations between the checkpoints of a run computed by ``run_all`` (seconds of work at p = 64).
 CHECKPOINT_EVERY = 2000
 #: Most checkpoints per run: each one rewrites the run's history, so a fixed interval would cost O(n²).
 MAX_CHECKPOINTS = 20
 #: A run of a paper method stops as diverged once √λ_max(Σ) exceeds this multiple of its initial value (the
 #: optimiser's ``max_std_growth``); converging runs stay within a few times the initial value.
 DIVERGENCE_GROWTH = 1000.0
+#: Initial search distributions of a run (see :func:`initial_distribution`).
+INITIALS = ("centre", "uniform5")
 #: Stop reasons of a run that ended before its budget ran out (besides the optimiser's ``"optimizer: ..."``).
 EARLY_STOPS = ("target_regret", "callback", "target")
 
@@ -84,12 +89,17 @@ class RunSpec:
     budget : int
         Maximum number of training episodes.
     samples : int
-        Episodes per iteration of the paper's methods.
+        Episodes per iteration (batch size N) of a registered optimiser, and of ``cma-fixed-batch``.
     max_interpolation : float
         CREPS-CMA's cap of λ (1: Eq. (14) as published). Since φ_eff <= N, a cap >= samples / dim² never
         binds: such a spec *is* the uncapped run and shares its key.
     divide_by_z : bool
         CREPS-CMA's ``divide_by_z`` (True: Eqs. (12) and (15) as published).
+    eval_contexts : int
+        Number of fixed test contexts of the metric (the runner's ``eval_contexts``).
+    initial : str
+        Initial search distribution (see :func:`initial_distribution`): ``"centre"`` (the runner's default)
+        or ``"uniform5"`` (mean U[-5, 5]^p drawn from the seed, the same for every context, σ0 = 1).
     """
 
     function: str
@@ -101,12 +111,17 @@ class RunSpec:
     samples: int = 50
     max_interpolation: float = 1.0
     divide_by_z: bool = True
+    eval_contexts: int = 16
+    initial: str = "centre"
 
     def __post_init__(self) -> None:
         function_spec(self.function)  # raises for an unknown function
         if not isinstance(self.method, str) or not self.method.replace("-", "").isalnum():
             raise ValueError(f"method: expected a name of letters, digits and '-', got {self.method!r}")
+        if self.initial not in INITIALS:
+            raise ValueError(f"initial: expected one of {list(INITIALS)}, got {self.initial!r}")
         minimum = {"dim": 2, "context_dim": 1, "seed": 0, "samples": 2, "budget": self.samples}
+        minimum["eval_contexts"] = 1
         for name, low in minimum.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
@@ -126,6 +141,8 @@ class RunSpec:
         """The key without the budget: the runs that differ only in their budget share it."""
         cap = "" if self.max_interpolation == 1.0 else f"-cap{self.max_interpolation!r}"
         cap += "" if self.divide_by_z else "-noz"
+        cap += "" if self.eval_contexts == 16 else f"-e{self.eval_contexts}"
+        cap += "" if self.initial == "centre" else f"-{self.initial}"
         return f"{self.function}-p{self.dim}-z{self.context_dim}-{self.method}{cap}-s{self.seed}"
 
     @property
@@ -142,6 +159,16 @@ class RunSpec:
     def env_kwargs(self) -> dict[str, int]:
         """``gymnasium.make`` keyword arguments."""
         return {"dim": self.dim, "context_dim": self.context_dim, "instance": self.seed}
+
+
+def initial_distribution(spec: RunSpec, action_space: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Initial mean and standard deviations (p,) of a run: the runner's default for ``"centre"``; for
+    ``"uniform5"`` a mean drawn from U[-5, 5]^p (the fourth child of the seed's ``SeedSequence``, the runner's
+    stream for initial means) and σ0 = 1."""
+    if spec.initial == "centre":
+        return default_initial_distribution(action_space)
+    stream = np.random.SeedSequence(spec.seed).spawn(4)[3]
+    return np.random.default_rng(stream).uniform(-5.0, 5.0, spec.dim), np.ones(spec.dim)
 
 
 def function_spec(name: str) -> Any:
@@ -223,12 +250,17 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
     else:
         iterations = max(1, spec.budget // spec.samples)
         options: dict[str, Any] = {}
+        start: dict[str, Any] = {}
         if _has_option(spec.method, "max_std_growth"):
             options["max_std_growth"] = DIVERGENCE_GROWTH
         if spec.max_interpolation < 1.0:
             options["max_interpolation"] = spec.max_interpolation
         if not spec.divide_by_z:
             options["divide_by_z"] = False
+        if spec.initial != "centre":
+            space = gym.make(spec.env_id, **spec.env_kwargs).action_space
+            mean, std = initial_distribution(spec, space)
+            start = {"initial_mean": mean.tolist(), "initial_std": std.tolist()}
         history = run(
             spec.method,
             spec.env_id,
@@ -240,10 +272,12 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
             target_regret=function_spec(spec.function).target if bounded else None,
             callbacks=callbacks,
             eval_every=1,
+            eval_contexts=spec.eval_contexts,
             backend="vector",
             vector_mode="native",
             run_dir=checkpoint_dir,
             checkpoint_every=max(CHECKPOINT_EVERY, iterations // MAX_CHECKPOINTS),
+            **start,
         )
     values = history.column("eval_regret") if bounded else -history.column("eval_return")
     seconds = history.records[-1].wall_time if history.records else 0.0  # summed over resumes
@@ -318,73 +352,9 @@ def load_document(path: Path) -> dict[str, Any] | None:
         return None  # missing or a partial write: recompute
 
 
-def _store(path: Path, document: dict[str, Any]) -> None:
+def store_document(path: Path, document: dict[str, Any]) -> None:
+    """Write a run's document to ``path`` (JSON, atomically)."""
     write_text(path, json.dumps(document, allow_nan=False) + "\n")
-
-
-def run_all(
-    specs: Iterable[RunSpec],
-    cache_dir: str | os.PathLike[str],
-    workers: int = 2,
-    worker: Callable[[RunSpec, Path], dict[str, Any]] = execute,
-    log: Callable[[str], None] = print,
-    compute: bool = True,
-) -> list[dict[str, Any]]:
-    """Results of the specs, in order: cached ones are read, the others computed in a process pool.
-
-    Parameters
-    ----------
-    specs : iterable of RunSpec
-    cache_dir : path-like
-        One ``<key>.json`` per run; created if missing.
-    workers : int
-        Processes (1 runs in this process, which is what the tests use).
-    worker : callable
-        ``(RunSpec, checkpoint_dir) -> result document`` (a module-level function, so the pool can send
-        it). ``checkpoint_dir`` is ``cache_dir/partial/<key>``; it is removed, with the same run's
-        checkpoints under other budgets, once the run's document is stored.
-    log : callable
-        Receives one progress line per computed run.
-    compute : bool
-        False: compute nothing and return only the cached results (to render a partial study).
-    """
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
-    cache = Path(cache_dir)
-    cache.mkdir(parents=True, exist_ok=True)
-    specs = list(specs)
-    results: dict[str, dict[str, Any]] = {}
-    todo = []
-    for spec in specs:
-        cached = cached_result(cache, spec)
-        if cached is not None:
-            results[spec.key] = cached
-        elif spec.key not in {s.key for s in todo}:
-            todo.append(spec)
-    if not compute:
-        log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} missing (not computed)")
-        return [results[spec.key] for spec in specs if spec.key in results]
-    log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} to compute with {workers} worker(s)")
-
-    partial = cache / "partial"
-
-    def done(spec: RunSpec, document: dict[str, Any], count: int) -> None:
-        _store(cache / f"{spec.key}.json", document)
-        for stale in partial.glob(f"{spec.prefix}-b*-n{spec.samples}"):  # this run, under any budget
-            shutil.rmtree(stale, ignore_errors=True)
-        results[spec.key] = document
-        outcome = f"hit at {document['hit']}" if document["hit"] is not None else f"final {document['final']}"
-        log(f"[{count}/{len(todo)}] {spec.key}: {outcome} ({document['seconds']:.1f} s)")
-
-    if workers == 1:
-        for count, spec in enumerate(todo, 1):
-            done(spec, worker(spec, partial / spec.key), count)
-    elif todo:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(worker, spec, partial / spec.key): spec for spec in todo}
-            for count, future in enumerate(as_completed(futures), 1):
-                done(futures[future], future.result(), count)
-    return [results[spec.key] for spec in specs]
 
 
 def write_text(path: Path, text: str) -> None:

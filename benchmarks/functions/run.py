@@ -30,13 +30,19 @@ matplotlib.use("Agg")
 
 from benchmarks.baselines import BASELINES
 from benchmarks.functions.report import METHODS, claims, plot_function, results_table
-from benchmarks.study_report import available_methods, command_flags, run_study, timing_text
+from benchmarks.study_runner import (
+    add_mode_options,
+    add_output_options,
+    available_methods,
+    resolve_outputs,
+    run_study,
+    timing_text,
+)
 from benchmarks.study_tools import RunSpec
 from creps_gym.envs.functions import SPECS
 
 HERE = Path(__file__).resolve().parent
 
-REPO = HERE.parents[1]
 ALL_FUNCTIONS = tuple(spec.name for spec in SPECS)
 PRESETS = {
     "quick": {
@@ -54,9 +60,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    mode = parser.add_mutually_exclusive_group()
-    mode.add_argument("--quick", action="store_const", dest="mode", const="quick", help="a fast subset")
-    mode.add_argument("--full", action="store_const", dest="mode", const="full", help="the whole protocol")
+    add_mode_options(parser, quick="a fast subset", full="the whole protocol")
     parser.add_argument("--functions", nargs="+", choices=ALL_FUNCTIONS, help="functions to run")
     parser.add_argument("--context-dims", nargs="+", type=int, help="context dimensions z")
     parser.add_argument("--seeds", type=int, help="seeds per configuration (0 .. n-1)")
@@ -64,18 +68,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--dim", type=int, default=15, help="problem dimension p (paper: 15)")
     parser.add_argument("--samples", type=int, default=50, help="samples per iteration (paper: 50)")
     parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
-    parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
-    parser.add_argument(
-        "--render-only", action="store_true", help="compute nothing: render the runs already cached"
-    )
-    parser.add_argument("--cache", type=Path, default=HERE / "runs", help="per-run JSON (git-ignored)")
-    parser.add_argument("--out", type=Path, help="figures and table (default docs/results/functions/<mode>)")
+    add_output_options(parser, HERE, out="figures and table (default docs/results/functions/<mode>)")
     args = parser.parse_args(argv)
     args.mode = args.mode or "full"
-    args.flags = command_flags(argv, args.mode)
+    resolve_outputs(args, argv, HERE, args.mode)
+    args.methods = available_methods(args.methods, BASELINES)  # skips the optimisers not registered yet
     preset = PRESETS[args.mode]
-    args.index = REPO / "docs" / "results" / "README.md" if args.out is None else None
-    args.out = args.out or REPO / "docs" / "results" / "functions" / args.mode
     args.functions = args.functions or list(preset["functions"])
     args.context_dims = args.context_dims or list(preset["context_dims"])
     args.seeds = args.seeds if args.seeds is not None else preset["seeds"]
@@ -90,13 +88,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 
 def make_specs(args: argparse.Namespace) -> list[RunSpec]:
     """Every run of the study, cheapest first within each function (the pool balances better)."""
-    methods = available_methods(args.methods, BASELINES)
     return [
         RunSpec(name, args.dim, z, method, seed, args.budget, args.samples)
         for name in args.functions
         for z in args.context_dims
         for seed in range(args.seeds)
-        for method in methods
+        for method in args.methods
     ]
 
 
@@ -120,7 +117,8 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
         "Cells: median training episodes until the mean regret of the mean policy on 16 test contexts is "
         "<= 1e-5 (mean f <= -1e4 for Plane and the ridges), over the seeds that got there, and "
         "(seeds that got there / seeds); ✗ = no seed got there, with the median final value. "
-        "pycma on 1 fixed context: episodes until the regret at that single context met the target. "
+        "pycma on 1 fixed context: episodes until the regret at that single context met the target, at "
+        "pycma's default population 4 + floor(3 ln p) or at N = samples. "
         "Regression baseline: total episodes of the independent CMA-ES runs, the resulting mean test "
         "regret (mean f) and how many seeds met the target.",
         "",
@@ -128,7 +126,7 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
         "",
         claims(documents),
         "",
-        results_table(documents, args.functions, args.context_dims),
+        results_table(documents, args.functions, args.context_dims, args.methods),
         "## Figures",
         "",
         *[f"![{name}]({name})" for name in figures],

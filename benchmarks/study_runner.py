@@ -1,20 +1,24 @@
-"""How a study's command line becomes its report: run (or resume) the specs, render, update the READMEs.
+"""Running a study: its runs in a process pool, its command line, its report and the READMEs it updates.
 
-:func:`run_study` is what every study's ``main`` calls: it runs the specs through
-:func:`benchmarks.study_tools.run_all` with the study's baseline runners, writes the report from the cached
-documents, and updates the results index (``docs/results/README.md``) and the study README's generated block.
+:func:`run_study` is what every study's ``main`` calls: it runs the specs through :func:`run_all` (cached runs
+are read, the others computed by :func:`benchmarks.study_tools.execute` with the study's baseline runners),
+writes the report from the cached documents, and updates the results index (``docs/results/README.md``) and
+the study README's generated block.
 The helpers around it pick the methods a study can run (:func:`available_methods`), summarise a cell's runs
 (:func:`summarise`) and say what computed the report (:func:`command_flags`, :func:`timing_text`).
 """
 
 from __future__ import annotations
 
+import argparse
 import functools
 import json
 import os
+import shutil
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
@@ -26,16 +30,20 @@ from benchmarks.study_tools import (
     cached_result,
     execute,
     load_document,
-    run_all,
+    store_document,
     write_text,
 )
 from creps_gym.optimizers import optimizer_names
 
 __all__ = [
     "NEUTRAL_OPTIONS",
+    "add_mode_options",
+    "add_output_options",
     "available_methods",
     "command_flags",
     "invocation_timing",
+    "resolve_outputs",
+    "run_all",
     "run_study",
     "summarise",
     "timing_text",
@@ -43,12 +51,77 @@ __all__ = [
 ]
 
 
+def run_all(
+    specs: Iterable[RunSpec],
+    cache_dir: str | os.PathLike[str],
+    workers: int = 2,
+    worker: Callable[[RunSpec, Path], dict[str, Any]] = execute,
+    log: Callable[[str], None] = print,
+    compute: bool = True,
+) -> list[dict[str, Any]]:
+    """Results of the specs, in order: cached ones are read, the others computed in a process pool.
+
+    Parameters
+    ----------
+    specs : iterable of RunSpec
+    cache_dir : path-like
+        One ``<key>.json`` per run; created if missing.
+    workers : int
+        Processes (1 runs in this process, which is what the tests use).
+    worker : callable
+        ``(RunSpec, checkpoint_dir) -> result document`` (a module-level function, so the pool can send
+        it). ``checkpoint_dir`` is ``cache_dir/partial/<key>``; it is removed, with the same run's
+        checkpoints under other budgets, once the run's document is stored.
+    log : callable
+        Receives one progress line per computed run.
+    compute : bool
+        False: compute nothing and return only the cached results (to render a partial study).
+    """
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    cache = Path(cache_dir)
+    cache.mkdir(parents=True, exist_ok=True)
+    specs = list(specs)
+    results: dict[str, dict[str, Any]] = {}
+    todo = []
+    for spec in specs:
+        cached = cached_result(cache, spec)
+        if cached is not None:
+            results[spec.key] = cached
+        elif spec.key not in {s.key for s in todo}:
+            todo.append(spec)
+    if not compute:
+        log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} missing (not computed)")
+        return [results[spec.key] for spec in specs if spec.key in results]
+    log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} to compute with {workers} worker(s)")
+
+    partial = cache / "partial"
+
+    def done(spec: RunSpec, document: dict[str, Any], count: int) -> None:
+        store_document(cache / f"{spec.key}.json", document)
+        for stale in partial.glob(f"{spec.prefix}-b*-n{spec.samples}"):  # this run, under any budget
+            shutil.rmtree(stale, ignore_errors=True)
+        results[spec.key] = document
+        outcome = f"hit at {document['hit']}" if document["hit"] is not None else f"final {document['final']}"
+        log(f"[{count}/{len(todo)}] {spec.key}: {outcome} ({document['seconds']:.1f} s)")
+
+    if workers == 1:
+        for count, spec in enumerate(todo, 1):
+            done(spec, worker(spec, partial / spec.key), count)
+    elif todo:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(worker, spec, partial / spec.key): spec for spec in todo}
+            for count, future in enumerate(as_completed(futures), 1):
+                done(futures[future], future.result(), count)
+    return [results[spec.key] for spec in specs]
+
+
 def available_methods(
     methods: Iterable[str], baselines: Baselines, log: Callable[[str], None] = print
 ) -> list[str]:
     """The methods a study can run now: registered optimisers and ``baselines``; the others are skipped
     with a message (a study lists optimisers that may not be registered yet, e.g. ``c-cma-es``)."""
-    known = set(optimizer_names()) | set(baselines)
+    methods, known = list(methods), set(optimizer_names()) | set(baselines)
     for method in methods:
         if method not in known:
             log(f"skipped method {method!r}: not a registered optimiser (nor a baseline) in this version")
@@ -127,6 +200,35 @@ def timing_text(timing: dict[str, Any], documents: Sequence[dict[str, Any]]) -> 
     if len(documents) < expected:
         text += f" **Partial: {len(documents)} of {expected} runs have finished.**"
     return text
+
+
+def add_mode_options(parser: argparse.ArgumentParser, quick: str, full: str) -> None:
+    """``--quick``/``--full`` (into ``mode``), with their help texts."""
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument("--quick", action="store_const", dest="mode", const="quick", help=quick)
+    mode.add_argument("--full", action="store_const", dest="mode", const="full", help=full)
+
+
+def add_output_options(parser: argparse.ArgumentParser, study_dir: Path, out: str) -> None:
+    """Add ``--workers``, ``--render-only``, ``--cache`` (default ``study_dir/runs``) and ``--out`` (help
+    text ``out``)."""
+    parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    parser.add_argument(
+        "--render-only", action="store_true", help="compute nothing: render the runs already cached"
+    )
+    parser.add_argument("--cache", type=Path, default=study_dir / "runs", help="per-run JSON (committed)")
+    parser.add_argument("--out", type=Path, help=out)
+
+
+def resolve_outputs(
+    args: argparse.Namespace, argv: Sequence[str] | None, study_dir: Path, label: str
+) -> None:
+    """Set ``args.flags`` (see :func:`command_flags`), ``args.index`` (the results index, or None with
+    ``--out``) and ``args.out`` (default ``docs/results/<study>/<label>``)."""
+    results = study_dir.parents[1] / "docs" / "results"
+    args.flags = command_flags(argv, args.mode)
+    args.index = results / "README.md" if args.out is None else None
+    args.out = args.out or results / study_dir.name / label
 
 
 #: Options that change where or how fast a study runs, not its results, with their argument counts: the

@@ -318,7 +318,11 @@ def test_the_study_tools_import_no_baseline() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True
     )
     assert result.stdout.strip() == "False"
-    assert set(baselines.BASELINES) >= {"cma-fixed", "cma-regression"}
+    assert set(baselines.BASELINES) >= {"cma-fixed", "cma-fixed-batch", "cma-regression"}
+    spec = study_tools.RunSpec("Sphere", 2, 1, "cma-fixed", 0, 500)
+    with pytest.raises(ValueError, match="method: expected a registered optimiser"):
+        study_tools.execute(spec)  # without the mapping, study_tools knows no baseline
+    assert study_tools.execute(spec, baselines=baselines.BASELINES)["spec"]["method"] == "cma-fixed"
 
 
 def test_the_reported_command_leaves_out_what_does_not_change_the_results() -> None:

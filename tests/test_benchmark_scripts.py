@@ -83,7 +83,8 @@ def test_scaling_study_writes_heatmaps_and_marks_censored_cells(tmp_path: Path) 
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--functions", "Sphere", "Rosenbrock", "--dims", "2", "4", "--context-dims", "1", "2"]
     args += ["--seeds", "1", "--budget", "1500", "--workers", "1", "--cache", str(cache), "--out", str(out)]
-    _script("scaling", *args, "--baseline-dims", "2", "--extra-methods", as_module=True)
+    args += ["--baselines", "cma-fixed", "cma-regression", "--baseline-dims", "2", "--extra-methods"]
+    _script("scaling", *args, as_module=True)
     documents = _documents(cache)
     assert len(documents) == 2 * 2 * 2 + 2 * 2 * 2  # the grid + 2 baselines x 2 functions x 2 z at p = 2
     assert (out / "heatmaps.png").stat().st_size > 10_000 and (out / "baselines.png").stat().st_size > 10_000

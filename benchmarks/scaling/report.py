@@ -40,9 +40,14 @@ TITLES = {
     "ShiftedSchwefel": "Shifted Schwefel 1.2",
     "ShiftedRotatedElliptic": "Shifted rotated elliptic",
 }
-LEGEND_LABELS = {"cma-fixed": "pycma, 1 fixed context", "cma-regression": "indep. CMA-ES + regression"}
+LEGEND_LABELS = {
+    "cma-fixed": "pycma, 1 fixed context",
+    "cma-fixed-batch": "pycma, 1 fixed context, N = samples",
+    "cma-regression": "indep. CMA-ES + regression",
+}
 BASELINE_LABELS = {
     "cma-fixed": "pycma on one fixed context",
+    "cma-fixed-batch": "pycma on one fixed context, population = samples per iteration",
     "cma-regression": "independent CMA-ES on 2^z + 1 training contexts (5 for z = 1) + linear regression",
 }
 
@@ -191,7 +196,12 @@ def plot_baselines(documents: Sequence[dict[str, Any]], args: argparse.Namespace
     figure = Figure(figsize=(4.2 * len(args.functions), 4.0), layout="constrained")
     axes = figure.subplots(1, len(args.functions), squeeze=False)[0]
     colours = matplotlib.colormaps["viridis"](np.linspace(0.0, 0.85, len(args.baseline_dims)))
-    styles = {METHOD: ("-", "o"), "cma-regression": ("--", "s"), "cma-fixed": (":", "^")}
+    styles = {
+        METHOD: ("-", "o"),
+        "cma-regression": ("--", "s"),
+        "cma-fixed": (":", "^"),
+        "cma-fixed-batch": ("-.", "v"),
+    }
     for axis, name in zip(axes, args.functions, strict=True):
         for method in (METHOD, *args.baselines):
             cells = grid(documents, name, args, method, args.baseline_dims)
@@ -228,7 +238,8 @@ def baseline_lines(documents: Sequence[dict[str, Any]], args: argparse.Namespace
         "",
         "Same test contexts, initial distribution and episode budget as the grid "
         "(`benchmarks/baselines.py`). pycma on one fixed context: episodes until the regret at that one "
-        "context met 1e-5 (the cost of a single task). Regression: the K = 2^z + 1 (5 for z = 1) "
+        "context met 1e-5 (the cost of a single task), at pycma's default population 4 + floor(3 ln p) "
+        "and at the grid's samples per iteration. Regression: the K = 2^z + 1 (5 for z = 1) "
         "independent CMA-ES runs, each given budget/K episodes, then least squares from [1, s] to θ; the "
         "total episodes of those runs and the mean test regret of the fitted map (✗: a seed missed 1e-5).",
         "",

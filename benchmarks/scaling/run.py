@@ -71,7 +71,7 @@ PRESETS = {
         "baseline_dims": (2, 4, 8, 16),
     },
 }
-BASELINE_NAMES = ("cma-fixed", "cma-regression")
+BASELINE_NAMES = ("cma-fixed", "cma-fixed-batch", "cma-regression")
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:

@@ -18,17 +18,17 @@ import json
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym.envs.functions import SPECS
 from creps_gym.envs.functions.specs import UNBOUNDED_TARGET
 from creps_gym.optimizers import optimizer_names
+from creps_gym.optimizers.registry import optimizer_class
 from creps_gym.runner import default_initial_distribution, resume, run
 
 __all__ = [
@@ -161,11 +161,16 @@ class RunSpec:
         return {"dim": self.dim, "context_dim": self.context_dim, "instance": self.seed}
 
 
-def initial_distribution(spec: RunSpec, action_space: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Initial mean and standard deviations (p,) of a run: the runner's default for ``"centre"``; for
-    ``"uniform5"`` a mean drawn from U[-5, 5]^p (the fourth child of the seed's ``SeedSequence``, the runner's
-    stream for initial means) and σ0 = 1."""
+def initial_distribution(
+    spec: RunSpec, action_space: Any = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Initial mean and standard deviations (p,) of a run: for ``"centre"`` the runner's default, the centre
+    and a quarter of the width of ``action_space`` (the env's, required then); for ``"uniform5"`` a mean drawn
+    from U[-5, 5]^p (the fourth child of the seed's ``SeedSequence``, the runner's stream for initial means)
+    and σ0 = 1."""
     if spec.initial == "centre":
+        if action_space is None:
+            raise ValueError("action_space: expected the env's action space for initial 'centre', got None")
         return default_initial_distribution(action_space)
     stream = np.random.SeedSequence(spec.seed).spawn(4)[3]
     return np.random.default_rng(stream).uniform(-5.0, 5.0, spec.dim), np.ones(spec.dim)
@@ -257,9 +262,8 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
             options["max_interpolation"] = spec.max_interpolation
         if not spec.divide_by_z:
             options["divide_by_z"] = False
-        if spec.initial != "centre":
-            space = gym.make(spec.env_id, **spec.env_kwargs).action_space
-            mean, std = initial_distribution(spec, space)
+        if spec.initial != "centre":  # else the runner's default, the same
+            mean, std = initial_distribution(spec)
             start = {"initial_mean": mean.tolist(), "initial_std": std.tolist()}
         history = run(
             spec.method,
@@ -286,10 +290,6 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
 
 def _has_option(method: str, option: str) -> bool:
     """Whether the registered optimiser ``method`` has a config field ``option`` (CREPS and its variants)."""
-    from dataclasses import fields
-
-    from creps_gym.optimizers.registry import optimizer_class
-
     config = getattr(optimizer_class(method), "config_class", None)
     return config is not None and option in {f.name for f in fields(config)}
 

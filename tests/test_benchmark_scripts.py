@@ -449,12 +449,16 @@ def test_ccmaes_columns_without_a_recommended_batch_size_are_skipped_with_a_mess
 
 def test_the_initial_distribution_and_test_contexts_of_a_spec_reach_every_method() -> None:
     spec = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-old", 4, 400, initial="uniform5", eval_contexts=100)
-    mean, std = study_tools.initial_distribution(spec, None)
-    again, _ = study_tools.initial_distribution(spec, None)
-    other, _ = study_tools.initial_distribution(dataclasses.replace(spec, seed=5), None)
+    mean, std = study_tools.initial_distribution(spec)
+    again, _ = study_tools.initial_distribution(spec)
+    other, _ = study_tools.initial_distribution(dataclasses.replace(spec, seed=5))
     assert np.all(np.abs(mean) <= 5.0) and np.array_equal(std, np.ones(3)) and np.array_equal(mean, again)
     assert not np.array_equal(mean, other)
     assert spec.key == "Sphere-p3-z1-creps-cma-old-e100-uniform5-s4-b400-n50"
+    with pytest.raises(ValueError, match="action_space: expected the env's action space"):
+        study_tools.initial_distribution(dataclasses.replace(spec, initial="centre"))
+    with pytest.raises(ValueError, match="initial: expected one of"):
+        dataclasses.replace(spec, initial="uniform")
     for method in ("creps-cma-old", "cma-fixed"):
         variants = [
             dataclasses.replace(spec, method=method, initial=initial, eval_contexts=contexts)

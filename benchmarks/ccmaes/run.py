@@ -171,7 +171,7 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
         f"the {EVAL_CONTEXTS} test contexts is <= 1e-5, a seed that never got there counting as infinitely "
         f"many (`>{args.budget:,}`: the median seed missed), and (seeds that got there / seeds). pycma on 1 "
         "context: episodes until the regret at that single context (the first test context) met 1e-5."
-        + (f" Not run (not registered in this version): {'; '.join(skipped)}." if skipped else ""),
+        + (f" Not run (not available in this version): {'; '.join(skipped)}." if skipped else ""),
         "",
         f"## Issue 12's targets ({args.headline_seeds} seed(s)){targets}",
         "",

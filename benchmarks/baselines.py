@@ -4,6 +4,7 @@
   4 + floor(3 ln p)) on **one** fixed context, the first of the run's test contexts. It measures the cost of
   solving a single task: the episodes until the regret at that context meets the paper's target (f <= -1e4
   for the functions unbounded below).
+* ``cma-fixed-batch``: the same with the population size of the contextual methods, ``spec.samples``.
 * ``cma-regression``: the naive contextual approach of the paper's related work. CMA-ES runs independently on
   K training contexts (z = 1: 5 points evenly spaced over [0, 3]; z > 1: the 2^z corners of [0, 3]^z and the
   centre), each until its own regret is at most a tenth of the target (f <= -1e4 for the unbounded ones) or
@@ -11,9 +12,10 @@
   solutions and evaluated, like the contextual methods, as the mean regret (or mean f) on the run's test
   contexts. The total episodes over the K runs are reported.
 
-Both use the runner's seed split (:func:`creps_gym.runner.split_seed`), so the test contexts and the initial
-search distribution (:func:`creps_gym.runner.default_initial_distribution`) are those of the paper methods'
-runs with the same seed. Only the public API is used.
+All use the runner's seed split (:func:`creps_gym.runner.split_seed`), so the test contexts
+(``spec.eval_contexts`` of them) and the initial search distribution
+(:func:`benchmarks.study_tools.initial_distribution`) are those of the contextual methods' runs with the same
+seed. Only the public API is used.
 """
 
 from __future__ import annotations
@@ -26,19 +28,15 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
-from study_tools import BASELINE_METHODS, RunSpec, function_spec, is_bounded, result_document
 
+from benchmarks.study_tools import RunSpec, function_spec, initial_distribution, is_bounded, result_document
 from creps_gym.envs.evaluation import contextual_model, test_contexts
 from creps_gym.optimizers import make_optimizer
-from creps_gym.runner import default_initial_distribution, split_seed
+from creps_gym.runner import split_seed
 
-__all__ = ["BASELINES", "fixed_context_cma", "run_baseline", "training_contexts"]
+__all__ = ["BASELINES", "fixed_context_cma", "training_contexts"]
 
 Array = NDArray[np.float64]
-#: Baseline method names (the ``method`` of a :class:`~study_tools.RunSpec`).
-BASELINES = BASELINE_METHODS
-#: Number of test contexts (the runner's default ``eval_contexts``).
-EVAL_CONTEXTS = 16
 
 
 def training_contexts(context_dim: int, low: float = 0.0, high: float = 3.0) -> Array:
@@ -55,7 +53,13 @@ def _metric(model: Any, bounded: bool, contexts: Array, params: Array) -> Array:
 
 
 def fixed_context_cma(
-    model: Any, context: Array, budget: int, seed: int, target: float
+    model: Any,
+    context: Array,
+    budget: int,
+    seed: int,
+    target: float,
+    start: tuple[Array, Array],
+    popsize: int | None = None,
 ) -> tuple[list[int], list[float], Array, str]:
     """CMA-ES on one context until the metric at it is <= ``target`` or the budget is spent.
 
@@ -69,6 +73,10 @@ def fixed_context_cma(
         Seed of the adapter.
     target : float
         Stop when the metric (regret, or f for unbounded functions) of the mean is at most this.
+    start : (ndarray, ndarray), shapes (p,) and (p,)
+        Initial mean and standard deviations.
+    popsize : int, optional
+        Population size (default: pycma's 4 + floor(3 ln p)).
 
     Returns
     -------
@@ -79,10 +87,10 @@ def fixed_context_cma(
     stop_reason : str
     """
     bounded = hasattr(model, "regret")
-    mean, std = default_initial_distribution(model.action_space)
+    mean, std = start
     p = model.param_dim
     optimizer = make_optimizer("cma", p, model.context_dim, seed, initial_mean=mean, initial_cov=std**2)
-    popsize = 4 + math.floor(3 * math.log(p))
+    popsize = popsize or 4 + math.floor(3 * math.log(p))
     contexts = np.repeat(context[None, :], popsize, axis=0)
     episodes: list[int] = []
     values: list[float] = []
@@ -105,23 +113,31 @@ def fixed_context_cma(
     return episodes, values, np.asarray(optimizer.recommend(contexts[:1]))[0], reason
 
 
-def _setup(spec: RunSpec) -> tuple[Any, Array, int]:
-    model = contextual_model(gym.make(spec.env_id, **spec.env_kwargs))
+def _setup(spec: RunSpec) -> tuple[Any, Array, int, tuple[Array, Array]]:
+    env = gym.make(spec.env_id, **spec.env_kwargs)
+    model = contextual_model(env)
     _, optimizer_seed, eval_seed = split_seed(spec.seed)
-    return model, test_contexts(model, EVAL_CONTEXTS, eval_seed), optimizer_seed
+    start = initial_distribution(spec, env.action_space)
+    return model, test_contexts(model, spec.eval_contexts, eval_seed), optimizer_seed, start
 
 
-def _fixed(spec: RunSpec) -> dict[str, Any]:
-    start = time.perf_counter()
-    model, tests, seed = _setup(spec)
+def _fixed(spec: RunSpec, popsize: int | None = None) -> dict[str, Any]:
+    clock = time.perf_counter()
+    model, tests, seed, start = _setup(spec)
     target = function_spec(spec.function).target
-    episodes, values, _, reason = fixed_context_cma(model, tests[0], spec.budget, seed, target)
-    return result_document(spec, episodes, values, reason, time.perf_counter() - start)
+    episodes, values, _, reason = fixed_context_cma(
+        model, tests[0], spec.budget, seed, target, start, popsize
+    )
+    return result_document(spec, episodes, values, reason, time.perf_counter() - clock)
+
+
+def _fixed_batch(spec: RunSpec) -> dict[str, Any]:
+    return _fixed(spec, popsize=spec.samples)
 
 
 def _regression(spec: RunSpec) -> dict[str, Any]:
-    start = time.perf_counter()
-    model, tests, seed = _setup(spec)
+    clock = time.perf_counter()
+    model, tests, seed, start = _setup(spec)
     bounded = is_bounded(spec.function)
     target = function_spec(spec.function).target
     per_context_target = target / 10.0 if bounded else target
@@ -131,7 +147,7 @@ def _regression(spec: RunSpec) -> dict[str, Any]:
     for context, context_seed in zip(train, seeds, strict=True):
         budget = spec.budget // len(train)
         episodes, values, params, _ = fixed_context_cma(
-            model, context, budget, int(context_seed), per_context_target
+            model, context, budget, int(context_seed), per_context_target, start
         )
         solutions.append(params)
         used += episodes[-1] if episodes else 0
@@ -145,16 +161,12 @@ def _regression(spec: RunSpec) -> dict[str, Any]:
         [used],
         [value],
         "regression",
-        time.perf_counter() - start,
+        time.perf_counter() - clock,
         training_contexts=len(train),
         contexts_solved=solved,
     )
 
 
-def run_baseline(spec: RunSpec) -> dict[str, Any]:
-    """Run a baseline spec (``spec.method`` in :data:`BASELINES`) and return its result document."""
-    if spec.method == "cma-fixed":
-        return _fixed(spec)
-    if spec.method == "cma-regression":
-        return _regression(spec)
-    raise ValueError(f"method: expected one of {list(BASELINES)}, got {spec.method!r}")
+#: The baselines' runners by method name (the ``method`` of a :class:`~benchmarks.study_tools.RunSpec`), as
+#: the studies pass them to :func:`benchmarks.study_tools.run_study`.
+BASELINES = {"cma-fixed": _fixed, "cma-fixed-batch": _fixed_batch, "cma-regression": _regression}

@@ -1,10 +1,11 @@
-"""Shared machinery of the paper-reproduction studies (``functions/``, ``scaling/``).
+"""Shared machinery of the studies (``functions/``, ``scaling/``, ``ccmaes/``): runs and their cache.
 
-One *run* is one (function, p, z, method, seed) with an episode budget. :func:`execute` runs it: the paper's
-methods (``creps``, ``creps-cma-old``, ``creps-cma-current``) through :func:`creps_gym.runner.run`, the
-baselines through :mod:`baselines`. Every run's result is a small JSON document cached on disk
-(:func:`run_all` skips runs whose file exists, so an interrupted study resumes) and computed in a process
-pool.
+One *run* is one (function, p, z, method, seed) with an episode budget. :func:`execute` runs it: a method
+that is a registered optimiser (the paper's ``creps``, ``creps-cma-old``, ``creps-cma-current``, or any other
+registry name) through :func:`creps_gym.runner.run`, a baseline through the runner the study passes in (a
+mapping from method name to a callable, e.g. :data:`benchmarks.baselines.BASELINES`: this module imports no
+baseline). Every run's result is a small JSON document cached on disk; :mod:`benchmarks.study_runner` skips
+runs whose file exists (an interrupted study resumes) and computes the others in a process pool.
 
 The metric is the paper's: the mean over a fixed set of test contexts of the regret of the mean policy, with
 the target 1e-5; for the functions unbounded below (Plane, the ridges) it is the mean of f, with the target
@@ -16,11 +17,8 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
-import time
-from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -29,42 +27,46 @@ from numpy.typing import NDArray
 
 from creps_gym.envs.functions import SPECS
 from creps_gym.envs.functions.specs import UNBOUNDED_TARGET
-from creps_gym.runner import resume, run
+from creps_gym.optimizers import optimizer_names
+from creps_gym.optimizers.registry import optimizer_class
+from creps_gym.runner import default_initial_distribution, resume, run
 
 __all__ = [
-    "BASELINE_METHODS",
     "CHECKPOINT_EVERY",
     "CURVE_POINTS",
     "DIVERGENCE_GROWTH",
     "EARLY_STOPS",
+    "INITIALS",
     "MAX_CHECKPOINTS",
     "PAPER_METHODS",
+    "Baselines",
     "RunSpec",
     "cached_result",
+    "curve_indices",
     "ended_early",
     "execute",
     "function_spec",
-    "invocation_timing",
+    "initial_distribution",
     "is_bounded",
-    "run_all",
-    "summarise",
-    "timing_text",
-    "update_block",
+    "load_document",
+    "result_document",
+    "store_document",
+    "write_text",
 ]
 
 #: The paper's three algorithms (registry names).
 PAPER_METHODS = ("creps", "creps-cma-old", "creps-cma-current")
-#: The baselines of :mod:`baselines`.
-BASELINE_METHODS = ("cma-fixed", "cma-regression")
 #: Maximum number of curve points stored per run.
 CURVE_POINTS = 300
-#: Fewest iterations between the checkpoints of a run computed by :func:`run_all` (seconds of work at p = 64).
+#: Fewest iterations between the checkpoints of a run computed by ``run_all`` (seconds of work at p = 64).
 CHECKPOINT_EVERY = 2000
 #: Most checkpoints per run: each one rewrites the run's history, so a fixed interval would cost O(n²).
 MAX_CHECKPOINTS = 20
 #: A run of a paper method stops as diverged once √λ_max(Σ) exceeds this multiple of its initial value (the
 #: optimiser's ``max_std_growth``); converging runs stay within a few times the initial value.
 DIVERGENCE_GROWTH = 1000.0
+#: Initial search distributions of a run (see :func:`initial_distribution`).
+INITIALS = ("centre", "uniform5")
 #: Stop reasons of a run that ended before its budget ran out (besides the optimiser's ``"optimizer: ..."``).
 EARLY_STOPS = ("target_regret", "callback", "target")
 
@@ -80,18 +82,24 @@ class RunSpec:
     dim, context_dim : int
         p and z.
     method : str
-        A name of :data:`PAPER_METHODS`, ``"cma-fixed"`` or ``"cma-regression"`` (see :mod:`baselines`).
+        A registered optimiser's name (run through the runner) or a baseline's name (run by the callable the
+        study passes to :func:`execute`, see :mod:`benchmarks.baselines`).
     seed : int
         Master seed of the run; the function instance (A, shift, rotation) is ``instance = seed``.
     budget : int
         Maximum number of training episodes.
     samples : int
-        Episodes per iteration of the paper's methods.
+        Episodes per iteration (batch size N) of a registered optimiser, and of ``cma-fixed-batch``.
     max_interpolation : float
         CREPS-CMA's cap of λ (1: Eq. (14) as published). Since φ_eff <= N, a cap >= samples / dim² never
         binds: such a spec *is* the uncapped run and shares its key.
     divide_by_z : bool
         CREPS-CMA's ``divide_by_z`` (True: Eqs. (12) and (15) as published).
+    eval_contexts : int
+        Number of fixed test contexts of the metric (the runner's ``eval_contexts``).
+    initial : str
+        Initial search distribution (see :func:`initial_distribution`): ``"centre"`` (the runner's default)
+        or ``"uniform5"`` (mean U[-5, 5]^p drawn from the seed, the same for every context, σ0 = 1).
     """
 
     function: str
@@ -103,14 +111,17 @@ class RunSpec:
     samples: int = 50
     max_interpolation: float = 1.0
     divide_by_z: bool = True
+    eval_contexts: int = 16
+    initial: str = "centre"
 
     def __post_init__(self) -> None:
         function_spec(self.function)  # raises for an unknown function
-        if self.method not in (*PAPER_METHODS, *BASELINE_METHODS):
-            raise ValueError(
-                f"method: expected one of {[*PAPER_METHODS, *BASELINE_METHODS]}, got {self.method!r}"
-            )
+        if not isinstance(self.method, str) or not self.method.replace("-", "").isalnum():
+            raise ValueError(f"method: expected a name of letters, digits and '-', got {self.method!r}")
+        if self.initial not in INITIALS:
+            raise ValueError(f"initial: expected one of {list(INITIALS)}, got {self.initial!r}")
         minimum = {"dim": 2, "context_dim": 1, "seed": 0, "samples": 2, "budget": self.samples}
+        minimum["eval_contexts"] = 1
         for name, low in minimum.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
@@ -130,6 +141,8 @@ class RunSpec:
         """The key without the budget: the runs that differ only in their budget share it."""
         cap = "" if self.max_interpolation == 1.0 else f"-cap{self.max_interpolation!r}"
         cap += "" if self.divide_by_z else "-noz"
+        cap += "" if self.eval_contexts == 16 else f"-e{self.eval_contexts}"
+        cap += "" if self.initial == "centre" else f"-{self.initial}"
         return f"{self.function}-p{self.dim}-z{self.context_dim}-{self.method}{cap}-s{self.seed}"
 
     @property
@@ -146,6 +159,21 @@ class RunSpec:
     def env_kwargs(self) -> dict[str, int]:
         """``gymnasium.make`` keyword arguments."""
         return {"dim": self.dim, "context_dim": self.context_dim, "instance": self.seed}
+
+
+def initial_distribution(
+    spec: RunSpec, action_space: Any = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Initial mean and standard deviations (p,) of a run: for ``"centre"`` the runner's default, the centre
+    and a quarter of the width of ``action_space`` (the env's, required then); for ``"uniform5"`` a mean drawn
+    from U[-5, 5]^p (the fourth child of the seed's ``SeedSequence``, the runner's stream for initial means)
+    and σ0 = 1."""
+    if spec.initial == "centre":
+        if action_space is None:
+            raise ValueError("action_space: expected the env's action space for initial 'centre', got None")
+        return default_initial_distribution(action_space)
+    stream = np.random.SeedSequence(spec.seed).spawn(4)[3]
+    return np.random.default_rng(stream).uniform(-5.0, 5.0, spec.dim), np.ones(spec.dim)
 
 
 def function_spec(name: str) -> Any:
@@ -211,13 +239,14 @@ def _reached_f_target(record: Any, history: Any) -> bool:
     return bool(-record.eval_return <= UNBOUNDED_TARGET)
 
 
-def paper_method_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[str, Any]:
-    """Run one of the paper's methods through the runner and return its result document.
+def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[str, Any]:
+    """Run a registered optimiser (``spec.method``) through the runner and return its result document.
 
     Episodes run on the functions' native vector env (bit-identical to one env per episode, and about
-    twice as fast); the optimiser stops a diverging run (:data:`DIVERGENCE_GROWTH`). With ``checkpoint_dir``,
-    the run checkpoints there (at most :data:`MAX_CHECKPOINTS` times, at least :data:`CHECKPOINT_EVERY`
-    iterations apart) and a run interrupted earlier continues from its last checkpoint instead of restarting.
+    twice as fast); an optimiser with a ``max_std_growth`` option stops a diverging run
+    (:data:`DIVERGENCE_GROWTH`). With ``checkpoint_dir``, the run checkpoints there (at most
+    :data:`MAX_CHECKPOINTS` times, at least :data:`CHECKPOINT_EVERY` iterations apart) and a run interrupted
+    earlier continues from its last checkpoint instead of restarting.
     """
     bounded = is_bounded(spec.function)
     callbacks = () if bounded else (_reached_f_target,)
@@ -225,11 +254,17 @@ def paper_method_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> di
         history = resume(checkpoint_dir, callbacks=callbacks)
     else:
         iterations = max(1, spec.budget // spec.samples)
-        options: dict[str, Any] = {"max_std_growth": DIVERGENCE_GROWTH}
+        options: dict[str, Any] = {}
+        start: dict[str, Any] = {}
+        if _has_option(spec.method, "max_std_growth"):
+            options["max_std_growth"] = DIVERGENCE_GROWTH
         if spec.max_interpolation < 1.0:
             options["max_interpolation"] = spec.max_interpolation
         if not spec.divide_by_z:
             options["divide_by_z"] = False
+        if spec.initial != "centre":  # else the runner's default, the same
+            mean, std = initial_distribution(spec)
+            start = {"initial_mean": mean.tolist(), "initial_std": std.tolist()}
         history = run(
             spec.method,
             spec.env_id,
@@ -241,27 +276,47 @@ def paper_method_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> di
             target_regret=function_spec(spec.function).target if bounded else None,
             callbacks=callbacks,
             eval_every=1,
+            eval_contexts=spec.eval_contexts,
             backend="vector",
             vector_mode="native",
             run_dir=checkpoint_dir,
             checkpoint_every=max(CHECKPOINT_EVERY, iterations // MAX_CHECKPOINTS),
+            **start,
         )
     values = history.column("eval_regret") if bounded else -history.column("eval_return")
     seconds = history.records[-1].wall_time if history.records else 0.0  # summed over resumes
     return result_document(spec, history.column("episodes"), values, history.stop_reason, seconds)
 
 
-def execute(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[str, Any]:
-    """Run one spec (a paper method or a baseline) and return its result document.
+def _has_option(method: str, option: str) -> bool:
+    """Whether the registered optimiser ``method`` has a config field ``option`` (CREPS and its variants)."""
+    config = getattr(optimizer_class(method), "config_class", None)
+    return config is not None and option in {f.name for f in fields(config)}
 
-    ``checkpoint_dir`` makes a paper method's run resumable (see :func:`paper_method_result`); the
+
+#: Baseline runners: method name -> ``f(spec) -> result document`` (module-level functions, so a process
+#: pool can send them).
+Baselines = Mapping[str, Callable[[RunSpec], dict[str, Any]]]
+
+
+def execute(
+    spec: RunSpec, checkpoint_dir: Path | None = None, baselines: Baselines | None = None
+) -> dict[str, Any]:
+    """Run one spec and return its result document.
+
+    ``spec.method`` is looked up first in ``baselines`` (name -> runner), then in the optimiser registry.
+    ``checkpoint_dir`` makes a registered optimiser's run resumable (see :func:`optimizer_result`); the
     baselines are short and ignore it.
     """
-    if spec.method in PAPER_METHODS:
-        return paper_method_result(spec, checkpoint_dir)
-    import baselines  # the sibling module; run.py scripts put benchmarks/ on sys.path
-
-    return baselines.run_baseline(spec)
+    baselines = baselines or {}
+    if spec.method in baselines:
+        return baselines[spec.method](spec)
+    if spec.method in optimizer_names():
+        return optimizer_result(spec, checkpoint_dir)
+    raise ValueError(
+        f"method: expected a registered optimiser {optimizer_names()} or a baseline {sorted(baselines)}, "
+        f"got {spec.method!r}"
+    )
 
 
 def cached_result(cache: Path, spec: RunSpec) -> dict[str, Any] | None:
@@ -271,11 +326,11 @@ def cached_result(cache: Path, spec: RunSpec) -> dict[str, Any] | None:
     budget ran out (it met the target, or the optimiser stopped) is the same run under any larger budget.
     Raising the budget of a study therefore recomputes only its censored runs.
     """
-    exact = _load(cache / f"{spec.key}.json")
+    exact = load_document(cache / f"{spec.key}.json")
     if exact is not None:
         return exact
     for path in sorted(cache.glob(f"{spec.prefix}-b*-n{spec.samples}.json")):
-        document = _load(path)
+        document = load_document(path)
         if document is not None and document["spec"]["budget"] <= spec.budget and ended_early(document):
             return document
     return None
@@ -283,212 +338,27 @@ def cached_result(cache: Path, spec: RunSpec) -> dict[str, Any] | None:
 
 def ended_early(document: dict[str, Any]) -> bool:
     """Whether a run's document would be the same under any larger budget: it met its target or its
-    optimiser stopped. Never for ``cma-regression``, whose per-context share of the budget depends on it."""
-    if document["spec"]["method"] == "cma-regression":
-        return False
+    optimiser stopped (its stop reason is in :data:`EARLY_STOPS` or starts with ``optimizer``). A baseline
+    whose result depends on the budget reports another stop reason (``cma-regression``: ``"regression"``)."""
     reason = str(document["stop_reason"])
     return reason in EARLY_STOPS or reason.startswith("optimizer")
 
 
-def _load(path: Path) -> dict[str, Any] | None:
+def load_document(path: Path) -> dict[str, Any] | None:
+    """The JSON document at ``path``, or None if it is missing or partly written."""
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError):
         return None  # missing or a partial write: recompute
 
 
-def _store(path: Path, document: dict[str, Any]) -> None:
-    _write_text(path, json.dumps(document, allow_nan=False) + "\n")
+def store_document(path: Path, document: dict[str, Any]) -> None:
+    """Write a run's document to ``path`` (JSON, atomically)."""
+    write_text(path, json.dumps(document, allow_nan=False) + "\n")
 
 
-def run_all(
-    specs: Iterable[RunSpec],
-    cache_dir: str | os.PathLike[str],
-    workers: int = 2,
-    worker: Callable[[RunSpec, Path], dict[str, Any]] = execute,
-    log: Callable[[str], None] = print,
-    compute: bool = True,
-) -> list[dict[str, Any]]:
-    """Results of the specs, in order: cached ones are read, the others computed in a process pool.
-
-    Parameters
-    ----------
-    specs : iterable of RunSpec
-    cache_dir : path-like
-        One ``<key>.json`` per run; created if missing.
-    workers : int
-        Processes (1 runs in this process, which is what the tests use).
-    worker : callable
-        ``(RunSpec, checkpoint_dir) -> result document`` (a module-level function, so the pool can send
-        it). ``checkpoint_dir`` is ``cache_dir/partial/<key>``; it is removed, with the same run's
-        checkpoints under other budgets, once the run's document is stored.
-    log : callable
-        Receives one progress line per computed run.
-    compute : bool
-        False: compute nothing and return only the cached results (to render a partial study).
-    """
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
-    cache = Path(cache_dir)
-    cache.mkdir(parents=True, exist_ok=True)
-    specs = list(specs)
-    results: dict[str, dict[str, Any]] = {}
-    todo = []
-    for spec in specs:
-        cached = cached_result(cache, spec)
-        if cached is not None:
-            results[spec.key] = cached
-        elif spec.key not in {s.key for s in todo}:
-            todo.append(spec)
-    if not compute:
-        log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} missing (not computed)")
-        return [results[spec.key] for spec in specs if spec.key in results]
-    log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} to compute with {workers} worker(s)")
-
-    partial = cache / "partial"
-
-    def done(spec: RunSpec, document: dict[str, Any], count: int) -> None:
-        _store(cache / f"{spec.key}.json", document)
-        for stale in partial.glob(f"{spec.prefix}-b*-n{spec.samples}"):  # this run, under any budget
-            shutil.rmtree(stale, ignore_errors=True)
-        results[spec.key] = document
-        outcome = f"hit at {document['hit']}" if document["hit"] is not None else f"final {document['final']}"
-        log(f"[{count}/{len(todo)}] {spec.key}: {outcome} ({document['seconds']:.1f} s)")
-
-    if workers == 1:
-        for count, spec in enumerate(todo, 1):
-            done(spec, worker(spec, partial / spec.key), count)
-    elif todo:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(worker, spec, partial / spec.key): spec for spec in todo}
-            for count, future in enumerate(as_completed(futures), 1):
-                done(futures[future], future.result(), count)
-    return [results[spec.key] for spec in specs]
-
-
-def summarise(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Median episodes to the target over the runs that hit it, how many hit it, and the median final value.
-
-    Returns
-    -------
-    dict
-        ``hits`` (int), ``runs`` (int), ``median_hit`` (float or None), ``median_final`` (float or None),
-        ``median_total`` (median episodes used).
-    """
-    hits = [d["hit"] for d in documents if d["hit"] is not None]
-    finals = [d["final"] for d in documents if d["final"] is not None]
-    return {
-        "hits": len(hits),
-        "runs": len(documents),
-        "median_hit": float(np.median(hits)) if hits else None,
-        "median_final": float(np.median(finals)) if finals else None,
-        "median_total": float(np.median([d["total_episodes"] for d in documents])) if documents else None,
-    }
-
-
-def update_block(path: str | os.PathLike[str], name: str, text: str) -> Path:
-    """Replace the text between ``<!-- name -->`` and ``<!-- /name -->`` in a Markdown file.
-
-    The block is appended (with its markers) when the file lacks it; the file is created if missing.
-    """
-    path = Path(path)
-    start, end = f"<!-- {name} -->", f"<!-- /{name} -->"
-    old = path.read_text(encoding="utf-8") if path.exists() else ""
-    block = f"{start}\n{text.strip()}\n{end}"
-    if start in old and end in old:
-        head, _, rest = old.partition(start)
-        _, _, tail = rest.partition(end)
-        new = head + block + tail
-    else:
-        new = old.rstrip("\n") + ("\n\n" if old else "") + block + "\n"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _write_text(path, new)
-    return path
-
-
-def _write_text(path: Path, text: str) -> None:
+def write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (a temporary file, then renamed)."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
-
-
-def invocation_timing(out: str | os.PathLike[str], wall: float, computed: int, total: int) -> dict[str, Any]:
-    """Wall time of the last invocation that computed runs, kept in ``out/timing.json``.
-
-    An invocation that only reads the cache (to re-render) keeps the stored timing, so the reports always
-    state how long the computation took.
-    """
-    path = Path(out) / "timing.json"
-    stored = _load(path) if computed == 0 else None
-    if stored is not None:
-        return {**stored, "expected": total}  # this invocation's run count, for the completeness check
-    timing = {"wall_seconds": round(wall, 1), "computed": computed, "total": total, "cores": os.cpu_count()}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _write_text(path, json.dumps(timing) + "\n")
-    return timing
-
-
-def timing_text(timing: dict[str, Any], documents: Sequence[dict[str, Any]]) -> str:
-    """Markdown on the time taken and on how complete the study is (see :func:`invocation_timing`)."""
-    cpu = sum(d["seconds"] for d in documents)
-    if timing["computed"]:
-        text = (
-            f"Time taken: {timing['wall_seconds']:.0f} s wall on {timing['cores']} cores for the last "
-            f"invocation that computed runs ({timing['computed']} of {timing['total']} runs computed, the "
-            "others read from the cache)"
-        )
-    else:
-        text = "Rendered from cached runs only (no invocation that computed runs has finished)"
-    text += f"; per-run times summed over the {len(documents)} runs shown: {cpu:.0f} s."
-    expected = timing.get("expected", timing["total"])
-    if len(documents) < expected:
-        text += f" **Partial: {len(documents)} of {expected} runs have finished.**"
-    return text
-
-
-def run_study(
-    args: Any,
-    specs: Sequence[RunSpec],
-    write_report: Callable[[Any, list[dict[str, Any]], dict[str, Any]], Path],
-    *,
-    title: str,
-    script: str,
-    figures_marker: str,
-    readme: Path,
-) -> int:
-    """Run (or resume) ``specs``, write the report, and update the results index and the study README.
-
-    ``title`` names the study in the index (e.g. "Function study"), ``script`` is its command's path,
-    ``figures_marker`` is the line where the generated table's figures start (the README gets the text
-    above it), and ``readme`` is the study README with a generated ``results-<mode>`` block.
-    """
-    start = time.perf_counter()
-    cached_before = sum(cached_result(args.cache, spec) is not None for spec in specs)
-    documents = run_all(specs, args.cache, workers=args.workers, compute=not args.render_only)
-    if not documents:
-        print(f"no cached runs in {args.cache}: nothing to render")
-        return 1
-    wall = time.perf_counter() - start
-    computed = 0 if args.render_only else len(specs) - cached_before
-    timing = invocation_timing(args.out, wall, computed, len(specs))
-    table = write_report(args, documents, timing)
-    print(f"wrote {table} and its figures in {wall:.0f} s")
-    if args.index is not None:
-        relative = table.relative_to(args.index.parent)
-        how = (
-            f"{timing['wall_seconds']:.0f} s wall on {timing['cores']} cores ({timing['computed']} runs "
-            "computed, the others cached)."
-            if timing["computed"]
-            else "rendered from the cached runs (the computing invocation has not finished)."
-        )
-        label = getattr(args, "label", args.mode)  # a variant of a mode, e.g. "full-cap0.2"
-        flags = getattr(args, "flags", f"--{args.mode}")
-        update_block(
-            args.index,
-            f"{Path(script).parent.name}-{label}",
-            f"- {title}, {label}: [{relative}]({relative}); command "
-            f"`python {script} {flags}`: {len(documents)} of {len(specs)} runs, {how}",
-        )
-        body = table.read_text(encoding="utf-8").split(figures_marker)[0].split("\n", 1)[1]
-        update_block(readme, f"results-{label}", body)
-    return 0

@@ -1,14 +1,18 @@
 """Smoke tests of the paper-reproduction studies (``benchmarks/functions``, ``benchmarks/scaling``).
 
-The scripts run as users run them (a subprocess) on tiny configurations into a temporary directory; the tests
-check that the tables and figures appear, that the tables are computed from the cached run results, and that
-cached runs are not recomputed (the studies resume).
+The scripts run as users run them (a subprocess, by path or with ``python -m``) on tiny configurations into a
+temporary directory; the tests check that the tables and figures appear, that the tables are computed from
+the cached run results, and that cached runs are not recomputed (the studies resume). The committed
+renderings under ``docs/results/`` must be what ``--render-only`` draws from the committed run caches.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import importlib
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -19,20 +23,24 @@ import pytest
 pytest.importorskip("matplotlib")
 pytest.importorskip("cma")
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
-sys.path.insert(0, str(BENCHMARKS))
+# The repository root is on sys.path (pyproject.toml: pytest's `pythonpath`), as for `python -m pytest`.
+from benchmarks import baselines, study_runner, study_tools
 
-import baselines  # noqa: E402
-import study_tools  # noqa: E402
+REPO = Path(__file__).resolve().parents[1]
+BENCHMARKS = REPO / "benchmarks"
+with_baselines = functools.partial(study_tools.execute, baselines=baselines.BASELINES)
 
 
-def _script(study: str, *args: str) -> str:
+def _script(study: str, *args: str, as_module: bool = False) -> str:
+    """Run a study's script from the repository root, by path or as ``python -m benchmarks.<study>.run``."""
+    command = ["-m", f"benchmarks.{study}.run"] if as_module else [str(BENCHMARKS / study / "run.py")]
     result = subprocess.run(
-        [sys.executable, str(BENCHMARKS / study / "run.py"), *args],
+        [sys.executable, *command, *args],
         capture_output=True,
         text=True,
         timeout=120,
         check=False,
+        cwd=REPO,
     )
     assert result.returncode == 0, result.stderr
     return result.stdout
@@ -45,11 +53,13 @@ def _documents(cache: Path) -> dict[str, dict]:
 def test_functions_study_writes_table_and_figures_from_its_cached_runs(tmp_path: Path) -> None:
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--functions", "Sphere", "Plane", "--context-dims", "1", "--seeds", "1", "--dim", "4"]
+    args += ["--methods", "creps", "creps-cma-old", "creps-cma-current"]
+    args += ["cma-fixed", "cma-fixed-batch", "cma-regression"]  # not issue 12's, which may be registered
     args += ["--budget", "3000", "--workers", "1", "--cache", str(cache), "--out", str(out)]
     log = _script("functions", *args)
     assert "0 runs cached" in log
     documents = _documents(cache)
-    assert len(documents) == 2 * 5  # 2 functions x 5 methods (3 paper methods + 2 baselines)
+    assert len(documents) == 2 * 6  # 2 functions x 6 methods (3 paper methods + 3 baselines)
     assert (out / "Sphere.png").stat().st_size > 10_000 and (out / "Plane.png").stat().st_size > 10_000
     table = (out / "results.md").read_text()
     fixed = documents["Sphere-p4-z1-cma-fixed-s0-b3000-n50"]
@@ -60,20 +70,21 @@ def test_functions_study_writes_table_and_figures_from_its_cached_runs(tmp_path:
     tampered = dict(documents[key], hit=1234567, final=1e-9)
     (cache / f"{key}.json").write_text(json.dumps(tampered))
     log = _script("functions", *args)
-    assert "10 runs cached" in log and "0 to compute" in log
+    assert "12 runs cached" in log and "0 to compute" in log
     assert "1,234,567 (1/1)" in (out / "results.md").read_text()
     # A partial study renders what has finished, computing nothing.
     (cache / f"{key}.json").unlink()
     _script("functions", *args, "--render-only")
-    assert len(list(cache.glob("*.json"))) == 9
-    assert "Partial: 9 of 10 runs have finished." in (out / "results.md").read_text()
+    assert len(list(cache.glob("*.json"))) == 11
+    assert "Partial: 11 of 12 runs have finished." in (out / "results.md").read_text()
 
 
 def test_scaling_study_writes_heatmaps_and_marks_censored_cells(tmp_path: Path) -> None:
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--functions", "Sphere", "Rosenbrock", "--dims", "2", "4", "--context-dims", "1", "2"]
     args += ["--seeds", "1", "--budget", "1500", "--workers", "1", "--cache", str(cache), "--out", str(out)]
-    _script("scaling", *args, "--baseline-dims", "2")
+    args += ["--baselines", "cma-fixed", "cma-regression", "--baseline-dims", "2", "--extra-methods"]
+    _script("scaling", *args, as_module=True)
     documents = _documents(cache)
     assert len(documents) == 2 * 2 * 2 + 2 * 2 * 2  # the grid + 2 baselines x 2 functions x 2 z at p = 2
     assert (out / "heatmaps.png").stat().st_size > 10_000 and (out / "baselines.png").stat().st_size > 10_000
@@ -135,9 +146,9 @@ def test_curve_indices_thin_long_curves_but_keep_both_ends() -> None:
 def test_update_block_replaces_only_its_block(tmp_path: Path) -> None:
     path = tmp_path / "README.md"
     path.write_text("# Results\n\nkept\n")
-    study_tools.update_block(path, "a", "first")
-    study_tools.update_block(path, "b", "other")
-    study_tools.update_block(path, "a", "second")
+    study_runner.update_block(path, "a", "first")
+    study_runner.update_block(path, "b", "other")
+    study_runner.update_block(path, "a", "second")
     text = path.read_text()
     assert text.startswith("# Results\n\nkept\n")
     assert "second" in text and "first" not in text and "other" in text
@@ -155,21 +166,25 @@ def test_regression_baseline_training_contexts_span_the_box() -> None:
 def test_unknown_function_or_baseline_is_rejected() -> None:
     with pytest.raises(ValueError, match="function: expected one of"):
         study_tools.function_spec("Nope")
-    with pytest.raises(ValueError, match="method: expected one of"):
-        study_tools.RunSpec("Sphere", 3, 1, "cma-nope", 0, 100)
-    with pytest.raises(ValueError, match="method: expected one of"):
-        baselines.run_baseline(study_tools.RunSpec("Sphere", 3, 1, "creps", 0, 100))
+    with pytest.raises(ValueError, match="method: expected a name of letters"):
+        study_tools.RunSpec("Sphere", 3, 1, "cma/nope", 0, 100)
+    unknown = study_tools.RunSpec("Sphere", 3, 1, "cma-nope", 0, 100)
+    with pytest.raises(ValueError, match=r"method: expected a registered optimiser .* or a baseline"):
+        study_tools.execute(unknown, baselines=baselines.BASELINES)
+    assert study_runner.available_methods(["creps", "cma-nope", "cma-fixed"], baselines.BASELINES, str) == [
+        "creps",
+        "cma-fixed",
+    ]
     with pytest.raises(ValueError, match="budget: expected an integer >= 50"):
         study_tools.RunSpec("Sphere", 3, 1, "creps", 0, 10)
     with pytest.raises(ValueError, match="dim: expected an integer >= 2"):
         study_tools.RunSpec("Sphere", 1, 1, "creps", 0, 100)
     with pytest.raises(ValueError, match="workers: expected"):
-        study_tools.run_all([], "/tmp/unused", workers=0)
+        study_runner.run_all([], "/tmp/unused", workers=0)
 
 
 def test_stalled_runs_are_those_that_missed_the_target_and_stopped_improving() -> None:
-    sys.path.insert(0, str(BENCHMARKS / "functions"))
-    import report
+    from benchmarks.functions import report
 
     spec = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-current", 0, 1000)
     episodes = [100, 200, 300, 400]
@@ -194,13 +209,13 @@ def test_a_larger_budget_recomputes_only_the_censored_runs(tmp_path: Path) -> No
     hit = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-old", 0, 3000)
     censored = study_tools.RunSpec("Rosenbrock", 4, 1, "creps-cma-old", 0, 500)
     calls: list[str] = []
-    first = study_tools.run_all([hit, censored], tmp_path, workers=1, worker=_count_calls(calls), log=str)
+    first = study_runner.run_all([hit, censored], tmp_path, workers=1, worker=_count_calls(calls), log=str)
     assert study_tools.ended_early(first[0]) and not study_tools.ended_early(first[1])
     larger = [
         study_tools.RunSpec(s.function, 3 if s is hit else 4, 1, s.method, 0, 6000) for s in (hit, censored)
     ]
     calls.clear()
-    second = study_tools.run_all(larger, tmp_path, workers=1, worker=_count_calls(calls), log=str)
+    second = study_runner.run_all(larger, tmp_path, workers=1, worker=_count_calls(calls), log=str)
     assert calls == [larger[1].key]  # the run that met its target is the same run under any larger budget
     assert second[0] is not None and second[0]["hit"] == first[0]["hit"]
     # ... and the rerun of a run that met its target under the larger budget is the cached document.
@@ -224,7 +239,7 @@ def test_an_interrupted_run_continues_from_its_checkpoint(tmp_path: Path, monkey
 
     monkeypatch.setattr(Runner, "step", interrupted_step)
     with pytest.raises(KeyboardInterrupt):
-        study_tools.run_all([spec], tmp_path, workers=1, log=str)
+        study_runner.run_all([spec], tmp_path, workers=1, log=str)
     partial = tmp_path / "partial" / spec.key
     assert (partial / "checkpoint.npz").exists() and not (tmp_path / f"{spec.key}.json").exists()
     calls.clear()
@@ -234,7 +249,7 @@ def test_an_interrupted_run_continues_from_its_checkpoint(tmp_path: Path, monkey
         return step(self, backend)
 
     monkeypatch.setattr(Runner, "step", counted_step)
-    (document,) = study_tools.run_all([spec], tmp_path, workers=1, log=str)
+    (document,) = study_runner.run_all([spec], tmp_path, workers=1, log=str)
     assert len(calls) == reference["total_episodes"] // 50 - 20  # continued after the checkpoint at 20
     assert not partial.exists()  # removed once the document is stored
     assert document["values"] == reference["values"] and document["hit"] == reference["hit"]
@@ -265,17 +280,14 @@ def test_a_cap_that_cannot_bind_is_the_uncapped_run() -> None:
 
 def test_a_regression_baseline_is_never_reused_for_another_budget(tmp_path: Path) -> None:
     small = study_tools.RunSpec("Sphere", 2, 1, "cma-regression", 0, 2000)
-    (document,) = study_tools.run_all([small], tmp_path, workers=1, log=str)
+    (document,) = study_runner.run_all([small], tmp_path, workers=1, worker=with_baselines, log=str)
     assert document["hit"] is not None and not study_tools.ended_early(document)
     assert study_tools.cached_result(tmp_path, dataclasses.replace(small, budget=4000)) is None
 
 
 def test_scaling_cells_say_why_every_seed_missed() -> None:
-    import importlib.util
-
-    module_spec = importlib.util.spec_from_file_location("scaling_run", BENCHMARKS / "scaling" / "run.py")
-    scaling = importlib.util.module_from_spec(module_spec)
-    module_spec.loader.exec_module(scaling)
+    from benchmarks.scaling import report as scaling
+    from benchmarks.scaling.run import parse_args
 
     def document(reason: str, final: float) -> dict:
         spec = {"function": "Sphere", "method": "creps-cma-old", "dim": 4, "context_dim": 1}
@@ -285,16 +297,200 @@ def test_scaling_cells_say_why_every_seed_missed() -> None:
     runs.append(document("iterations", 3.0))
     kinds = [scaling.missed_kind(d) for d in runs]
     assert kinds == ["diverged", "stopped", "censored"]
-    args = scaling.parse_args(["--quick", "--dims", "4", "--context-dims", "1"])
+    args = parse_args(["--quick", "--dims", "4", "--context-dims", "1"])
     (row,) = scaling.grid(runs, "Sphere", args)
     assert scaling.cell_text(row[0], 1000) == ">1,000 1 / diverged 1 / stopped 1, regret 3"
     (row,) = scaling.grid(runs[:1], "Sphere", args)
     assert scaling.cell_text(row[0], 1000) == "diverged, regret 1e+09"
 
 
-def test_a_render_of_a_larger_study_reports_it_partial(tmp_path: Path) -> None:
-    computed = study_tools.invocation_timing(tmp_path, wall=3.0, computed=5, total=5)
-    assert "Partial" not in study_tools.timing_text(computed, [{"seconds": 1.0}] * 5)
-    rendered = study_tools.invocation_timing(tmp_path, wall=0.1, computed=0, total=10)  # the study grew
-    text = study_tools.timing_text(rendered, [{"seconds": 1.0}] * 8)
+def test_a_render_of_a_larger_study_runners_it_partial(tmp_path: Path) -> None:
+    computed = study_runner.invocation_timing(tmp_path, wall=3.0, computed=5, total=5)
+    assert "Partial" not in study_runner.timing_text(computed, [{"seconds": 1.0}] * 5)
+    rendered = study_runner.invocation_timing(tmp_path, wall=0.1, computed=0, total=10)  # the study grew
+    text = study_runner.timing_text(rendered, [{"seconds": 1.0}] * 8)
     assert "3 s wall" in text and "**Partial: 8 of 10 runs have finished.**" in text
+
+
+def test_the_study_tools_import_no_baseline() -> None:
+    """The import circle baselines <-> study_tools is gone: the baselines are passed in as a mapping."""
+    code = "import sys, benchmarks.study_tools; print('benchmarks.baselines' in sys.modules)"
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True
+    )
+    assert result.stdout.strip() == "False"
+    assert set(baselines.BASELINES) >= {"cma-fixed", "cma-fixed-batch", "cma-regression"}
+    spec = study_tools.RunSpec("Sphere", 2, 1, "cma-fixed", 0, 500)
+    with pytest.raises(ValueError, match="method: expected a registered optimiser"):
+        study_tools.execute(spec)  # without the mapping, study_tools knows no baseline
+    assert study_tools.execute(spec, baselines=baselines.BASELINES)["spec"]["method"] == "cma-fixed"
+
+
+def test_the_reported_command_leaves_out_what_does_not_change_the_results() -> None:
+    flags = [
+        "--full",
+        "--workers",
+        "4",
+        "--no-z",
+        "--out=/tmp/x",
+        "--render-only",
+        "--cache",
+        "c",
+        "--seeds",
+        "2",
+    ]
+    assert study_runner.command_flags(flags, "full") == "--full --no-z --seeds 2"
+    assert study_runner.command_flags(["--render-only"], "quick") == "--quick"
+
+
+#: Every committed rendering under docs/results/ (study, the options that computed it).
+COMMITTED_RENDERINGS = [
+    ("functions", ["--quick"]),
+    ("functions", ["--full"]),
+    ("scaling", ["--quick"]),
+    ("scaling", ["--full"]),
+    ("scaling", ["--full", "--max-interpolation", "0.2", "--baselines"]),
+    ("scaling", ["--full", "--no-z", "--max-interpolation", "0.2", "--baselines"]),
+    ("ccmaes", ["--quick"]),
+    ("ccmaes", ["--full"]),
+]
+
+
+@pytest.mark.parametrize(
+    ("study", "flags"), COMMITTED_RENDERINGS, ids=lambda v: v if isinstance(v, str) else " ".join(v)
+)
+def test_committed_renderings_are_drawn_from_the_committed_runs(
+    study: str, flags: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--render-only`` on the committed run caches reproduces each committed table exactly (the figures,
+    which depend on the matplotlib version, are not drawn here)."""
+    module = importlib.import_module(f"benchmarks.{study}.run")
+    committed = module.parse_args(flags).out
+    if not (committed / "results.md").exists():
+        pytest.skip(f"{committed} is not rendered yet: python benchmarks/{study}/run.py {' '.join(flags)}")
+    for name in [n for n in dir(module) if n.startswith("plot_")]:
+        monkeypatch.setattr(module, name, lambda *args: Path(args[-1]))
+    shutil.copy(committed / "timing.json", tmp_path / "timing.json")  # the computing invocation's timing
+    assert module.main([*flags, "--render-only", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "results.md").read_text() == (committed / "results.md").read_text()
+
+
+def test_ccmaes_study_renders_its_targets_from_the_cached_runs(tmp_path: Path) -> None:
+    cache, out = tmp_path / "cache", tmp_path / "out"
+    args = ["--dim", "4", "--functions", "Sphere", "--context-dims", "1", "--seeds", "1", "--headline-seeds"]
+    args += ["2", "--columns", "creps-cma-old", "cma-fixed", "cma-fixed-batch", "--budget", "3000"]
+    args += ["--workers", "1", "--cache", str(cache), "--out", str(out)]
+    log = _script("ccmaes", *args)
+    assert "0 runs cached" in log
+    documents = _documents(cache)
+    # The headline columns (creps-cma-old, cma-fixed) have 2 seeds, the others 1; every run in the setting.
+    assert sorted(documents) == sorted(
+        f"Sphere-p4-z1-{method}-e100-uniform5-s{seed}-b3000-n50"
+        for method, seeds in (("creps-cma-old", 2), ("cma-fixed", 2), ("cma-fixed-batch", 1))
+        for seed in range(seeds)
+    )
+    assert (out / "curves.png").stat().st_size > 10_000
+    # Tamper with the cache: the rerun computes nothing, and the tables (targets too) follow the documents.
+    for seed, hit in ((0, 4000), (1, None)):
+        key = f"Sphere-p4-z1-creps-cma-old-e100-uniform5-s{seed}-b3000-n50"
+        (cache / f"{key}.json").write_text(json.dumps(dict(documents[key], hit=hit)))
+    for seed, hit in ((0, 900), (1, 1100)):
+        key = f"Sphere-p4-z1-cma-fixed-e100-uniform5-s{seed}-b3000-n50"
+        (cache / f"{key}.json").write_text(json.dumps(dict(documents[key], hit=hit)))
+    log = _script("ccmaes", *args, as_module=True)
+    assert "5 runs cached" in log and "0 to compute" in log
+    table = (out / "results.md").read_text()
+    row = next(line for line in table.splitlines() if line.startswith("| Sphere | 1 | "))
+    # median of (4000, missed) is censored; pycma's median 1000 sets the recommended-N bound at 2,000.
+    assert row.split(" | ")[2:9] == [">3,000 (1/2)", "–", "≤ 5,500", "–", "–", "1,000 (2/2)", "≤ 2,000"]
+
+
+def test_ccmaes_targets_are_computed_from_medians_with_missed_seeds_as_infinite() -> None:
+    from benchmarks.ccmaes import report
+
+    def runs(*hits):
+        return [{"hit": hit, "spec": {"samples": 50, "seed": i}} for i, hit in enumerate(hits)]
+
+    assert report.median_episodes(runs(5000, None, 6000)) == 6000
+    assert report.median_episodes(runs(5000, None, None)) == float("inf")
+    assert report.median_episodes([]) is None
+    assert report.target_met(runs(5000, 5400, None), 5_500, 0.0) == "met"
+    assert report.target_met(runs(5000, 5600, 5700), 5_500, 0.0) == "not met"
+    nineteen, eighteen = runs(*[20_000] * 19, None), runs(*[20_000] * 18, None, None)
+    assert report.target_met(nineteen, 25_000, 0.95) == "met"
+    assert report.target_met(eighteen, 25_000, 0.95) == "not met"  # median fine, but only 18/20 seeds
+    cells = {("Sphere", 1, "c-cma-es"): runs(5000, 5200, 6000), ("Sphere", 1, "cma-fixed"): runs(1500, 1600)}
+    cells[("Sphere", 1, "c-cma-es-rec")] = runs(3000, 3300)
+    row = report.headline_table(cells, [("Sphere", 1)], 200_000).splitlines()[2].split(" | ")
+    assert row[2:9] == ["–", "5,200 (3/3)", "≤ 5,500", "met", "3,150 (2/2), N = 50", "1,550 (2/2)", "≤ 3,100"]
+    assert row[9] == "not met |"  # 3,150 > 2 x 1,550
+
+
+def test_ccmaes_columns_without_a_recommended_batch_size_are_skipped_with_a_message(monkeypatch) -> None:
+    from benchmarks.ccmaes import run
+
+    monkeypatch.setattr(run, "available_methods", lambda methods, baselines, log: list(methods))  # all known
+    monkeypatch.setattr(run, "recommended_batch", lambda dim, z: None)
+    messages: list[str] = []
+    args = run.parse_args(["--quick", "--columns", "cma-fixed", "c-cma-es-rec", "c-cma-es"])
+    pairs = run.column_specs(args, messages.append)
+    assert {column for column, _ in pairs} == {"cma-fixed", "c-cma-es"}
+    assert messages == [
+        "skipped column 'c-cma-es-rec': creps_gym.optimizers.ccmaes has no recommended_batch_size"
+    ]
+    assert all(spec.initial == "uniform5" and spec.eval_contexts == 100 for _, spec in pairs)
+    monkeypatch.setattr(run, "recommended_batch", lambda dim, z: 10 + dim + z)
+    pairs = run.column_specs(args, messages.append)
+    assert {spec.samples for column, spec in pairs if column == "c-cma-es-rec"} == {
+        26,
+        28,
+    }  # p = 15, z = 1, 3
+
+
+def test_the_initial_distribution_and_test_contexts_of_a_spec_reach_every_method() -> None:
+    spec = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-old", 4, 400, initial="uniform5", eval_contexts=100)
+    mean, std = study_tools.initial_distribution(spec)
+    again, _ = study_tools.initial_distribution(spec)
+    other, _ = study_tools.initial_distribution(dataclasses.replace(spec, seed=5))
+    assert np.all(np.abs(mean) <= 5.0) and np.array_equal(std, np.ones(3)) and np.array_equal(mean, again)
+    assert not np.array_equal(mean, other)
+    assert spec.key == "Sphere-p3-z1-creps-cma-old-e100-uniform5-s4-b400-n50"
+    with pytest.raises(ValueError, match="action_space: expected the env's action space"):
+        study_tools.initial_distribution(dataclasses.replace(spec, initial="centre"))
+    with pytest.raises(ValueError, match="initial: expected one of"):
+        dataclasses.replace(spec, initial="uniform")
+    for method in ("creps-cma-old", "cma-fixed"):
+        variants = [
+            dataclasses.replace(spec, method=method, initial=initial, eval_contexts=contexts)
+            for initial, contexts in (("uniform5", 100), ("centre", 100), ("uniform5", 16))
+        ]
+        first = [with_baselines(v)["values"][0] for v in variants]
+        assert first[0] != first[1], method  # another initial distribution
+        # Other test contexts (pycma on one context uses the first of them, the same for 16 and 100)
+        assert (first[0] != first[2]) == (method == "creps-cma-old"), method
+
+
+def test_issue_12_optimisers_fill_their_columns_once_registered(tmp_path: Path, monkeypatch) -> None:
+    """Stand-ins registered as ``c-cma-es`` and ``creps-cma-csa`` (CREPS-CMA aliases) get their own columns in
+    the function study and their own tables and heatmap in the scaling study."""
+    from benchmarks.functions import run as functions
+    from benchmarks.scaling import run as scaling
+    from creps_gym.optimizers import registry
+
+    for name in ("c-cma-es", "creps-cma-csa"):
+        alias = registry.OptimizerEntry(name, "stand-in", "creps_gym.optimizers.creps_cma:CREPSCMA")
+        monkeypatch.setitem(registry._REGISTRY, name, alias)
+    common = ["--context-dims", "1", "--seeds", "1", "--budget", "1000", "--workers", "1"]
+    out = tmp_path / "functions"
+    args = ["--functions", "Sphere", "--dim", "3", "--methods", "creps-cma-old", "c-cma-es", "creps-cma-csa"]
+    assert functions.main([*args, *common, "--cache", str(tmp_path / "c1"), "--out", str(out)]) == 0
+    header = next(
+        line for line in (out / "results.md").read_text().splitlines() if line.startswith("| function")
+    )
+    assert header == "| function | CREPS-CMA-old | C-CMA-ES | CREPS-CMA-CSA |"
+    out = tmp_path / "scaling"
+    args = ["--functions", "Sphere", "--dims", "2", "--baselines", "--extra-methods", "c-cma-es"]
+    assert scaling.main([*args, *common, "--cache", str(tmp_path / "c2"), "--out", str(out)]) == 0
+    table = (out / "results.md").read_text()
+    assert "## C-CMA-ES (`c-cma-es`)" in table and (out / "heatmaps-c-cma-es.png").stat().st_size > 10_000
+    assert len(list((tmp_path / "c2").glob("Sphere-p2-z1-c-cma-es-s0-*.json"))) == 1

@@ -100,7 +100,7 @@ def test_extreme_return_scales_neither_overflow_nor_underflow(exponent):
 
 
 def test_weighted_baseline_features_match_the_batch_means():
-    """Stationarity in w: the weighted mean of φ equals φ̂ (notes, point 5)."""
+    """Stationarity in w: the weighted mean of φ equals φ̂ (docs/algorithms.md, point 5)."""
     contexts, returns = make_batch(60, 11, "gaussian")
     phi = BASELINE(contexts)
     solution = solve_dual(returns, phi, 0.7)

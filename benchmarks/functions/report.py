@@ -7,20 +7,37 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from study_tools import PAPER_METHODS, function_spec, summarise
 
-__all__ = ["LABELS", "METHODS", "claims", "plot_function", "results_table", "stalled"]
+from benchmarks.study_runner import summarise
+from benchmarks.study_tools import PAPER_METHODS, function_spec
 
-#: Column order and labels of the table and the legends.
-METHODS = (*PAPER_METHODS, "cma-fixed", "cma-regression")
+__all__ = ["LABELS", "METHODS", "claims", "curve", "plot_function", "results_table", "stalled"]
+
+#: Column order and labels of the table and the legends (issue 12's ``c-cma-es`` and ``creps-cma-csa`` are
+#: skipped while they are not registered).
+METHODS = (*PAPER_METHODS, "c-cma-es", "creps-cma-csa", "cma-fixed", "cma-fixed-batch", "cma-regression")
 LABELS = {
     "creps": "CREPS",
     "creps-cma-old": "CREPS-CMA-old",
     "creps-cma-current": "CREPS-CMA-current",
+    "c-cma-es": "C-CMA-ES",
+    "creps-cma-csa": "CREPS-CMA-CSA",
     "cma-fixed": "pycma, 1 fixed context",
+    "cma-fixed-batch": "pycma, 1 fixed context, N = samples",
     "cma-regression": "indep. CMA-ES + regression",
 }
-COLOURS = {"creps": "tab:red", "creps-cma-old": "tab:blue", "creps-cma-current": "tab:green"}
+COLOURS = {
+    "creps": "tab:red",
+    "creps-cma-old": "tab:blue",
+    "creps-cma-current": "tab:green",
+    "c-cma-es": "tab:orange",
+    "creps-cma-csa": "tab:purple",
+}
+#: The pycma baselines on one fixed context: (line colour, label in the legends).
+FIXED = {
+    "cma-fixed": ("0.45", "pycma on 1 fixed context (its regret there)"),
+    "cma-fixed-batch": ("0.7", "pycma on 1 fixed context, N = samples"),
+}
 
 Results = dict[tuple[str, int, str], list[dict[str, Any]]]
 
@@ -58,17 +75,24 @@ def regression_cell(documents: Sequence[dict[str, Any]]) -> str:
     return f"{mark}{s['median_total']:,.0f} ep., {_value(s['median_final'])} ({s['hits']}/{s['runs']})"
 
 
-def results_table(documents: Sequence[dict[str, Any]], functions: Sequence[str], dims: Sequence[int]) -> str:
-    """One Markdown table per context dimension: a row per function, a column per method."""
+def results_table(
+    documents: Sequence[dict[str, Any]],
+    functions: Sequence[str],
+    dims: Sequence[int],
+    methods: Sequence[str] = METHODS,
+) -> str:
+    """One Markdown table per context dimension: a row per function, a column per method (in
+    :data:`METHODS` order)."""
     grouped = group(documents)
+    methods = [m for m in METHODS if m in methods]
     lines = []
     for z in dims:
         lines += [f"### Context dimension z = {z}", ""]
-        lines.append("| function | " + " | ".join(LABELS[m] for m in METHODS) + " |")
-        lines.append("|---" * (len(METHODS) + 1) + "|")
+        lines.append("| function | " + " | ".join(LABELS[m] for m in methods) + " |")
+        lines.append("|---" * (len(methods) + 1) + "|")
         for name in functions:
             cells = []
-            for method in METHODS:
+            for method in methods:
                 runs = grouped.get((name, z, method), [])
                 cells.append(regression_cell(runs) if method == "cma-regression" else cell(runs))
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
@@ -131,12 +155,13 @@ def stalled(document: dict[str, Any]) -> bool:
     """
     if document["hit"] is not None or document["final"] is None:
         return False
-    episodes, values = _curve(document)
+    episodes, values = curve(document)
     middle = values[np.searchsorted(episodes, episodes[-1] / 2.0)]
     return bool(np.isfinite(middle) and document["final"] > middle - 0.1 * abs(middle))
 
 
-def _curve(document: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+def curve(document: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """A run's stored curve: episodes and metric values (NaN where the value was not finite)."""
     x = np.asarray(document["episodes"], dtype=np.float64)
     y = np.array([np.nan if v is None else v for v in document["values"]], dtype=np.float64)
     return x, y
@@ -146,14 +171,14 @@ def _panel(axis: Any, grouped: Results, name: str, z: int) -> None:
     for method, colour in COLOURS.items():
         for i, document in enumerate(grouped.get((name, z, method), [])):
             axis.plot(
-                *_curve(document), color=colour, alpha=0.6, lw=1, label=LABELS[method] if i == 0 else None
+                *curve(document), color=colour, alpha=0.6, lw=1, label=LABELS[method] if i == 0 else None
             )
-    for i, document in enumerate(grouped.get((name, z, "cma-fixed"), [])):
-        label = "pycma on 1 fixed context (its regret there)" if i == 0 else None
-        axis.plot(*_curve(document), color="0.45", ls="--", lw=0.9, label=label)
+    for method, (colour, text) in FIXED.items():
+        for i, document in enumerate(grouped.get((name, z, method), [])):
+            axis.plot(*curve(document), color=colour, ls="--", lw=0.9, label=text if i == 0 else None)
     for i, document in enumerate(grouped.get((name, z, "cma-regression"), [])):
         label = LABELS["cma-regression"] + " (total)" if i == 0 else None
-        axis.plot(*_curve(document), "kx", ms=7, mew=1.5, label=label)
+        axis.plot(*curve(document), "kx", ms=7, mew=1.5, label=label)
     axis.axhline(function_spec(name).target, color="k", lw=0.8, ls=":", label="target")
     if function_spec(name).bounded:
         axis.set_yscale("log")

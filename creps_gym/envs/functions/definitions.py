@@ -3,7 +3,7 @@
 Abdolmaleki et al. (2019), section 5.1, Table 1. The extracted table is garbled, so the kernels follow the
 standard definitions of the CMA-ES test-function literature (Hansen's ``cmaes.m`` / ``purecma`` test suite,
 Hansen & Ostermeier 2001, and the CEC 2005 benchmark of Suganthan et al. for the shifted, rotated functions),
-as settled in the project's notes. Indices in the formulas are 1-based, ``p >= 2`` is the dimension.
+as settled in ``docs/algorithms.md``. Indices in the formulas are 1-based, ``p >= 2`` is the dimension.
 
 Every kernel maps points ``x`` of shape (n, p) to values of shape (n,) and is *row-independent*: row ``k`` of
 the result depends only on row ``k`` of ``x`` and is bit-identical whatever ``n`` is (only element-wise

@@ -181,7 +181,7 @@ SPECS: tuple[FunctionSpec, ...] = (
         _HANSEN + ", ftwoaxes",
         "Fig. 2c",
         note="Hansen's ftwoaxes puts the weight 1e6 on the second half: the same function up to an axis "
-        "permutation; this one follows the project's notes.",
+        "permutation; this one follows docs/algorithms.md.",
     ),
     FunctionSpec(
         "Cigar", "Cigar", d.cigar, "f(x) = x_1^2 + 1e6 sum_{i=2}^{p} x_i^2", _HANSEN + ", fcigar", "Fig. 2d"

@@ -1,0 +1,1 @@
+"""Issue 12: the C-CMA-ES target study (see README.md)."""

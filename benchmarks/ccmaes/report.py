@@ -126,7 +126,8 @@ def seed_table(cells: Cells, columns: Sequence[Column], rows: Sequence[tuple[str
 
 def headline_table(cells: Cells, rows: Sequence[tuple[str, int]], budget: int) -> str:
     """The issue's targets against the data: C-CMA-ES at N = 50 against the fixed targets, and at its
-    recommended N against :data:`RECOMMENDED_FACTOR` times pycma's episodes for one context."""
+    recommended N against :data:`RECOMMENDED_FACTOR` times pycma's episodes for one context (at z = 1, where
+    the issue sets that target; larger z only report the episodes)."""
     head = (
         "| function | z | CREPS-CMA-old, N = 50 | C-CMA-ES, N = 50 | target | met? | C-CMA-ES, recommended N "
         f"| pycma, 1 context, default N | target ({RECOMMENDED_FACTOR:g} × pycma) | met? |"
@@ -136,7 +137,7 @@ def headline_table(cells: Cells, rows: Sequence[tuple[str, int]], budget: int) -
         old, ours, rec, pycma = (cells.get((name, z, c), []) for c in HEADLINE)
         most, fraction = TARGETS.get((name, z), (math.nan, 0.0))
         reference = median_episodes(pycma)
-        if reference is None or math.isinf(reference):
+        if reference is None or math.isinf(reference) or z != 1:  # the issue sets this target at z = 1
             rec_target, rec_met = "–", "–"
         else:
             rec_target = f"≤ {RECOMMENDED_FACTOR * reference:,.0f}"

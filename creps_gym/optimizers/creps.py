@@ -84,7 +84,7 @@ class CREPSConfig:
     initial_cov : scalar, (p,) or (p, p)    initial covariance Σ: variance, variances or SPD matrix.
     mean_features : str, dict or FeatureMap ϕ(s) of the mean; ``"affine"`` = [1, s].
     baseline_features : str, dict or FeatureMap   φ(s) of the dual's baseline; ``"baseline"`` = [s, s²].
-    ridge : float               relative ridge of Eq. (7), ≥ 0 (kept tiny; see the notes).
+    ridge : float               relative ridge of Eq. (7), ≥ 0 (kept tiny; see docs/algorithms.md).
     seed : int or None          seed of the sampling Generator.
     min_std, max_condition, max_std_growth : float   stop criteria: √λ_max(Σ) < min_std, cond(Σ) >
         max_condition, or √λ_max(Σ) > max_std_growth·√λ_max(Σ₀) (divergence, like pycma's tolupsigma).

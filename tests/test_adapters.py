@@ -7,7 +7,7 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 import pytest
-from helpers import python_blocks
+from helpers import EXTRAS, marked, python_blocks
 
 from creps_gym.envs.evaluation import evaluate_policy, test_contexts
 from creps_gym.optimizers import registry
@@ -39,7 +39,7 @@ def test_registry_lists_every_adapter_with_a_one_line_description():
         assert registry.optimizer_class(name) is cls
 
 
-@pytest.mark.parametrize("name", registry.optimizer_names())
+@pytest.mark.parametrize("name", marked(registry.optimizer_names()))
 def test_every_registered_optimizer_follows_the_protocol_and_restores_exactly(name):
     optimizer = registry.make_optimizer(name, 3, 2, 11, initial_mean=[0.1, 0.2, 0.3], initial_cov=0.5)
     assert (optimizer.n_params, optimizer.n_context_dims) == (3, 2)
@@ -62,6 +62,7 @@ def test_make_optimizer_names_the_valid_choices_and_fixed_options():
         registry.make_optimizer("creps-cma-old", 2, 1, 0, variant="current")
 
 
+@EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
 def test_adapter_learns_on_a_function_env(name):
     history = run(name, "creps_gym/Sphere-v0", 20, 12, 3, env_kwargs={"dim": 3}, eval_every=19)
@@ -76,6 +77,7 @@ def test_adapter_learns_on_a_function_env(name):
     assert best_constant.mean_regret <= regrets[-1] < 0.9 * start  # maximising the return lowers the regret
 
 
+@EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
 def test_sign_convention_library_minimises_the_negated_return(name):
     adapter = ADAPTERS[name](2, 1, initial_mean=0.0, initial_cov=1.0, seed=5)
@@ -88,6 +90,7 @@ def test_sign_convention_library_minimises_the_negated_return(name):
     assert adapter.diagnostics["best_return"] == 5.0
 
 
+@EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
 def test_contexts_are_ignored_and_asks_are_seeded(name):
     a = ADAPTERS[name](3, 2, seed=9)
@@ -103,6 +106,7 @@ def test_contexts_are_ignored_and_asks_are_seeded(name):
     assert np.array_equal(rec[0], rec[1])
 
 
+@EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
 def test_replay_reproduces_every_recorded_ask_bit_for_bit(name, tmp_path):
     adapter = ADAPTERS[name](
@@ -121,6 +125,7 @@ def test_replay_reproduces_every_recorded_ask_bit_for_bit(name, tmp_path):
         ADAPTERS[name].from_state_dict(tampered)
 
 
+@EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
 def test_rejected_tells_leave_the_adapter_unchanged(name):
     adapter = ADAPTERS[name](2, 1, seed=1)
@@ -136,6 +141,7 @@ def test_rejected_tells_leave_the_adapter_unchanged(name):
     adapter.tell(contexts, params, np.zeros(5))  # the pending batch is still accepted
 
 
+@EXTRAS
 def test_cma_needs_whole_populations_of_a_fixed_size():
     adapter = CMAAdapter(2, 1, seed=0)
     params = adapter.ask(np.zeros((6, 1)))
@@ -146,6 +152,7 @@ def test_cma_needs_whole_populations_of_a_fixed_size():
         adapter.ask(np.zeros((5, 1)))
 
 
+@EXTRAS
 def test_subsets_are_fine_for_nevergrad_and_optuna():
     for cls in (NevergradAdapter, OptunaAdapter):
         adapter = cls(2, 1, seed=0)
@@ -170,6 +177,7 @@ def test_bad_arguments_are_named(name, kwargs, error, match):
         ADAPTERS[name](2, 1, **kwargs)
 
 
+@EXTRAS
 def test_library_specific_options_are_checked():
     with pytest.raises(ValueError, match="cma_options: expected none of"):
         CMAAdapter(2, 1, cma_options={"popsize": 4})
@@ -181,6 +189,7 @@ def test_library_specific_options_are_checked():
         OptunaAdapter(2, 1, bound_stds=0)
 
 
+@EXTRAS
 def test_optuna_searches_inside_the_documented_box():
     adapter = OptunaAdapter(
         3, 1, initial_mean=[1.0, 2.0, 3.0], initial_cov=0.25, sampler="random", bound_stds=2.0
@@ -189,6 +198,7 @@ def test_optuna_searches_inside_the_documented_box():
     assert np.all(np.abs(params - [1.0, 2.0, 3.0]) <= 1.0) and np.ptp(params, axis=0).min() > 0.5
 
 
+@EXTRAS
 def test_cma_reports_its_own_stop_criteria():
     adapter = CMAAdapter(2, 1, seed=0, cma_options={"tolfun": 1e3, "tolfunhist": 1e3})
     assert adapter.stop() == {}

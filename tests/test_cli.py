@@ -8,7 +8,7 @@ import subprocess
 from dataclasses import fields
 
 import pytest
-from helpers import SPHERE, cli_command
+from helpers import EXTRAS, SPHERE, cli_command
 
 from creps_gym.cli import main
 from creps_gym.optimizers import CREPSCMAConfig, optimizer_names
@@ -45,6 +45,7 @@ def test_list_shows_envs_and_optimizers_with_descriptions():
         assert any(line.split()[:1] == [name] and len(line.split()) > 1 for line in lines), name
 
 
+@EXTRAS
 def test_run_writes_the_run_directory_and_matches_the_python_api(tmp_path):
     out = tmp_path / "run"
     result = cli(*run_args(out))
@@ -57,6 +58,7 @@ def test_run_writes_the_run_directory_and_matches_the_python_api(tmp_path):
         assert (out / name).stat().st_size > 0, name
 
 
+@EXTRAS
 def test_progress_bar_on_request_and_plot_and_export_and_resume(tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
     shown = cli(*run_args(a, "--progress", "--no-plot"))

@@ -38,7 +38,7 @@ _EXTRA_ENV_MODULES = ("creps_gym.envs.kick", "creps_gym.wrappers")  # MuJoCo, Gy
 
 
 def needs_extra(env_or_optimizer: str) -> bool:
-    """Whether a registered env id or optimiser name needs an optional extra (MuJoCo, an adapter's library)."""
+    """Whether a registered env id or optimiser name needs an optional extra (MuJoCo, a library)."""
     from creps_gym.optimizers.adapters import MinimizerAdapter
     from creps_gym.optimizers.registry import optimizer_class, optimizer_names
 

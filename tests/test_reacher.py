@@ -7,8 +7,8 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
-from helpers import EXTRAS
 from gymnasium.utils.env_checker import check_env
+from helpers import EXTRAS
 
 import creps_gym  # noqa: F401  (registers the ids)
 from creps_gym.envs.reacher import PlanarReacherEnv, PlanarReacherVectorEnv, end_effector, forward_kinematics

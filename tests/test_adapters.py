@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import threading
 from pathlib import Path
 
 import gymnasium
@@ -14,6 +17,8 @@ from creps_gym.optimizers import registry
 from creps_gym.optimizers.adapters import CMAAdapter, MinimizerAdapter, NevergradAdapter, OptunaAdapter
 from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.runner import default_initial_distribution, run, split_seed
+from creps_gym.runner.config import RunConfig
+from creps_gym.runner.loop import Runner
 
 ADAPTERS = {"cma": CMAAdapter, "nevergrad": NevergradAdapter, "optuna": OptunaAdapter}
 GUIDE = Path(__file__).resolve().parent.parent / "docs" / "writing_an_adapter.md"
@@ -171,7 +176,7 @@ def test_subsets_are_fine_for_nevergrad_and_optuna():
         ({"bogus": 1}, TypeError, "bogus"),
     ],
 )
-@pytest.mark.parametrize("name", sorted(ADAPTERS))
+@pytest.mark.parametrize("name", marked(sorted(ADAPTERS)))
 def test_bad_arguments_are_named(name, kwargs, error, match):
     with pytest.raises(error, match=match):
         ADAPTERS[name](2, 1, **kwargs)
@@ -179,8 +184,18 @@ def test_bad_arguments_are_named(name, kwargs, error, match):
 
 @EXTRAS
 def test_library_specific_options_are_checked():
-    with pytest.raises(ValueError, match="cma_options: expected none of"):
-        CMAAdapter(2, 1, cma_options={"popsize": 4})
+    with pytest.raises(
+        ValueError, match=r"options: expected none of \[.*\] \(set by the adapter\), got \['seed'\]"
+    ):
+        CMAAdapter(2, 1, seed=0, cma_options={"seed": 4})
+    with pytest.raises(TypeError, match=r"expected pycma option names .*got unknown \['popsiz'\]"):
+        CMAAdapter(2, 1, popsiz=4)
+    with pytest.raises(ValueError, match=r"got \['tolfun'\] flat and in cma_options"):
+        CMAAdapter(2, 1, tolfun=1.0, cma_options={"tolfun": 2.0})
+    adapter = CMAAdapter(2, 1, popsize=4)
+    with pytest.raises(ValueError, match=r"popsize: expected the batch size 6 .*, got 4"):
+        adapter.ask(np.zeros((6, 1)))
+    assert adapter.state_dict()["adapter"]["events"] == []  # the rejected ask left it unchanged
     with pytest.raises(ValueError, match="optimizer: expected a name in nevergrad"):
         NevergradAdapter(2, 1, optimizer="NoSuchOptimizer")
     with pytest.raises(ValueError, match=r"sampler: expected one of \['tpe', 'random'\], got 'grid'"):
@@ -199,11 +214,58 @@ def test_optuna_searches_inside_the_documented_box():
 
 
 @EXTRAS
-def test_cma_reports_its_own_stop_criteria():
-    adapter = CMAAdapter(2, 1, seed=0, cma_options={"tolfun": 1e3, "tolfunhist": 1e3})
-    assert adapter.stop() == {}
+@pytest.mark.parametrize("nested", [False, True])
+def test_cma_takes_pycma_options_flat_and_reports_its_own_stop_criteria(nested):
+    options = {"tolfun": 1e3, "tolfunhist": 1e3, "popsize": 6}
+    adapter = CMAAdapter(2, 1, seed=0, **({"cma_options": options} if nested else options))
+    assert adapter.options == options and adapter.stop() == {}
     _drive(adapter, 12, n=6)
     assert adapter.stop()  # the huge tolerances are met once the history is long enough
+    assert adapter._lib.popsize == 6
+
+
+@EXTRAS
+def test_the_runner_gives_nevergrad_its_budget_and_ngopt_runs_on_this_numpy():
+    # NGOpt picks its meta-model here, which calls float() on a one-element array (a TypeError on numpy 2.4)
+    history = run("nevergrad", "creps_gym/Sphere-v0", 6, 10, 0, env_kwargs={"dim": 3},
+                  optimizer_options={"optimizer": "NGOpt"}, run_dir=None)  # fmt: skip
+    assert np.isfinite(history.column("eval_regret")).all()
+    runner_budgets = {}
+    for max_episodes, expected in ((None, 60), (35, 35)):
+        config = RunConfig("creps_gym/Sphere-v0", "nevergrad", 6, 10, 0, max_episodes=max_episodes)
+        runner_budgets[max_episodes] = Runner(config).optimizer.options["budget"]
+        assert runner_budgets[max_episodes] == expected
+    given = RunConfig("creps_gym/Sphere-v0", "nevergrad", 6, 10, 0, optimizer_options={"budget": 7})
+    assert Runner(given).optimizer.options["budget"] == 7  # the user's budget wins
+
+
+@EXTRAS
+def test_nevergrad_threads_are_stopped_by_close_and_by_the_runner():
+    baseline = threading.active_count()
+    with NevergradAdapter(
+        3, 1, seed=0, optimizer="Carola3", budget=100
+    ) as adapter:  # runs Cobyla in a thread
+        _drive(adapter, 3, n=4)
+        assert threading.active_count() > baseline
+    assert threading.active_count() == baseline
+    history = run("nevergrad", "creps_gym/Sphere-v0", 3, 4, 0, env_kwargs={"dim": 3},
+                  optimizer_options={"optimizer": "Carola3"})  # fmt: skip
+    assert len(history) == 3 and threading.active_count() == baseline
+
+
+@EXTRAS
+def test_a_script_that_keeps_its_runner_exits(tmp_path):
+    script = tmp_path / "keeps_runner.py"  # the runner, a global, holds the adapter until after exit's join
+    script.write_text(
+        "from creps_gym.runner.config import RunConfig\n"
+        "from creps_gym.runner.loop import Runner\n"
+        "config = RunConfig('creps_gym/Sphere-v0', 'nevergrad', 3, 4, 0, env_kwargs={'dim': 3},\n"
+        "                   optimizer_options={'optimizer': 'Carola3'})\n"
+        "runner = Runner(config)\n"
+        "print(len(runner.run()))\n"
+    )
+    result = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0 and result.stdout.strip() == "3", result.stderr
 
 
 def test_the_adapter_guide_examples_run(monkeypatch, capsys):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import subprocess
 import sys
 import threading
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 from helpers import EXTRAS, marked, python_blocks
 
+from creps_gym import cli
 from creps_gym.envs.evaluation import evaluate_policy, test_contexts
 from creps_gym.optimizers import registry
 from creps_gym.optimizers.adapters import CMAAdapter, MinimizerAdapter, NevergradAdapter, OptunaAdapter
@@ -278,3 +280,18 @@ def test_the_adapter_guide_examples_run(monkeypatch, capsys):
     assert issubclass(namespace["RandomSearchAdapter"], MinimizerAdapter)
     assert "random-search" in registry.optimizer_names()
     assert "mean regret of the recommended policy" in capsys.readouterr().out
+
+
+RUNNER_GUIDE = GUIDE.parent / "runner.md"
+
+
+@EXTRAS
+@pytest.mark.parametrize("index", range(3))
+def test_the_documented_adapter_commands_run(index, tmp_path, capsys):
+    section = RUNNER_GUIDE.read_text().split("## Adapters", 1)[1].split("\n## ", 1)[0]
+    commands = [line for line in section.splitlines() if line.startswith("creps-gym run ")]
+    assert len(commands) == 3
+    argv = shlex.split(commands[index])[1:]
+    argv[argv.index("--out") + 1] = str(tmp_path / "run")
+    assert cli.main([*argv, "--no-plot"]) == 0
+    assert "stop: iterations" in capsys.readouterr().out

@@ -101,7 +101,10 @@ def _env_id(text: str) -> str:
     import creps_gym
 
     if text not in gym.registry:
-        raise argparse.ArgumentTypeError(f"expected one of {creps_gym.registered_ids()}, got {text!r}")
+        from creps_gym.listing import did_you_mean
+
+        ids = creps_gym.registered_ids()
+        raise argparse.ArgumentTypeError(f"expected one of {ids}, got {text!r}{did_you_mean(text, ids)}")
     return text
 
 
@@ -109,7 +112,10 @@ def _optimizer_name(text: str) -> str:
     from creps_gym.optimizers.registry import optimizer_names
 
     if text not in optimizer_names():
-        raise argparse.ArgumentTypeError(f"expected one of {optimizer_names()}, got {text!r}")
+        from creps_gym.listing import did_you_mean
+
+        names = optimizer_names()
+        raise argparse.ArgumentTypeError(f"expected one of {names}, got {text!r}{did_you_mean(text, names)}")
     return text
 
 
@@ -192,8 +198,16 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Exit codes: 0 ok, 1 run failed, 2 usage error, 3 run-directory error, "
         "4 missing optional dependency, 130 interrupted.",
     )
+    from creps_gym import __version__
+
+    parser.add_argument("--version", action="version", version=f"creps-gym {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    commands.add_parser("list", help="list the envs and optimisers", description="List envs and optimisers.")
+    commands.add_parser(
+        "list",
+        help="list the envs and optimisers",
+        description="List the envs (context and parameter spaces, the default initial search distribution) "
+        "and the optimisers.",
+    )
     _add_run(commands)
     resume = commands.add_parser("resume", help="continue a run from its last checkpoint")
     resume.add_argument("run_dir", metavar="DIR")
@@ -209,28 +223,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # -- commands -----------------------------------------------------------------------------------------------
-def _env_description(env_id: str) -> str:
-    import gymnasium as gym
-    from gymnasium.envs.registration import load_env_creator
-
-    try:
-        creator = load_env_creator(gym.spec(env_id).entry_point)
-    except Exception as exc:  # an env whose module cannot be imported is still listed
-        return f"(cannot import: {type(exc).__name__})"
-    lines = (getattr(creator, "__doc__", None) or "").strip().splitlines()
-    return lines[0] if lines else ""
-
-
 def _cmd_list(_: argparse.Namespace) -> int:
     import creps_gym
+    from creps_gym.listing import env_rows, optimizer_rows, table
     from creps_gym.optimizers.registry import describe_optimizers
 
     print("Environments:")
-    for env_id in creps_gym.registered_ids():
-        print(f"  {env_id:<34} {_env_description(env_id)}")
+    print(table(env_rows(creps_gym.registered_ids())))
     print("Optimizers:")
-    for name, description in describe_optimizers().items():
-        print(f"  {name:<34} {description}")
+    print(table(optimizer_rows(describe_optimizers())))
     return 0
 
 

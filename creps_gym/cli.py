@@ -215,10 +215,12 @@ def build_parser() -> argparse.ArgumentParser:
     plot = commands.add_parser("plot", help="plot learning curves of run directories")
     plot.add_argument("run_dirs", nargs="+", metavar="DIR")
     plot.add_argument("-o", "--output", required=True, metavar="FILE", help="image file, e.g. curves.png")
-    plot.add_argument("--title", help="figure title")
+    plot.add_argument("--title", help="figure title (default: the env and its dimensions)")
     export = commands.add_parser("export", help="write run directories as one IOHanalyzer CSV")
     export.add_argument("run_dirs", nargs="+", metavar="DIR")
     export.add_argument("-o", "--output", required=True, metavar="FILE", help="CSV file")
+    for command in (plot, export):
+        command.add_argument("--mix-envs", action="store_true", help="allow runs of different envs")
     return parser
 
 
@@ -314,7 +316,10 @@ def _cmd_resume(args: argparse.Namespace) -> int:
 def _cmd_plot(args: argparse.Namespace) -> int:
     from creps_gym.runner.plots import plot_run_dirs
 
-    plot_run_dirs(args.run_dirs, args.output, title=args.title)
+    try:
+        plot_run_dirs(args.run_dirs, args.output, title=args.title, mix_envs=args.mix_envs)
+    except ValueError as exc:  # e.g. runs of different envs without --mix-envs
+        raise UsageError(str(exc)) from None
     print(f"plot: {args.output}")
     return 0
 
@@ -323,7 +328,10 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from creps_gym.runner.export import write_iohanalyzer
     from creps_gym.runner.plots import load_history
 
-    write_iohanalyzer([load_history(p) for p in args.run_dirs], args.output)
+    try:
+        write_iohanalyzer([load_history(p) for p in args.run_dirs], args.output, mix_envs=args.mix_envs)
+    except ValueError as exc:  # e.g. runs of different envs without --mix-envs
+        raise UsageError(str(exc)) from None
     print(f"IOHanalyzer CSV: {args.output}")
     return 0
 

@@ -359,10 +359,11 @@ def test_plot_median_and_band_over_seeds_with_a_log_regret_axis(tmp_path):
     figure = plot_histories(runs, tmp_path / "curves.png", title="test")
     assert (tmp_path / "curves.png").stat().st_size > 0
     left, right = figure.axes
-    assert right.get_yscale() == "log" and left.get_yscale() == "linear"
+    assert right.get_yscale() == "log" and left.get_yscale() == "symlog"
     line = right.get_lines()[1]
     expected = np.median([h.column("eval_regret") for h in runs["creps-cma-old"]], axis=0)
-    assert line.get_label() == "creps-cma-old (n=3)" and np.allclose(line.get_ydata(), expected)
+    assert line.get_label() == "creps-cma-old (n=3; stop: iterations ×3)"
+    assert np.allclose(line.get_ydata(), expected)
     assert len(right.collections) == 2  # one band per group
     with pytest.raises(ValueError, match="band"):
         plot_histories(runs, band=(0.9, 0.1))

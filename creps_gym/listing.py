@@ -64,7 +64,7 @@ def env_rows(env_ids: Iterable[str]) -> list[list[str]]:
         try:
             env = gym.make(env_id)
         except Exception as exc:  # an env whose optional extra is missing is still listed
-            rows.append([env_id, "?", "?", "?", f"(cannot make: {type(exc).__name__}: {exc})"[:100]])
+            rows.append([env_id, "?", "?", "?", plain(f"(not available: {type(exc).__name__}: {exc})")[:100]])
             continue
         spaces = [box_text(env.observation_space), box_text(env.action_space)]
         rows.append([env_id, *spaces, initial_hint(env), _description(env)])

@@ -101,7 +101,10 @@ def _env_id(text: str) -> str:
     import creps_gym
 
     if text not in gym.registry:
-        raise argparse.ArgumentTypeError(f"expected one of {creps_gym.registered_ids()}, got {text!r}")
+        from creps_gym.listing import did_you_mean
+
+        ids = creps_gym.registered_ids()
+        raise argparse.ArgumentTypeError(f"expected one of {ids}, got {text!r}{did_you_mean(text, ids)}")
     return text
 
 
@@ -109,7 +112,10 @@ def _optimizer_name(text: str) -> str:
     from creps_gym.optimizers.registry import optimizer_names
 
     if text not in optimizer_names():
-        raise argparse.ArgumentTypeError(f"expected one of {optimizer_names()}, got {text!r}")
+        from creps_gym.listing import did_you_mean
+
+        names = optimizer_names()
+        raise argparse.ArgumentTypeError(f"expected one of {names}, got {text!r}{did_you_mean(text, names)}")
     return text
 
 
@@ -197,8 +203,16 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Exit codes: 0 ok, 1 run failed, 2 usage error, 3 run-directory error, "
         "4 missing optional dependency, 130 interrupted.",
     )
+    from creps_gym import __version__
+
+    parser.add_argument("--version", action="version", version=f"creps-gym {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    commands.add_parser("list", help="list the envs and optimisers", description="List envs and optimisers.")
+    commands.add_parser(
+        "list",
+        help="list the envs and optimisers",
+        description="List the envs (context and parameter spaces, the default initial search distribution) "
+        "and the optimisers.",
+    )
     _add_run(commands)
     resume = commands.add_parser("resume", help="continue a run from its last checkpoint")
     resume.add_argument("run_dir", metavar="DIR")
@@ -206,36 +220,25 @@ def build_parser() -> argparse.ArgumentParser:
     plot = commands.add_parser("plot", help="plot learning curves of run directories")
     plot.add_argument("run_dirs", nargs="+", metavar="DIR")
     plot.add_argument("-o", "--output", required=True, metavar="FILE", help="image file, e.g. curves.png")
-    plot.add_argument("--title", help="figure title")
+    plot.add_argument("--title", help="figure title (default: the env and its dimensions)")
     export = commands.add_parser("export", help="write run directories as one IOHanalyzer CSV")
     export.add_argument("run_dirs", nargs="+", metavar="DIR")
     export.add_argument("-o", "--output", required=True, metavar="FILE", help="CSV file")
+    for command in (plot, export):
+        command.add_argument("--mix-envs", action="store_true", help="allow runs of different envs")
     return parser
 
 
 # -- commands -----------------------------------------------------------------------------------------------
-def _env_description(env_id: str) -> str:
-    import gymnasium as gym
-    from gymnasium.envs.registration import load_env_creator
-
-    try:
-        creator = load_env_creator(gym.spec(env_id).entry_point)
-    except Exception as exc:  # an env whose module cannot be imported is still listed
-        return f"(cannot import: {type(exc).__name__})"
-    lines = (getattr(creator, "__doc__", None) or "").strip().splitlines()
-    return lines[0] if lines else ""
-
-
 def _cmd_list(_: argparse.Namespace) -> int:
     import creps_gym
+    from creps_gym.listing import env_rows, optimizer_rows, table
     from creps_gym.optimizers.registry import describe_optimizers
 
     print("Environments:")
-    for env_id in creps_gym.registered_ids():
-        print(f"  {env_id:<34} {_env_description(env_id)}")
+    print(table(env_rows(creps_gym.registered_ids())))
     print("Optimizers:")
-    for name, description in describe_optimizers().items():
-        print(f"  {name:<34} {description}")
+    print(table(optimizer_rows(describe_optimizers())))
     return 0
 
 
@@ -318,7 +321,10 @@ def _cmd_resume(args: argparse.Namespace) -> int:
 def _cmd_plot(args: argparse.Namespace) -> int:
     from creps_gym.runner.plots import plot_run_dirs
 
-    plot_run_dirs(args.run_dirs, args.output, title=args.title)
+    try:
+        plot_run_dirs(args.run_dirs, args.output, title=args.title, mix_envs=args.mix_envs)
+    except ValueError as exc:  # e.g. runs of different envs without --mix-envs
+        raise UsageError(str(exc)) from None
     print(f"plot: {args.output}")
     return 0
 
@@ -327,7 +333,10 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from creps_gym.runner.export import write_iohanalyzer
     from creps_gym.runner.plots import load_history
 
-    write_iohanalyzer([load_history(p) for p in args.run_dirs], args.output)
+    try:
+        write_iohanalyzer([load_history(p) for p in args.run_dirs], args.output, mix_envs=args.mix_envs)
+    except ValueError as exc:  # e.g. runs of different envs without --mix-envs
+        raise UsageError(str(exc)) from None
     print(f"IOHanalyzer CSV: {args.output}")
     return 0
 

@@ -1,14 +1,20 @@
 """Generate the tutorial notebooks (``01_quickstart``, ``02_compare_optimisers``, ``03_robot_tasks``).
 
-The notebooks are written from the cell sources below with nbformat, without outputs, so their source is
-reviewable here. Each notebook reads ``CREPS_GYM_QUICK=1`` in its first cell and then runs a small
-configuration (how CI runs them, see ``tests/test_notebooks.py``).
+The notebooks are written from the cell sources below with nbformat, so their source is reviewable here,
+then executed (nbclient, in a temporary folder) so that they are committed with their outputs and the
+figures show on the repository page. Each notebook reads ``CREPS_GYM_QUICK=1`` in its first cell and then
+runs a small configuration (how CI runs them, see ``tests/test_notebooks.py``); the committed outputs come
+from the full configuration.
 
-    python notebooks/make_notebooks.py
+    python notebooks/make_notebooks.py            # write and execute every notebook (a few minutes)
+    python notebooks/make_notebooks.py --no-execute  # sources only, no outputs
 """
 
 from __future__ import annotations
 
+import argparse
+import os
+import tempfile
 from pathlib import Path
 
 import nbformat
@@ -208,12 +214,41 @@ if kick is not None:
 ]
 
 
-def write(name: str, cells: list) -> Path:
-    """Write one notebook (no outputs) and return its path."""
-    notebook = new_notebook(cells=cells)
+def execute(notebook: nbformat.NotebookNode, quick: bool = False, timeout: int = 1800) -> None:
+    """Run every cell in place (fresh kernel, a temporary working folder), in full or quick mode."""
+    import nbclient
+
+    previous = os.environ.get("CREPS_GYM_QUICK")
+    os.environ["CREPS_GYM_QUICK"] = "1" if quick else "0"
+    try:
+        with tempfile.TemporaryDirectory() as folder:
+            client = nbclient.NotebookClient(
+                notebook, timeout=timeout, kernel_name="python3", record_timing=False,
+                resources={"metadata": {"path": folder}},
+            )  # fmt: skip
+            client.execute()
+    finally:
+        if previous is None:
+            os.environ.pop("CREPS_GYM_QUICK")
+        else:
+            os.environ["CREPS_GYM_QUICK"] = previous
+
+
+def build(cells: list) -> nbformat.NotebookNode:
+    """A notebook of ``cells`` with the kernel metadata, validated (no outputs yet)."""
+    notebook = new_notebook(cells=[nbformat.from_dict(cell) for cell in cells])
     notebook.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
     notebook.metadata["language_info"] = {"name": "python"}
     nbformat.validate(notebook)
+    return notebook
+
+
+def write(name: str, cells: list, run: bool = True) -> Path:
+    """Write one notebook, executed in full mode unless ``run`` is False; returns its path."""
+    notebook = build(cells)
+    if run:
+        execute(notebook)
+        notebook.metadata.pop("widgets", None)
     path = HERE / f"{name}.ipynb"
     nbformat.write(notebook, path)
     return path
@@ -222,10 +257,14 @@ def write(name: str, cells: list) -> Path:
 NOTEBOOKS = {"01_quickstart": QUICKSTART, "02_compare_optimisers": COMPARE, "03_robot_tasks": ROBOTS}
 
 
-def main() -> None:
-    """Write every notebook."""
-    for name, cells in NOTEBOOKS.items():
-        print("wrote", write(name, cells))
+def main(argv: list[str] | None = None) -> None:
+    """Write (and execute) every notebook, or the ones named."""
+    parser = argparse.ArgumentParser(description="Write the tutorial notebooks with their outputs.")
+    parser.add_argument("names", nargs="*", choices=[*NOTEBOOKS, []], help="default: all")
+    parser.add_argument("--no-execute", action="store_true", help="write the sources without outputs")
+    args = parser.parse_args(argv)
+    for name in args.names or NOTEBOOKS:
+        print("wrote", write(name, NOTEBOOKS[name], run=not args.no_execute), flush=True)
 
 
 if __name__ == "__main__":

@@ -2,18 +2,25 @@
 
 from __future__ import annotations
 
+import shlex
+import subprocess
+import sys
+import threading
 from pathlib import Path
 
 import gymnasium
 import numpy as np
 import pytest
-from helpers import python_blocks
+from helpers import EXTRAS, marked, python_blocks
 
+from creps_gym import cli
 from creps_gym.envs.evaluation import evaluate_policy, test_contexts
 from creps_gym.optimizers import registry
 from creps_gym.optimizers.adapters import CMAAdapter, MinimizerAdapter, NevergradAdapter, OptunaAdapter
 from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.runner import default_initial_distribution, run, split_seed
+from creps_gym.runner.config import RunConfig
+from creps_gym.runner.loop import Runner
 
 ADAPTERS = {"cma": CMAAdapter, "nevergrad": NevergradAdapter, "optuna": OptunaAdapter}
 GUIDE = Path(__file__).resolve().parent.parent / "docs" / "writing_an_adapter.md"
@@ -39,7 +46,7 @@ def test_registry_lists_every_adapter_with_a_one_line_description():
         assert registry.optimizer_class(name) is cls
 
 
-@pytest.mark.parametrize("name", registry.optimizer_names())
+@pytest.mark.parametrize("name", marked(registry.optimizer_names()))
 def test_every_registered_optimizer_follows_the_protocol_and_restores_exactly(name):
     optimizer = registry.make_optimizer(name, 3, 2, 11, initial_mean=[0.1, 0.2, 0.3], initial_cov=0.5)
     assert (optimizer.n_params, optimizer.n_context_dims) == (3, 2)
@@ -62,6 +69,7 @@ def test_make_optimizer_names_the_valid_choices_and_fixed_options():
         registry.make_optimizer("creps-cma-old", 2, 1, 0, variant="current")
 
 
+@EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
 def test_adapter_learns_on_a_function_env(name):
     history = run(name, "creps_gym/Sphere-v0", 20, 12, 3, env_kwargs={"dim": 3}, eval_every=19)
@@ -76,6 +84,7 @@ def test_adapter_learns_on_a_function_env(name):
     assert best_constant.mean_regret <= regrets[-1] < 0.9 * start  # maximising the return lowers the regret
 
 
+@EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
 def test_sign_convention_library_minimises_the_negated_return(name):
     adapter = ADAPTERS[name](2, 1, initial_mean=0.0, initial_cov=1.0, seed=5)
@@ -88,6 +97,7 @@ def test_sign_convention_library_minimises_the_negated_return(name):
     assert adapter.diagnostics["best_return"] == 5.0
 
 
+@EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
 def test_contexts_are_ignored_and_asks_are_seeded(name):
     a = ADAPTERS[name](3, 2, seed=9)
@@ -103,6 +113,7 @@ def test_contexts_are_ignored_and_asks_are_seeded(name):
     assert np.array_equal(rec[0], rec[1])
 
 
+@EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
 def test_replay_reproduces_every_recorded_ask_bit_for_bit(name, tmp_path):
     adapter = ADAPTERS[name](
@@ -121,6 +132,7 @@ def test_replay_reproduces_every_recorded_ask_bit_for_bit(name, tmp_path):
         ADAPTERS[name].from_state_dict(tampered)
 
 
+@EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
 def test_rejected_tells_leave_the_adapter_unchanged(name):
     adapter = ADAPTERS[name](2, 1, seed=1)
@@ -136,6 +148,7 @@ def test_rejected_tells_leave_the_adapter_unchanged(name):
     adapter.tell(contexts, params, np.zeros(5))  # the pending batch is still accepted
 
 
+@EXTRAS
 def test_cma_needs_whole_populations_of_a_fixed_size():
     adapter = CMAAdapter(2, 1, seed=0)
     params = adapter.ask(np.zeros((6, 1)))
@@ -146,6 +159,7 @@ def test_cma_needs_whole_populations_of_a_fixed_size():
         adapter.ask(np.zeros((5, 1)))
 
 
+@EXTRAS
 def test_subsets_are_fine_for_nevergrad_and_optuna():
     for cls in (NevergradAdapter, OptunaAdapter):
         adapter = cls(2, 1, seed=0)
@@ -164,15 +178,26 @@ def test_subsets_are_fine_for_nevergrad_and_optuna():
         ({"bogus": 1}, TypeError, "bogus"),
     ],
 )
-@pytest.mark.parametrize("name", sorted(ADAPTERS))
+@pytest.mark.parametrize("name", marked(sorted(ADAPTERS)))
 def test_bad_arguments_are_named(name, kwargs, error, match):
     with pytest.raises(error, match=match):
         ADAPTERS[name](2, 1, **kwargs)
 
 
+@EXTRAS
 def test_library_specific_options_are_checked():
-    with pytest.raises(ValueError, match="cma_options: expected none of"):
-        CMAAdapter(2, 1, cma_options={"popsize": 4})
+    with pytest.raises(
+        ValueError, match=r"options: expected none of \[.*\] \(set by the adapter\), got \['seed'\]"
+    ):
+        CMAAdapter(2, 1, seed=0, cma_options={"seed": 4})
+    with pytest.raises(TypeError, match=r"expected pycma option names .*got unknown \['popsiz'\]"):
+        CMAAdapter(2, 1, popsiz=4)
+    with pytest.raises(ValueError, match=r"got \['tolfun'\] flat and in cma_options"):
+        CMAAdapter(2, 1, tolfun=1.0, cma_options={"tolfun": 2.0})
+    adapter = CMAAdapter(2, 1, popsize=4)
+    with pytest.raises(ValueError, match=r"popsize: expected the batch size 6 .*, got 4"):
+        adapter.ask(np.zeros((6, 1)))
+    assert adapter.state_dict()["adapter"]["events"] == []  # the rejected ask left it unchanged
     with pytest.raises(ValueError, match="optimizer: expected a name in nevergrad"):
         NevergradAdapter(2, 1, optimizer="NoSuchOptimizer")
     with pytest.raises(ValueError, match=r"sampler: expected one of \['tpe', 'random'\], got 'grid'"):
@@ -181,6 +206,7 @@ def test_library_specific_options_are_checked():
         OptunaAdapter(2, 1, bound_stds=0)
 
 
+@EXTRAS
 def test_optuna_searches_inside_the_documented_box():
     adapter = OptunaAdapter(
         3, 1, initial_mean=[1.0, 2.0, 3.0], initial_cov=0.25, sampler="random", bound_stds=2.0
@@ -189,11 +215,59 @@ def test_optuna_searches_inside_the_documented_box():
     assert np.all(np.abs(params - [1.0, 2.0, 3.0]) <= 1.0) and np.ptp(params, axis=0).min() > 0.5
 
 
-def test_cma_reports_its_own_stop_criteria():
-    adapter = CMAAdapter(2, 1, seed=0, cma_options={"tolfun": 1e3, "tolfunhist": 1e3})
-    assert adapter.stop() == {}
+@EXTRAS
+@pytest.mark.parametrize("nested", [False, True])
+def test_cma_takes_pycma_options_flat_and_reports_its_own_stop_criteria(nested):
+    options = {"tolfun": 1e3, "tolfunhist": 1e3, "popsize": 6}
+    adapter = CMAAdapter(2, 1, seed=0, **({"cma_options": options} if nested else options))
+    assert adapter.options == options and adapter.stop() == {}
     _drive(adapter, 12, n=6)
     assert adapter.stop()  # the huge tolerances are met once the history is long enough
+    assert adapter._lib.popsize == 6
+
+
+@EXTRAS
+def test_the_runner_gives_nevergrad_its_budget_and_ngopt_runs_on_this_numpy():
+    # NGOpt picks its meta-model here, which calls float() on a one-element array (a TypeError on numpy 2.4)
+    history = run("nevergrad", "creps_gym/Sphere-v0", 6, 10, 0, env_kwargs={"dim": 3},
+                  optimizer_options={"optimizer": "NGOpt"}, run_dir=None)  # fmt: skip
+    assert np.isfinite(history.column("eval_regret")).all()
+    runner_budgets = {}
+    for max_episodes, expected in ((None, 60), (35, 35)):
+        config = RunConfig("creps_gym/Sphere-v0", "nevergrad", 6, 10, 0, max_episodes=max_episodes)
+        runner_budgets[max_episodes] = Runner(config).optimizer.options["budget"]
+        assert runner_budgets[max_episodes] == expected
+    given = RunConfig("creps_gym/Sphere-v0", "nevergrad", 6, 10, 0, optimizer_options={"budget": 7})
+    assert Runner(given).optimizer.options["budget"] == 7  # the user's budget wins
+
+
+@EXTRAS
+def test_nevergrad_threads_are_stopped_by_close_and_by_the_runner():
+    baseline = threading.active_count()
+    with NevergradAdapter(
+        3, 1, seed=0, optimizer="Carola3", budget=100
+    ) as adapter:  # runs Cobyla in a thread
+        _drive(adapter, 3, n=4)
+        assert threading.active_count() > baseline
+    assert threading.active_count() == baseline
+    history = run("nevergrad", "creps_gym/Sphere-v0", 3, 4, 0, env_kwargs={"dim": 3},
+                  optimizer_options={"optimizer": "Carola3"})  # fmt: skip
+    assert len(history) == 3 and threading.active_count() == baseline
+
+
+@EXTRAS
+def test_a_script_that_keeps_its_runner_exits(tmp_path):
+    script = tmp_path / "keeps_runner.py"  # the runner, a global, holds the adapter until after exit's join
+    script.write_text(
+        "from creps_gym.runner.config import RunConfig\n"
+        "from creps_gym.runner.loop import Runner\n"
+        "config = RunConfig('creps_gym/Sphere-v0', 'nevergrad', 3, 4, 0, env_kwargs={'dim': 3},\n"
+        "                   optimizer_options={'optimizer': 'Carola3'})\n"
+        "runner = Runner(config)\n"
+        "print(len(runner.run()))\n"
+    )
+    result = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0 and result.stdout.strip() == "3", result.stderr
 
 
 def test_the_adapter_guide_examples_run(monkeypatch, capsys):
@@ -206,3 +280,18 @@ def test_the_adapter_guide_examples_run(monkeypatch, capsys):
     assert issubclass(namespace["RandomSearchAdapter"], MinimizerAdapter)
     assert "random-search" in registry.optimizer_names()
     assert "mean regret of the recommended policy" in capsys.readouterr().out
+
+
+RUNNER_GUIDE = GUIDE.parent / "runner.md"
+
+
+@EXTRAS
+@pytest.mark.parametrize("index", range(3))
+def test_the_documented_adapter_commands_run(index, tmp_path, capsys):
+    section = RUNNER_GUIDE.read_text().split("## Adapters", 1)[1].split("\n## ", 1)[0]
+    commands = [line for line in section.splitlines() if line.startswith("creps-gym run ")]
+    assert len(commands) == 3
+    argv = shlex.split(commands[index])[1:]
+    argv[argv.index("--out") + 1] = str(tmp_path / "run")
+    assert cli.main([*argv, "--no-plot"]) == 0
+    assert "stop: iterations" in capsys.readouterr().out

@@ -10,9 +10,10 @@ from dataclasses import fields
 import pytest
 from helpers import SPHERE, cli_command
 
+import creps_gym
 from creps_gym.cli import main
 from creps_gym.optimizers import CREPSCMAConfig, optimizer_names
-from creps_gym.runner import History, RunDir, run
+from creps_gym.runner import History, RunDir
 
 
 def cli(*args, cwd=None, timeout=120):
@@ -35,45 +36,46 @@ def test_console_script_is_installed():
     assert result.returncode == 0 and "Exit codes" in result.stdout
 
 
-def test_list_shows_envs_and_optimizers_with_descriptions():
+def test_list_shows_aligned_envs_with_spaces_and_optimizers_without_rest_markup():
     result = cli("list")
     assert result.returncode == 0, result.stderr
-    lines = result.stdout.splitlines()
-    sphere = next(line for line in lines if line.strip().startswith(SPHERE))
-    assert "Sphere" in sphere.split(SPHERE, 1)[1]
+    assert "`" not in result.stdout and ":class:" not in result.stdout
+    envs, optimizers = result.stdout.split("Optimizers:\n")
+    env_lines, optimizer_lines = envs.splitlines()[1:], optimizers.splitlines()
+    for lines, columns in ((env_lines, ("context", "parameters θ", "initial (default)", "description")),
+                           (optimizer_lines, ("description",))):  # fmt: skip
+        for column in columns:  # every row has a cell starting right below the column's header
+            start = lines[0].index(column)
+            assert all(line[start - 2 : start] == "  " and line[start] != " " for line in lines[1:]), column
+    sphere = next(line for line in env_lines if line.strip().startswith(SPHERE)).split("  ")
+    assert [cell.strip() for cell in sphere if cell.strip()][1:5] == [
+        "[0, 3]", "[-5, 5]^15", "N(0, 2.5^2)", "Sphere: contextual version, x = theta + A s."]  # fmt: skip
+    assert len(env_lines) == 1 + len(creps_gym.registered_ids())
     for name in optimizer_names():
-        assert any(line.split()[:1] == [name] and len(line.split()) > 1 for line in lines), name
+        assert any(line.split()[:1] == [name] and len(line.split()) > 1 for line in optimizer_lines), name
 
 
-def test_run_writes_the_run_directory_and_matches_the_python_api(tmp_path):
-    out = tmp_path / "run"
-    result = cli(*run_args(out))
-    assert result.returncode == 0, result.stderr
-    assert "stop: iterations" in result.stdout and result.stderr == ""  # no bar when not on a terminal
-    history = History.from_json(out / RunDir.HISTORY_JSON)
-    expected = run("creps-cma-old", SPHERE, 6, 10, 0, env_kwargs={"dim": 4}, eval_every=2)
-    assert history.equals(expected)
-    for name in (RunDir.CONFIG, RunDir.VERSIONS, RunDir.LOG, RunDir.CHECKPOINT, RunDir.IOH, RunDir.PLOT):
-        assert (out / name).stat().st_size > 0, name
+def test_version_flag(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--version"])
+    assert exit_info.value.code == 0 and capsys.readouterr().out == f"creps-gym {creps_gym.__version__}\n"
 
 
-def test_progress_bar_on_request_and_plot_and_export_and_resume(tmp_path):
-    a, b = tmp_path / "a", tmp_path / "b"
-    shown = cli(*run_args(a, "--progress", "--no-plot"))
-    assert shown.returncode == 0 and "regret=" in shown.stderr and "6/6" in shown.stderr
-    assert not (a / RunDir.PLOT).exists()
-    assert cli(*run_args(b, "--no-plot", seed=1)).returncode == 0
-    plotted = cli("plot", a, b, "-o", tmp_path / "both.png")
-    assert plotted.returncode == 0 and (tmp_path / "both.png").stat().st_size > 0
-    exported = cli("export", a, b, "-o", tmp_path / "ioh.csv")
-    lines = (tmp_path / "ioh.csv").read_text().splitlines()
-    assert (
-        exported.returncode == 0 and lines[0] == "evaluations,value,function_id,algorithm_id,dimension,run_id"
-    )
-    assert len(lines) == 1 + 2 * 3  # two runs, evaluated at iterations 2, 4 and 6
-    before = (a / RunDir.HISTORY_JSON).read_text()
-    resumed = cli("resume", a, "--no-plot")
-    assert resumed.returncode == 0 and (a / RunDir.HISTORY_JSON).read_text() == before  # finished: unchanged
+@pytest.mark.parametrize(
+    ("flag", "typo", "hint"),
+    [
+        ("--env", "creps_gym/Spere-v0", "(did you mean 'creps_gym/Sphere-v0'"),
+        ("--env", "Rosenbrock-v0", "(did you mean 'creps_gym/Rosenbrock-v0'?)"),
+        ("--optimizer", "creps-cma", "(did you mean 'creps-cma-old' or 'creps' or 'creps-cma-current'?)"),
+        ("--optimizer", "nevergrd", "(did you mean 'nevergrad'?)"),
+    ],
+)
+def test_a_mistyped_env_or_optimizer_gets_did_you_mean(tmp_path, capsys, flag, typo, hint):
+    args = [str(a) for a in run_args(tmp_path / "run")]
+    args[args.index(flag) + 1] = typo
+    with pytest.raises(SystemExit) as exit_info:
+        main(args)
+    assert exit_info.value.code == 2 and hint in capsys.readouterr().err
 
 
 #: The options of the default optimiser, as its error message lists them (the config's init fields).

@@ -8,6 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from helpers import EXTRAS
 
 import creps_gym  # noqa: F401  (registers the ids)
 from creps_gym.envs.reacher import PlanarReacherEnv, PlanarReacherVectorEnv, end_effector, forward_kinematics
@@ -114,6 +115,7 @@ def test_same_seed_gives_the_same_contexts():
     assert all(np.all((o >= 0) & (o <= 2)) for o in obs_a)
 
 
+@EXTRAS
 def test_rgb_array_render_shows_the_motion():
     env = gym.make(ENV_ID, render_mode="rgb_array")
     assert "human" not in env.metadata["render_modes"]
@@ -130,6 +132,7 @@ def test_rgb_array_render_shows_the_motion():
     assert red.sum() > 20  # the via-point cross
 
 
+@EXTRAS
 @pytest.mark.filterwarnings("ignore:.*symmetric and normalized")
 def test_check_env_passes_including_the_render_check():
     check_env(gym.make(ENV_ID, render_mode="rgb_array").unwrapped)

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import SPHERE, cli_command
+from helpers import SPHERE, cli_command, marked
 
 from creps_gym.runner import History, RunDir, run
 
@@ -40,7 +40,7 @@ def _kill_when(process: subprocess.Popen, ready, what: str, timeout: float = 90.
     assert process.returncode == -signal.SIGKILL
 
 
-@pytest.mark.parametrize("optimizer", ["creps-cma-old", "cma"])
+@pytest.mark.parametrize("optimizer", marked(["creps-cma-old", "cma"]))
 def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(tmp_path, optimizer):
     out = tmp_path / "run"
     log = out / RunDir.LOG

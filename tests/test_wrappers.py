@@ -10,7 +10,7 @@ import pytest
 from gymnasium.utils import seeding
 from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode
-from helpers import make_or_skip, python_blocks
+from helpers import EXTRAS, make_or_skip, python_blocks
 
 import creps_gym
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
@@ -302,7 +302,7 @@ def test_every_vector_wrapper_on_every_registered_native_vector_env(env_id):
 DOC = Path(__file__).resolve().parents[1] / "docs" / "wrappers.md"
 
 
-@pytest.mark.parametrize("index", [0, 1])
+@pytest.mark.parametrize("index", [0, pytest.param(1, marks=EXTRAS)])  # block 1 makes a MuJoCo env
 def test_doc_examples_run(index, capsys):
     blocks = python_blocks(DOC)
     assert len(blocks) == 4

@@ -8,7 +8,13 @@ the mean evaluation return (maximised). Load the file in IOHanalyzer's R package
     read_pure_csv("iohanalyzer.csv", "evaluations", "value", "function_id", "algorithm_id",
                   "dimension", "run_id", maximization = FALSE)   # TRUE for returns
 
-or upload it in the web interface and map the columns of the same names.
+or upload it in the web interface ("use custom csv format") and map the columns of the same names. The
+file follows IOHanalyzer's documented CSV conventions (tested in ``tests/test_plots_export.py``): one header
+row, the function values as the only required column, one row per (function, algorithm, dimension, run,
+evaluation count), evaluation counts increasing within each run, finite values.
+
+Histories of different envs (env id, p or z differ) are refused unless ``mix_envs=True``: a regret and a
+return cannot share one value column, and mixing is usually a mistake.
 """
 
 from __future__ import annotations
@@ -22,15 +28,32 @@ from pathlib import Path
 
 from creps_gym.runner.history import History, atomic_write_text
 
-__all__ = ["IOH_COLUMNS", "iohanalyzer_rows", "write_iohanalyzer"]
+__all__ = ["IOH_COLUMNS", "check_one_env", "env_key", "iohanalyzer_rows", "write_iohanalyzer"]
 
 IOH_COLUMNS = ("evaluations", "value", "function_id", "algorithm_id", "dimension", "run_id")
 
 
-def iohanalyzer_rows(histories: Sequence[History]) -> tuple[list[tuple], str]:
+def env_key(history: History) -> str:
+    """The env of a run as text: id, parameters p and context dimensions z (from its metadata)."""
+    meta = history.meta
+    return f"{meta.get('env', '?')} (p = {meta.get('n_params', '?')}, z = {meta.get('n_context_dims', '?')})"
+
+
+def check_one_env(histories: Sequence[History], mix_envs: bool = False) -> list[str]:
+    """The sorted env keys of ``histories``; ``ValueError`` if there are several and ``mix_envs`` is False."""
+    envs = sorted({env_key(h) for h in histories})
+    if len(envs) > 1 and not mix_envs:
+        raise ValueError(
+            f"runs: expected runs of one env (pass mix_envs=True, or --mix-envs, to combine them), got {envs}"
+        )
+    return envs
+
+
+def iohanalyzer_rows(histories: Sequence[History], mix_envs: bool = False) -> tuple[list[tuple], str]:
     """Rows (in :data:`IOH_COLUMNS` order) and the metric (``"regret"`` or ``"return"``)."""
     if not histories:
         raise ValueError("histories: expected at least one History, got none")
+    check_one_env(histories, mix_envs)
     use_regret = all(h.meta.get("metric") == "regret" for h in histories)
     rows = []
     for history in histories:
@@ -43,9 +66,11 @@ def iohanalyzer_rows(histories: Sequence[History]) -> tuple[list[tuple], str]:
     return rows, "regret" if use_regret else "return"
 
 
-def write_iohanalyzer(histories: Sequence[History], path: str | os.PathLike[str]) -> Path:
+def write_iohanalyzer(
+    histories: Sequence[History], path: str | os.PathLike[str], *, mix_envs: bool = False
+) -> Path:
     """Write the rows of :func:`iohanalyzer_rows` to ``path`` (atomically); returns the path."""
-    rows, _ = iohanalyzer_rows(histories)
+    rows, _ = iohanalyzer_rows(histories, mix_envs)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(IOH_COLUMNS)

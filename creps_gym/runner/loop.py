@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import contextual_model, evaluate_policy, test_contexts
 from creps_gym.optimizers.registry import make_optimizer, recommended_samples, restore_optimizer
+from creps_gym.optimizers.registry import optimizer_class as registered_class
 from creps_gym.runner.backends import EnvSource, EpisodeError, make_backend, retry, run_episodes
 from creps_gym.runner.callbacks import as_callback
 from creps_gym.runner.config import RunConfig
@@ -156,6 +157,12 @@ class Runner:
         else:
             mean = self._per_parameter("initial_mean", mean)
         std = self._per_parameter("initial_std", std)
+        options = dict(self.config.optimizer_options)
+        budget_option = getattr(registered_class(self.config.optimizer), "budget_option", None)
+        if budget_option is not None and budget_option not in options:  # e.g. nevergrad's NGOpt needs it
+            options[budget_option] = min(
+                self.config.iterations * self.config.samples, self.config.max_episodes or math.inf
+            )
         return make_optimizer(
             self.config.optimizer,
             self.n_params,
@@ -163,7 +170,7 @@ class Runner:
             seed,
             initial_mean=mean,
             initial_cov=std**2,
-            **self.config.optimizer_options,
+            **options,
         )
 
     def _per_parameter(self, name: str, default: Array) -> Array:
@@ -349,6 +356,8 @@ class Runner:
                     self._checkpoint()
         finally:
             backend.close()
+            if self.config.optimizer is not None and hasattr(self.optimizer, "close"):
+                self.optimizer.close()  # built by name here: release its library's threads
             for callback in self.callbacks:
                 callback.on_end(self.history)
         self._finish()

@@ -4,7 +4,8 @@
 file                      content
 ========================= ===========================================================================
 ``config.json``           the resolved :class:`~creps_gym.runner.config.RunConfig` and run metadata
-``versions.json``         Python, creps_gym, gymnasium, numpy, scipy and mujoco versions, platform
+``versions.json``         Python, creps_gym, gymnasium, numpy, scipy, mujoco, gymnasium-robotics, and the
+                          adapters' libraries (cma, nevergrad, optuna) and ray versions, platform
 ``log.jsonl``             append-only log, one JSON object per line: an iteration record
                           (:meth:`IterationRecord.to_dict`) or an event (``{"event": "start" | "resume" |
                           "end", ...}``). After a resume, iterations done after the last checkpoint appear
@@ -40,7 +41,8 @@ CHECKPOINT_FORMAT = "creps_gym.run/1"
 def package_versions() -> dict[str, str]:
     """Versions of Python and of the packages a run depends on ("not installed" where missing)."""
     found = {"python": sys.version.split()[0], "platform": platform.platform()}
-    for package in ("creps-gym", "gymnasium", "numpy", "scipy", "mujoco"):
+    packages = ("creps-gym", "gymnasium", "numpy", "scipy", "mujoco", "gymnasium-robotics")
+    for package in (*packages, "cma", "nevergrad", "optuna", "ray"):  # ... and the adapters' libraries
         try:
             found[package] = version(package)
         except PackageNotFoundError:
@@ -156,7 +158,9 @@ class RunDir:
         """Write the runner's state and the optimiser's ``state_dict()`` atomically to ``checkpoint.npz``."""
         flat = {"format": CHECKPOINT_FORMAT, **state}
         flat.update({f"optimizer.{key}": value for key, value in optimizer_state.items()})
-        return save_state(flat, self.file(self.CHECKPOINT))
+        path = save_state(flat, self.file(self.CHECKPOINT))
+        os.chmod(path, self.file(self.CONFIG).stat().st_mode & 0o777)  # one mode for all the run's files
+        return path
 
     def load_checkpoint(self) -> tuple[dict[str, Any], dict[str, Any]] | None:
         """``(runner state, optimiser state)`` of the last checkpoint, or None if there is none yet."""

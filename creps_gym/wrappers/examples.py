@@ -1,70 +1,204 @@
-"""Registered examples of the episodic conversion on real ecosystem tasks.
+"""Registered examples of the episodic conversion on real ecosystem tasks: PointMaze and Reacher.
 
 Ids (collected by :mod:`creps_gym.envs.registration`)
 -----------------------------------------------------
 ``creps_gym/PointMazeGoal-v0``
-    Gymnasium-Robotics ``PointMaze_OpenDense-v3`` (open 3 x 5 arena, dense reward ``exp(-|x - g|)``,
-    continuing task without goal resets) for 100 steps from the arena's centre cell. Context: the desired
-    goal ``g`` (2,), in ``[-2.25, 2.25] x [-1.25, 1.25]``. Parameters (8): a DMP reference from the ball's
-    start to a learned goal (2, in the context box) shaped by 3 weights per axis (6, in ``[-1, 1]``),
-    tracked by the PD force ``5 (y_ref - x) - v`` (:class:`~creps_gym.wrappers.TrackingDMPController`).
-    The flat observation is ``[achieved_goal, desired_goal, observation]``, so x is at 4:6 and v at 6:8.
+    :class:`PointMazeGoalEnv` (Gymnasium-Robotics ``PointMaze_OpenDense-v3``), native vector env
+    :class:`PointMazeGoalVectorEnv`.
 ``creps_gym/ReacherTarget-v0``
-    Gymnasium MuJoCo ``Reacher-v5`` (50 steps). Context: the target position ``qpos[2:4]`` (2,), in
-    ``[-0.2, 0.2]^2``. Parameters: an open-loop DMP torque profile
-    (:class:`~creps_gym.wrappers.DMPController`), 4 weights per joint (8), in ``[-1, 1]``.
+    :class:`ReacherTargetEnv` (Gymnasium MuJoCo ``Reacher-v5``), native vector env
+    :class:`ReacherTargetVectorEnv`.
 
-Contexts drawn on reset come from the inner env's own goal distribution. Neither id has a native vector
-entry point: ``gymnasium.make_vec(id, n, vectorization_mode="async")`` runs episodes in parallel processes.
+Each class docstring is the env's manual. Both render ``rgb_array`` frames through the inner MuJoCo env
+(headless: ``MUJOCO_GL=egl`` or ``osmesa``). The native vector envs run the episodes one after another in
+one process; ``gymnasium.make_vec(id, n, vectorization_mode="async")`` runs them in parallel processes.
 
-Dependencies. Importing this module imports neither MuJoCo nor Gymnasium-Robotics: the entry points are
-strings resolved at ``gymnasium.make`` time (``"gymnasium_robotics:Id"`` imports the package then), and
-``pip install creps-gym[mujoco]`` installs both. Gymnasium-Robotics 1.4.2's Fetch and Shadow-Hand envs fail
-to reset with mujoco >= 3.12 (their ``set_joint_qpos`` compares ``model.jnt_type`` with the ``mjtJoint``
-enum, which no longer compares equal), while PointMaze and Gymnasium's Reacher-v5 work with mujoco 4.0,
-which the humanoid kick env needs. So only those two are registered; a Fetch example would need
-``mujoco<3.12``, incompatible with the kick env.
+Seeding across vectorisation modes. ``reset(seed=s)`` of the native vector env draws all n contexts from
+one generator seeded with ``s``; Gymnasium's sync and async vector envs seed sub-env ``i`` with ``s + i``.
+The contexts from the same seed therefore differ between the modes (each mode is reproducible). The runner
+is not affected: it gives every episode its own reset seed, so its backends agree bit for bit.
+
+Dependencies. Importing this module imports neither MuJoCo nor Gymnasium-Robotics; making an env does
+(``pip install creps-gym[mujoco]`` installs both). Gymnasium-Robotics prints a notice about its Adroit
+envs to stderr when imported; the PointMaze env imports it with that notice silenced. Gymnasium-Robotics
+1.4.2's Fetch and Shadow-Hand envs fail to reset with mujoco >= 3.12 (their ``set_joint_qpos`` compares
+``model.jnt_type`` with the ``mjtJoint`` enum, which no longer compares equal), while PointMaze and
+Gymnasium's Reacher-v5 work with mujoco 4.0, which the humanoid kick env needs. So only those two are
+registered; a Fetch example would need ``mujoco<3.12``, incompatible with the kick env.
 """
 
 from __future__ import annotations
 
-from typing import Any
+import contextlib
+import copy
+import importlib
+import io
+import sys
+from typing import Any, ClassVar
 
-__all__ = ["REGISTRATIONS"]
+import numpy as np
+from numpy.typing import NDArray
 
-_ENTRY_POINT = "creps_gym.wrappers.episodic:EpisodicEnv"
+from creps_gym.wrappers.episodic import EpisodicEnv, EpisodicVectorEnv
 
+__all__ = [
+    "REGISTRATIONS",
+    "PointMazeGoalEnv",
+    "PointMazeGoalVectorEnv",
+    "ReacherTargetEnv",
+    "ReacherTargetVectorEnv",
+]
+
+_POINT_MAZE: dict[str, Any] = {
+    "env": "PointMaze_OpenDense-v3",
+    "env_kwargs": {"continuing_task": True, "reset_target": False},
+    "reset_options": {"reset_cell": [2, 3]},
+    "max_inner_steps": 100,
+    "controller": {
+        "type": "tracking_dmp",
+        "position_indices": [4, 5],
+        "velocity_indices": [6, 7],
+        "goal_low": [-2.25, -1.25],
+        "goal_high": [2.25, 1.25],
+        "n_basis": 3,
+        "weight_bound": 1.0,
+        "kp": 5.0,
+        "kd": 1.0,
+    },
+    "context": {"type": "goal", "low": [-2.25, -1.25], "high": [2.25, 1.25]},
+}
+_REACHER: dict[str, Any] = {
+    "env": "Reacher-v5",
+    "max_inner_steps": 50,
+    "controller": {"type": "dmp", "n_basis": 4, "weight_bound": 1.0},
+    "context": {"type": "qpos", "indices": [2, 3], "low": [-0.2, -0.2], "high": [0.2, 0.2]},
+}
+
+
+def _import_robotics_quietly() -> None:
+    """Import Gymnasium-Robotics (registers its ids) without the Adroit notice it prints to stderr."""
+    if "gymnasium_robotics" not in sys.modules:
+        with contextlib.redirect_stderr(io.StringIO()):
+            importlib.import_module("gymnasium_robotics")
+
+
+class _RenderedEpisodicEnv(EpisodicEnv):
+    """An :class:`EpisodicEnv` with fixed defaults that renders the inner env (``rgb_array``)."""
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
+    _defaults: ClassVar[dict[str, Any]]
+
+    def __init__(self, render_mode: str | None = None, **overrides: Any) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode: expected one of {self.metadata['render_modes']} or None, got {render_mode!r}"
+            )
+        kwargs = {**copy.deepcopy(self._defaults), **overrides}
+        if render_mode is not None:  # the inner env renders the frames
+            kwargs["env_kwargs"] = {**kwargs.get("env_kwargs", {}), "render_mode": render_mode}
+        super().__init__(**kwargs, render_mode=render_mode)
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """The inner env's frame (uint8, (height, width, 3)): the start with the context set after
+        ``reset``, the last inner state after ``step``; None without a render mode."""
+        if self.render_mode is None:
+            return None
+        if self._context is None:
+            raise RuntimeError("render() called before reset(): there is no context to show")
+        if self._last_params is None:  # show the episode's start with its context
+            observation, _ = self.inner.reset(seed=self.start_seed, options=self.reset_options)
+            self.access.write(self.inner, self._context, observation)
+        return self.inner.render()
+
+
+class PointMazeGoalEnv(_RenderedEpisodicEnv):
+    """A point mass steered to a goal in an open PointMaze arena by a tracked DMP reference.
+
+    Description
+        Gymnasium-Robotics ``PointMaze_OpenDense-v3``: an open 3 x 5 arena, dense reward
+        ``exp(-|x - g|)`` per step, a continuing task without goal resets. Every episode starts the ball in
+        the arena's centre cell (reset cell (2, 3), inner reset seed ``start_seed``) and runs 100 inner
+        steps. A DMP reference from the ball's start to a learned goal is tracked by the PD force
+        ``5 (y_ref - x) - v`` (:class:`~creps_gym.wrappers.TrackingDMPController`).
+    Context Space
+        ``Box([-2.25, -1.25], [2.25, 1.25], (2,), float64)``: the desired goal g. Contexts drawn on reset
+        come from PointMaze's own goal distribution (the centres of the arena's cells, with noise).
+    Parameter Space
+        ``Box(8,)``: the DMP's goal (2, in the context box) and 3 weights per axis (6, in [-1, 1]).
+    Return
+        The sum of the 100 inner rewards, in [0, 100]; higher when the ball gets to g early and stays.
+    Episode End
+        After the single step (``terminated=True``); the inner episode always runs 100 steps (``info``
+        has ``inner_length``, ``inner_terminated``, ``inner_truncated`` and the last ``inner_info``).
+    Arguments
+        render_mode : {"rgb_array", None}
+            ``render()`` gives the inner MuJoCo frame (480 x 480).
+        **overrides
+            Any :class:`~creps_gym.wrappers.EpisodicEnv` argument (``max_inner_steps``, ``start_seed``,
+            ``controller``, ...) replacing the defaults above.
+    Version History
+        v0: initial version.
+    """
+
+    _defaults: ClassVar[dict[str, Any]] = _POINT_MAZE
+
+    def __init__(self, render_mode: str | None = None, **overrides: Any) -> None:
+        _import_robotics_quietly()
+        super().__init__(render_mode, **overrides)
+
+
+class ReacherTargetEnv(_RenderedEpisodicEnv):
+    """Gymnasium's two-joint Reacher reaching a target with an open-loop DMP torque profile.
+
+    Description
+        Gymnasium MuJoCo ``Reacher-v5``, 50 inner steps from the inner reset ``start_seed``; the
+        target is the context. The torques follow an open-loop DMP profile
+        (:class:`~creps_gym.wrappers.DMPController`).
+    Context Space
+        ``Box(-0.2, 0.2, (2,), float64)``: the target position ``qpos[2:4]``. Contexts drawn on reset
+        come from Reacher's own target distribution (uniform in the disc of radius 0.2).
+    Parameter Space
+        ``Box(-1, 1, (8,), float64)``: 4 DMP weights per joint.
+    Return
+        The sum of Reacher-v5's 50 rewards: minus the fingertip-target distance minus the control cost,
+        per step (at most 0).
+    Episode End
+        After the single step (``terminated=True``); the inner episode runs 50 steps (``info`` has
+        ``inner_length``, ``inner_terminated``, ``inner_truncated`` and the last ``inner_info``).
+    Arguments
+        render_mode : {"rgb_array", None}
+            ``render()`` gives the inner MuJoCo frame (480 x 480).
+        **overrides
+            Any :class:`~creps_gym.wrappers.EpisodicEnv` argument replacing the defaults above.
+    Version History
+        v0: initial version.
+    """
+
+    _defaults: ClassVar[dict[str, Any]] = _REACHER
+
+
+class PointMazeGoalVectorEnv(EpisodicVectorEnv):
+    """Native vector version of :class:`PointMazeGoalEnv` (episodes run one after another)."""
+
+    single_env_class = PointMazeGoalEnv
+
+
+class ReacherTargetVectorEnv(EpisodicVectorEnv):
+    """Native vector version of :class:`ReacherTargetEnv` (episodes run one after another)."""
+
+    single_env_class = ReacherTargetEnv
+
+
+_MODULE = "creps_gym.wrappers.examples"
 REGISTRATIONS: list[dict[str, Any]] = [
     {
         "id": "creps_gym/PointMazeGoal-v0",
-        "entry_point": _ENTRY_POINT,
-        "kwargs": {
-            "env": "gymnasium_robotics:PointMaze_OpenDense-v3",
-            "env_kwargs": {"continuing_task": True, "reset_target": False},
-            "reset_options": {"reset_cell": [2, 3]},
-            "max_inner_steps": 100,
-            "controller": {
-                "type": "tracking_dmp",
-                "position_indices": [4, 5],
-                "velocity_indices": [6, 7],
-                "goal_low": [-2.25, -1.25],
-                "goal_high": [2.25, 1.25],
-                "n_basis": 3,
-                "weight_bound": 1.0,
-                "kp": 5.0,
-                "kd": 1.0,
-            },
-            "context": {"type": "goal", "low": [-2.25, -1.25], "high": [2.25, 1.25]},
-        },
+        "entry_point": f"{_MODULE}:PointMazeGoalEnv",
+        "vector_entry_point": f"{_MODULE}:PointMazeGoalVectorEnv",
     },
     {
         "id": "creps_gym/ReacherTarget-v0",
-        "entry_point": _ENTRY_POINT,
-        "kwargs": {
-            "env": "Reacher-v5",
-            "max_inner_steps": 50,
-            "controller": {"type": "dmp", "n_basis": 4, "weight_bound": 1.0},
-            "context": {"type": "qpos", "indices": [2, 3], "low": [-0.2, -0.2], "high": [0.2, 0.2]},
-        },
+        "entry_point": f"{_MODULE}:ReacherTargetEnv",
+        "vector_entry_point": f"{_MODULE}:ReacherTargetVectorEnv",
     },
 ]

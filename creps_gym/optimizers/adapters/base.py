@@ -113,11 +113,14 @@ class MinimizerAdapter(ContextualOptimizer):
     (``n`` normalised points, shape (n, p)), :meth:`_lib_tell` (losses of some of the last asked points) and
     :meth:`_lib_recommend` (normalised point, shape (p,)), and may override :meth:`stop` and
     :meth:`_lib_diagnostics`. ``fixed_batch = True`` means every ask must have the first ask's size and
-    every tell must hold the whole batch (pycma's population).
+    every tell must hold the whole batch (pycma's population). ``budget_option`` names an option that the
+    runner fills with the run's episode budget (iterations × samples, at most ``max_episodes``) unless the
+    user gave it; :meth:`close` releases what the library opened.
     """
 
     kind: ClassVar[str] = "adapter"
     fixed_batch: ClassVar[bool] = False
+    budget_option: ClassVar[str | None] = None
 
     @staticmethod
     def recommended_batch_size(n_params: int, n_context_dims: int) -> int:
@@ -172,6 +175,19 @@ class MinimizerAdapter(ContextualOptimizer):
 
     def _lib_diagnostics(self) -> dict[str, float]:
         return {}
+
+    def close(self) -> None:
+        """Release what the library opened (threads, files); the default has nothing to release.
+
+        The runner calls it at the end of a run with an optimiser it built by name. Adapters are also
+        context managers: ``with NevergradAdapter(...) as adapter: ...`` closes on exit.
+        """
+
+    def __enter__(self) -> MinimizerAdapter:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
 
     # -- protocol ------------------------------------------------------------------------------------------
     def _sample(self, contexts: Array) -> Array:

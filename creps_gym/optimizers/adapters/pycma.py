@@ -16,7 +16,7 @@ from creps_gym.optimizers.adapters.base import MinimizerAdapter, import_optional
 __all__ = ["CMAAdapter"]
 
 Array = NDArray[np.float64]
-_MANAGED = ("seed", "randn", "popsize", "CMA_stds", "verbose", "verb_log", "verb_disp")
+_MANAGED = ("seed", "randn", "CMA_stds", "verbose", "verb_log", "verb_disp")
 
 
 class CMAAdapter(MinimizerAdapter):
@@ -31,28 +31,48 @@ class CMAAdapter(MinimizerAdapter):
     n_params, n_context_dims, initial_mean, initial_cov, seed
         See :class:`~creps_gym.optimizers.adapters.base.MinimizerAdapter`. pycma starts at
         ``initial_mean`` with step size 1 in coordinates scaled by the initial standard deviations.
-    cma_options : dict, optional
-        Further JSON-serialisable pycma options (for example ``{"tolfun": 1e-12}``). The options
-        ``seed``, ``randn``, ``popsize``, ``CMA_stds`` and the verbosity options are set by the adapter.
+    **cma_options
+        pycma options by their pycma names, flat as in ``cma.CMAEvolutionStrategy(x0, sigma0, options)``
+        (for example ``tolfun=1e-12``, or ``--opt tolfun=1e-12`` on the command line); the names are checked
+        against ``cma.CMAOptions()``. ``popsize``, if given, must equal the batch size (the runner's samples
+        per iteration). ``seed``, ``randn``, ``CMA_stds`` and the verbosity options are set by the adapter.
+        The nested form ``cma_options={...}`` of earlier versions is still accepted.
     """
 
     kind: ClassVar[str] = "cma"
     fixed_batch: ClassVar[bool] = True
 
     def _check_options(self, options: dict[str, Any]) -> dict[str, Any]:
-        unknown = set(options) - {"cma_options"}
-        if unknown:
-            raise TypeError(f"options: expected only 'cma_options', got unknown keys {sorted(unknown)}")
-        cma_options = options.get("cma_options", {})
-        if not isinstance(cma_options, dict):
-            raise TypeError(f"cma_options: expected a dict, got {type(cma_options).__name__}")
-        managed = sorted(set(cma_options) & set(_MANAGED))
+        nested = options.pop("cma_options", {})
+        if not isinstance(nested, dict):
+            raise TypeError(f"cma_options: expected a dict, got {type(nested).__name__}")
+        twice = sorted(set(nested) & set(options))
+        if twice:
+            raise ValueError(f"options: expected each pycma option once, got {twice} flat and in cma_options")
+        merged = {**nested, **options}
+        managed = sorted(set(merged) & set(_MANAGED))
         if managed:
-            raise ValueError(f"cma_options: expected none of {list(_MANAGED)}, got {managed}")
-        return {"cma_options": dict(cma_options)} if cma_options else {}
+            raise ValueError(
+                f"options: expected none of {list(_MANAGED)} (set by the adapter), got {managed}"
+            )
+        unknown = sorted(set(merged) - set(import_optional("cma").CMAOptions()))
+        if unknown:
+            raise TypeError(
+                f"options: expected pycma option names (see cma.CMAOptions()), got unknown {unknown}"
+            )
+        popsize = merged.get("popsize")
+        if popsize is not None and (isinstance(popsize, bool) or not isinstance(popsize, int) or popsize < 2):
+            raise ValueError(f"popsize: expected an int >= 2 (the batch size), got {popsize!r}")
+        return merged
 
     def _create(self, batch_size: int) -> Any:
         cma = import_optional("cma")
+        popsize = self.options.get("popsize", batch_size)
+        if popsize != batch_size:
+            raise ValueError(
+                f"popsize: expected the batch size {batch_size} (the runner's samples per iteration), "
+                f"got {popsize}"
+            )
         rng = np.random.default_rng(self.seed)
 
         def randn(*shape: int) -> Array:
@@ -65,7 +85,7 @@ class CMAAdapter(MinimizerAdapter):
             "verbose": -9,
             "verb_log": 0,
             "verb_disp": 0,
-            **self.options.get("cma_options", {}),
+            **self.options,
         }
         self._solutions: list[Array] = []
         return cma.CMAEvolutionStrategy(np.zeros(self.n_params), 1.0, opts)

@@ -65,6 +65,9 @@ MAX_CHECKPOINTS = 20
 #: A run of a paper method stops as diverged once √λ_max(Σ) exceeds this multiple of its initial value (the
 #: optimiser's ``max_std_growth``); converging runs stay within a few times the initial value.
 DIVERGENCE_GROWTH = 1000.0
+#: CREPS-family runs never stop on stagnation (their ``tolstagnation``): the committed runs were computed
+#: before that criterion existed, and a stalled paper method is reported by its budget running out.
+NO_STAGNATION = 10**9
 #: Initial search distributions of a run (see :func:`initial_distribution`).
 INITIALS = ("centre", "uniform5")
 #: Stop reasons of a run that ended before its budget ran out (besides the optimiser's ``"optimizer: ..."``).
@@ -244,7 +247,8 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
 
     Episodes run on the functions' native vector env (bit-identical to one env per episode, and about
     twice as fast); an optimiser with a ``max_std_growth`` option stops a diverging run
-    (:data:`DIVERGENCE_GROWTH`). With ``checkpoint_dir``, the run checkpoints there (at most
+    (:data:`DIVERGENCE_GROWTH`) and never stops on stagnation (:data:`NO_STAGNATION`). With
+    ``checkpoint_dir``, the run checkpoints there (at most
     :data:`MAX_CHECKPOINTS` times, at least :data:`CHECKPOINT_EVERY` iterations apart) and a run interrupted
     earlier continues from its last checkpoint instead of restarting.
     """
@@ -256,8 +260,9 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
         iterations = max(1, spec.budget // spec.samples)
         options: dict[str, Any] = {}
         start: dict[str, Any] = {}
-        if _has_option(spec.method, "max_std_growth"):
+        if _has_option(spec.method, "max_std_growth"):  # CREPS and its variants
             options["max_std_growth"] = DIVERGENCE_GROWTH
+            options["tolstagnation"] = NO_STAGNATION
         if spec.max_interpolation < 1.0:
             options["max_interpolation"] = spec.max_interpolation
         if not spec.divide_by_z:

@@ -252,18 +252,30 @@ def test_creps_cma_rejects_an_unknown_step_size_rule():
 
 @pytest.mark.parametrize("name", ["creps", "creps-cma-old", "creps-cma-csa", "c-cma-es"])
 def test_flat_returns_stop_every_native_optimizer(name):
-    optimizer = make_optimizer(name, 3, 1, 0, initial_cov=1.0, tolflatfitness=3)
+    restarts = {"restarts": 0} if name == "c-cma-es" else {}  # a met criterion would restart C-CMA-ES
+    optimizer = make_optimizer(name, 3, 1, 0, initial_cov=1.0, tolflatfitness=3, **restarts)
     _drive(optimizer, lambda s, th, rng: np.full(len(th), 2.5), 2, 20)
     assert optimizer.stop() == {}
     _drive(optimizer, lambda s, th, rng: np.full(len(th), 2.5), 1, 20)
     assert optimizer.stop() == {"tolflatfitness": 3}
 
 
+def test_a_met_criterion_restarts_contextual_cma_es_from_the_initial_distribution():
+    optimizer = CCMAES(3, 1, initial_mean=2.0, initial_cov=1.0, tolflatfitness=1, restarts=1, seed=0)
+    _drive(optimizer, lambda s, th, rng: -(th**2).sum(axis=1), 5, 20)
+    assert optimizer.restarts_done == 0 and optimizer.step_size != 1.0
+    _drive(optimizer, lambda s, th, rng: np.zeros(len(th)), 1, 20)  # flat: met, so a restart
+    assert optimizer.restarts_done == 1 and optimizer.stop() == {}
+    assert optimizer.step_size == 1.0 and np.array_equal(optimizer.coefficients, optimizer.config.initial_mean)
+    _drive(optimizer, lambda s, th, rng: np.zeros(len(th)), 1, 20)  # no restart left: stop() reports it
+    assert optimizer.stop() == {"tolflatfitness": 1} and optimizer.diagnostics["restarts"] == 1.0
+
+
 def test_contextual_cma_es_stops_on_tolx_and_tolupsigma():
-    optimizer = CCMAES(3, 1, initial_cov=1e-24, seed=0)
+    optimizer = CCMAES(3, 1, initial_cov=1e-24, seed=0, restarts=0)
     _drive(optimizer, lambda s, th, rng: -(th**2).sum(axis=1), 1, 20)
     assert "tolx" in optimizer.stop()
-    optimizer = CCMAES(3, 1, initial_cov=1.0, seed=0, tolupsigma=10.0)
+    optimizer = CCMAES(3, 1, initial_cov=1.0, seed=0, tolupsigma=10.0, restarts=0)
     _drive(optimizer, lambda s, th, rng: th[:, 0], 12, 20)
     assert "tolupsigma" in optimizer.stop()
 

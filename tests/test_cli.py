@@ -66,7 +66,7 @@ def test_version_flag(capsys):
     [
         ("--env", "creps_gym/Spere-v0", "(did you mean 'creps_gym/Sphere-v0'"),
         ("--env", "Rosenbrock-v0", "(did you mean 'creps_gym/Rosenbrock-v0'?)"),
-        ("--optimizer", "creps-cma", "(did you mean 'creps-cma-old' or 'creps' or 'creps-cma-current'?)"),
+        ("--optimizer", "creps-cma", "(did you mean 'creps-cma-old' or 'creps-cma-csa' or 'creps'?)"),
         ("--optimizer", "nevergrd", "(did you mean 'nevergrad'?)"),
     ],
 )

@@ -116,3 +116,24 @@ def test_allow_external_must_be_a_bool_and_seed_non_negative(name):
     assert optimizer.iteration == 0
     with pytest.raises(ValueError, match="seed: expected an int >= 0 or None, got -1"):
         make_optimizer(name, 3, 1, -1)
+
+
+@pytest.mark.parametrize("n_params", [1, 5])
+@pytest.mark.parametrize("name", NATIVE)
+def test_pure_noise_returns_end_in_a_stop_criterion(name, n_params):
+    """Returns that ignore θ carry no signal: before, Σ grew to a std of 1e15 (or collapsed and stalled) for
+    10k iterations without a stop. Now the stagnation criterion (or another) ends the run."""
+    optimizer = make_optimizer(name, n_params, 1, 0)
+    rng = np.random.default_rng(0)
+    for _ in range(2000):
+        contexts = rng.uniform(0, 3, (20, 1))
+        optimizer.tell(contexts, optimizer.ask(contexts), rng.standard_normal(20))
+        if optimizer.stop():
+            break
+    assert optimizer.stop(), f"{name} ran 2000 noise iterations without a stop"
+
+
+@pytest.mark.parametrize("name", NATIVE)
+def test_tolstagnation_is_validated(name):
+    with pytest.raises(ValueError, match="tolstagnation: expected an integer >= 1, got 0"):
+        make_optimizer(name, 3, 1, 0, tolstagnation=0)

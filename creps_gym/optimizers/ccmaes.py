@@ -45,7 +45,9 @@ from creps_gym.optimizers.cma_rules import (
     expected_norm,
     inverse_sqrt,
     rank_weights,
+    record_mean_return,
     stagnated,
+    stagnation_window,
     update_paths_and_cov,
 )
 from creps_gym.optimizers.contextual import (
@@ -239,7 +241,8 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         columns = config.mean_map.n_features if config.step_size_signal == "coefficients" else 1
         self.path_sigma = np.zeros((config.n_params, columns))
         self.path_cov = np.zeros(config.n_params)
-        self.mean_returns: list[float] = []  # per iteration, for the stagnation criterion
+        self.mean_returns: list[float] = []  # the last iterations', for the stagnation criterion
+        self.stagnation_window = stagnation_window(config.n_params, 1, config.tolstagnation)
         self.past_contexts = np.empty((0, config.n_context_dims))  # for the baseline (baseline_batches > 1)
         self.past_returns = np.empty(0)
         self.flat_iterations = 0
@@ -265,10 +268,11 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
                 "tell(): the update produced non-finite values; the optimiser was left unchanged"
             )
         self.policy, self.path_sigma, self.path_cov = step.policy, step.path_sigma, step.path_cov
-        spread = float(advantages.max() - advantages.min())
+        spread = float(returns.max() - returns.min())  # pycma's tolflatfitness: all returns equal
         flat = spread <= 1e-12 * max(float(np.abs(returns).max()), 1e-300)
         self.flat_iterations = self.flat_iterations + 1 if flat else 0
-        self.mean_returns.append(float(np.mean(returns)))
+        self.stagnation_window = stagnation_window(self.n_params, returns.shape[0], config.tolstagnation)
+        self.mean_returns = record_mean_return(self.mean_returns, returns, self.stagnation_window)
         if config.baseline_batches > 1:
             self.past_contexts, self.past_returns = recent_samples(
                 self.past_contexts, self.past_returns, contexts, returns, config.baseline_batches - 1
@@ -352,14 +356,9 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             met["max_condition"] = diagnostics["cond_cov"]
         if self.flat_iterations >= config.tolflatfitness:
             met["tolflatfitness"] = self.flat_iterations
-        window = config.tolstagnation or int(100 + 100 * self.n_params**1.5 / max(self._last_batch, 1))
-        if stagnated(self.mean_returns, window):
-            met["tolstagnation"] = window
+        if stagnated(self.mean_returns, self.stagnation_window):
+            met["tolstagnation"] = self.stagnation_window
         return met
-
-    @property
-    def _last_batch(self) -> int:
-        return int(self.evaluations / self.iteration) if self.iteration else 1
 
     # -- checkpoints ---------------------------------------------------------------------------------------
     def _state(self) -> dict[str, Any]:
@@ -368,6 +367,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             path_sigma=self.path_sigma.copy(),
             path_cov=self.path_cov.copy(),
             mean_returns=np.asarray(self.mean_returns, dtype=np.float64),
+            stagnation_window=self.stagnation_window,
             past_contexts=self.past_contexts.copy(),
             past_returns=self.past_returns.copy(),
             restarts_done=self.restarts_done,
@@ -392,6 +392,8 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         optimizer.path_cov = as_float_array(state["path_cov"], "state['path_cov']", (p,)).copy()
         history = as_float_array(state["mean_returns"], "state['mean_returns']", (None,))
         optimizer.mean_returns = [float(v) for v in history]
+        window = check_positive_int(state["stagnation_window"], "state['stagnation_window']")
+        optimizer.stagnation_window = window
         z = config.n_context_dims
         optimizer.past_contexts = as_float_array(state["past_contexts"], "state['past_contexts']", (None, z))
         optimizer.past_returns = as_float_array(

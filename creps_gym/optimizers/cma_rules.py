@@ -22,7 +22,9 @@ __all__ = [
     "expected_norm",
     "inverse_sqrt",
     "rank_weights",
+    "record_mean_return",
     "stagnated",
+    "stagnation_window",
     "update_paths_and_cov",
 ]
 
@@ -163,6 +165,16 @@ def csa_step(sigma: float, path_sigma: Array, constants: CMAConstants) -> float:
     """
     ratio = float(np.linalg.norm(path_sigma)) / expected_norm(path_sigma.size)
     return sigma * math.exp(min(1.0, constants.c_sigma / constants.d_sigma * (ratio - 1.0)))
+
+
+def stagnation_window(n_params: int, n_samples: int, configured: int | None) -> int:
+    """Iterations the stagnation criterion looks back: ``configured``, or pycma's 100 + 100·p^1.5/N."""
+    return configured if configured is not None else int(100 + 100 * n_params**1.5 / n_samples)
+
+
+def record_mean_return(history: Sequence[float], returns: Array, window: int) -> list[float]:
+    """The batch's mean return appended to ``history``, which keeps only the last ``window`` entries."""
+    return [*history, float(np.mean(returns))][-window:]
 
 
 def stagnated(mean_returns: Sequence[float], window: int) -> bool:

@@ -24,8 +24,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from creps_gym._validation import check_real_in_range, check_seed
+from creps_gym._validation import as_float_array, check_positive_int, check_real_in_range, check_seed
 from creps_gym.optimizers.base import ContextualOptimizer
+from creps_gym.optimizers.cma_rules import record_mean_return, stagnated, stagnation_window
 from creps_gym.optimizers.dual import DUAL_KL_TOL, DualSolution, solve_dual
 from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import (
@@ -90,6 +91,9 @@ class CREPSConfig:
         max_condition, or √λ_max(Σ) > max_std_growth·√λ_max(Σ₀) (divergence, like pycma's tolupsigma).
     tolflatfitness : int        stop after this many consecutive batches whose returns are all equal
         (default 10; like pycma's option of that name: no signal, and Σ would grow without bound).
+    tolstagnation : int or None  stop when, over this many iterations, the median batch mean return of the
+        last fifth is no better than that of the first fifth (None: pycma's 100 + 100·p^1.5/N). Under returns
+        that are pure noise, Σ collapses or grows without end; this criterion ends such runs.
     """
 
     n_params: int
@@ -103,12 +107,15 @@ class CREPSConfig:
     seed: int | None = None
     min_std: float = 1e-12
     max_condition: float = 1e14
-    max_std_growth: float = 1e20
+    max_std_growth: float = 1e8
     tolflatfitness: int = 10
+    tolstagnation: int | None = None
     mean_map: FeatureMap = field(init=False, repr=False)
     baseline_map: FeatureMap = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        if self.tolstagnation is not None:
+            object.__setattr__(self, "tolstagnation", check_positive_int(self.tolstagnation, "tolstagnation"))
         for name, minimum in (("n_params", 1), ("n_context_dims", 0), ("tolflatfitness", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
@@ -189,6 +196,8 @@ class CREPS(PolicyAccess, ContextualOptimizer):
         self._initial_max_std = float(np.sqrt(np.linalg.eigvalsh(config.initial_cov)[-1]))
         self._eta = 1.0  # the dual's warm start, normalised units
         self.flat_iterations = 0
+        self.mean_returns: list[float] = []  # the last iterations', for the stagnation criterion
+        self.stagnation_window = stagnation_window(config.n_params, 1, config.tolstagnation)
 
     def mean(self, contexts: Array) -> Array:
         """Policy mean Aᵀϕ(s) for validated contexts (n, z): shape (n, p)."""
@@ -247,6 +256,9 @@ class CREPS(PolicyAccess, ContextualOptimizer):
         spread = float(returns.max() - returns.min())
         flat = spread <= 1e-12 * max(float(np.abs(returns).max()), 1e-300)
         self.flat_iterations = self.flat_iterations + 1 if flat else 0
+        window = stagnation_window(self.n_params, n, self.config.tolstagnation)
+        self.stagnation_window = window
+        self.mean_returns = record_mean_return(self.mean_returns, returns, window)
 
     @property
     def diagnostics(self) -> dict[str, float]:
@@ -277,8 +289,8 @@ class CREPS(PolicyAccess, ContextualOptimizer):
         }
 
     def stop(self) -> dict[str, Any]:
-        """``min_std``, ``max_condition``, ``max_std_growth`` and ``tolflatfitness`` criteria that are met
-        (empty before the first update)."""
+        """``min_std``, ``max_condition``, ``max_std_growth``, ``tolflatfitness`` and ``tolstagnation``
+        criteria that are met (empty before the first update)."""
         met: dict[str, Any] = {}
         diagnostics = self.diagnostics
         if not diagnostics:
@@ -291,12 +303,18 @@ class CREPS(PolicyAccess, ContextualOptimizer):
             met["max_std_growth"] = diagnostics["max_std"] / self._initial_max_std
         if self.flat_iterations >= self.config.tolflatfitness:
             met["tolflatfitness"] = self.flat_iterations
+        if stagnated(self.mean_returns, self.stagnation_window):
+            met["tolstagnation"] = self.stagnation_window
         return met
 
     # -- checkpoints ---------------------------------------------------------------------------------------
     def _state(self) -> dict[str, Any]:
         state = self._policy_state()
-        state["dual_eta"] = self._eta
+        state.update(
+            dual_eta=self._eta,
+            mean_returns=np.asarray(self.mean_returns, dtype=np.float64),
+            stagnation_window=self.stagnation_window,
+        )
         return state
 
     @classmethod
@@ -312,4 +330,9 @@ class CREPS(PolicyAccess, ContextualOptimizer):
         optimizer.policy = LinearGaussianPolicy.from_state(config.mean_map, config.n_params, state)
         optimizer._eta = float(state["dual_eta"])
         optimizer.flat_iterations = int(state.get("flat_iterations", 0))
+        if "mean_returns" in state:  # checkpoints written before the stagnation criterion have none
+            history = as_float_array(state["mean_returns"], "state['mean_returns']", (None,))
+            optimizer.mean_returns = [float(v) for v in history]
+            window = check_positive_int(state["stagnation_window"], "state['stagnation_window']")
+            optimizer.stagnation_window = window
         return optimizer

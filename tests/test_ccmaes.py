@@ -266,7 +266,9 @@ def test_a_met_criterion_restarts_contextual_cma_es_from_the_initial_distributio
     assert optimizer.restarts_done == 0 and optimizer.step_size != 1.0
     _drive(optimizer, lambda s, th, rng: np.zeros(len(th)), 1, 20)  # flat: met, so a restart
     assert optimizer.restarts_done == 1 and optimizer.stop() == {}
-    assert optimizer.step_size == 1.0 and np.array_equal(optimizer.coefficients, optimizer.config.initial_mean)
+    assert optimizer.step_size == 1.0 and np.array_equal(
+        optimizer.coefficients, optimizer.config.initial_mean
+    )
     _drive(optimizer, lambda s, th, rng: np.zeros(len(th)), 1, 20)  # no restart left: stop() reports it
     assert optimizer.stop() == {"tolflatfitness": 1} and optimizer.diagnostics["restarts"] == 1.0
 

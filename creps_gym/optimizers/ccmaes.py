@@ -317,6 +317,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             weights,
             constants,
             self.iteration,
+            inv_sqrt,
         )
         repaired = policy.set_cov(cov)
         policy.step_size = csa_step(sigma, path_sigma, constants)  # Eq. (C9)

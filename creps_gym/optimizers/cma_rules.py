@@ -118,6 +118,7 @@ def update_paths_and_cov(
     weights: Array,
     constants: CMAConstants,
     iteration: int,
+    inv_sqrt: Array | None = None,
 ) -> tuple[Array, Array, Array, bool]:
     """One generation of the evolution paths and the covariance, Eqs. (C5)–(C8).
 
@@ -132,6 +133,7 @@ def update_paths_and_cov(
     weights : ndarray, shape (N,)        aligned with ``deviations``'s rows (negative: active update).
     constants : CMAConstants
     iteration : int                      generations done before this one (for h_σ's bias correction).
+    inv_sqrt : ndarray, shape (p, p), optional   C^(−1/2), if the caller has it already.
 
     Returns
     -------
@@ -147,7 +149,7 @@ def update_paths_and_cov(
     adjusted = weights.copy()
     negative = weights < 0
     if negative.any():  # Eq. (C7): negative weights act on whitened lengths, so C stays positive definite
-        whitened = deviations[negative] @ inverse_sqrt(cov)
+        whitened = deviations[negative] @ (inverse_sqrt(cov) if inv_sqrt is None else inv_sqrt)
         adjusted[negative] *= n / np.maximum(np.einsum("ij,ij->i", whitened, whitened), 1e-300)
     lost = (1.0 - hsig) * c_c * (2.0 - c_c)
     cov = (

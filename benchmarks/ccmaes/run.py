@@ -49,7 +49,7 @@ from benchmarks.study_runner import (
     run_study,
     timing_text,
 )
-from benchmarks.study_tools import RunSpec
+from benchmarks.study_tools import RunSpec, ended_early
 
 HERE = Path(__file__).resolve().parent
 FUNCTIONS = ("Sphere", "Rosenbrock", "ShiftedRotatedElliptic")
@@ -141,12 +141,22 @@ def make_spec(column: Column, function: str, dim: int, z: int, seed: int, budget
 
 
 def group(pairs: Sequence[tuple[str, RunSpec]], documents: Sequence[dict], seeds: int | None = None) -> dict:
-    """The cached documents by (function, z, column); with ``seeds``, only the seeds below it."""
+    """The cached documents by (function, z, column); with ``seeds``, only the seeds below it.
+
+    A run cached with a smaller budget that ended early stands for the run with the larger budget (the
+    cache's reuse rule, :func:`~benchmarks.study_tools.cached_result`).
+    """
     by_key = {RunSpec(**d["spec"]).key: d for d in documents}
+    by_prefix = {(RunSpec(**d["spec"]).prefix, d["spec"]["samples"]): d for d in documents if ended_early(d)}
     cells: dict[tuple[str, int, str], list[dict]] = {}
     for column, spec in pairs:
-        if spec.key in by_key and (seeds is None or spec.seed < seeds):
-            cells.setdefault((spec.function, spec.context_dim, column), []).append(by_key[spec.key])
+        document = by_key.get(spec.key) or by_prefix.get((spec.prefix, spec.samples))
+        if (
+            document is not None
+            and document["spec"]["budget"] <= spec.budget
+            and (seeds is None or spec.seed < seeds)
+        ):
+            cells.setdefault((spec.function, spec.context_dim, column), []).append(document)
     return cells
 
 

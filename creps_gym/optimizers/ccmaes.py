@@ -89,12 +89,6 @@ class _Step(NamedTuple):
     diagnostics: dict[str, float]
 
 
-def _check_optional(value: Any, name: str, low: float, high: float) -> float | None:
-    if value is None:
-        return None
-    return check_real_in_range(value, name, low, high)
-
-
 @dataclass(frozen=True, eq=False)
 class CCMAESConfig:
     """Configuration of :class:`CCMAES`; validates itself on construction.
@@ -171,12 +165,11 @@ class CCMAESConfig:
             ("tolupsigma", 1.0, 1e300),
             ("max_condition", 1.0, 1e300),
         ):
-            object.__setattr__(self, name, check_real_in_range(getattr(self, name), name, low, high))
-        for name, high in (("c_sigma", 1.0), ("d_sigma", 1e6), ("c_c", 1.0), ("c_1", 1.0), ("c_mu", 1.0)):
-            value = _check_optional(getattr(self, name), name, 0.0, high)
-            if value is not None and value <= 0.0:
-                raise ValueError(f"{name}: expected a value in (0, {high}] or None, got {value}")
+            value = check_real_in_range(getattr(self, name), name, low, high, low_inclusive=low == 0.0)
             object.__setattr__(self, name, value)
+        for name, high in (("c_sigma", 1.0), ("d_sigma", 1e6), ("c_c", 1.0), ("c_1", 1.0), ("c_mu", 1.0)):
+            if getattr(self, name) is not None:  # None: the tutorial's default; else in (0, high]
+                object.__setattr__(self, name, check_real_in_range(getattr(self, name), name, 0.0, high))
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
         object.__setattr__(self, "seed", check_seed(self.seed))
@@ -230,6 +223,8 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         self.n_params, self.n_context_dims = config.n_params, config.n_context_dims
         self.rng = np.random.default_rng(config.seed)
         self.restarts_done = 0
+        self._eigen_of: Array | None = None
+        self._eigen_cache: tuple[Array, Array] = (np.ones(0), np.ones((0, 0)))
         self._reset_search()
 
     def _reset_search(self) -> None:
@@ -249,13 +244,13 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
 
     def _update(self, contexts: Array, params: Array, returns: Array) -> None:
         config = self.config
+        past = (self.past_contexts, self.past_returns)
         advantages, explained = context_advantages(  # Eq. (C1)
             contexts,
             returns,
             config.baseline_degree,
             config.baseline_ridge,
-            self.past_contexts,
-            self.past_returns,
+            *past,
             config.standardise_advantages,
         )
         constants = self.config.constants(returns.shape[0])
@@ -300,24 +295,16 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             ) from None
         selected = weights > 0
         shift = weights[selected] @ deviations[selected]  # Eq. (C4): N(0, C/μ_eff) if selection is blind
-        inv_sqrt = inverse_sqrt(self.policy.cov)
+        inv_sqrt = inverse_sqrt(self.policy.cov, self._eigen())
         if self.config.step_size_signal == "mean":
             signal = math.sqrt(constants.mu_eff) * (inv_sqrt @ shift)[:, None]  # Eq. (C4)
         else:
             signal = inv_sqrt @ coefficient_shift(  # Eq. (C4'): every coefficient's shift, whitened
                 policy.mean_map, contexts[selected], deviations[selected], weights[selected]
             )
+        before = (self.policy.cov, self.path_sigma, self.path_cov)
         path_sigma, path_cov, cov, hsig = update_paths_and_cov(  # Eqs. (C5)-(C8)
-            self.policy.cov,
-            self.path_sigma,
-            self.path_cov,
-            signal,
-            shift,
-            deviations,
-            weights,
-            constants,
-            self.iteration,
-            inv_sqrt,
+            *before, signal, shift, deviations, weights, constants, self.iteration, inv_sqrt
         )
         repaired = policy.set_cov(cov)
         policy.step_size = csa_step(sigma, path_sigma, constants)  # Eq. (C9)
@@ -330,11 +317,19 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         }
         return _Step(policy, path_sigma, path_cov, diagnostics)
 
+    def _eigen(self) -> tuple[Array, Array]:
+        """``eigh`` of C, computed once per update: the diagnostics, the stop criteria and the next update's
+        C^(−1/2) share it."""
+        cov = self.policy.cov
+        if self._eigen_of is not cov:
+            self._eigen_cache, self._eigen_of = np.linalg.eigh(cov), cov
+        return self._eigen_cache
+
     @property
     def diagnostics(self) -> dict[str, float]:
         """σ, μ_eff, ‖p_σ‖/E‖N(0,I)‖, h_σ, R² of the baseline, mean return, max std and cond of σ²C."""
         if "step_size" in self._diagnostics and "cond_cov" not in self._diagnostics:
-            eigenvalues = np.linalg.eigvalsh(self.policy.cov)
+            eigenvalues = self._eigen()[0]
             self._diagnostics["cond_cov"] = float(eigenvalues[-1] / max(eigenvalues[0], 1e-300))
             self._diagnostics["max_std"] = self.step_size * float(np.sqrt(eigenvalues[-1]))
         return dict(self._diagnostics)

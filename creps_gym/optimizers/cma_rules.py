@@ -97,9 +97,12 @@ def cma_constants(
     return CMAConstants(weights, mu_eff, chi_n=expected_norm(n), **rates)
 
 
-def inverse_sqrt(matrix: Array) -> Array:
-    """M^(−1/2) = B D⁻¹ Bᵀ from the eigendecomposition M = B D² Bᵀ of a symmetric PSD matrix."""
-    values, vectors = np.linalg.eigh(matrix)
+def inverse_sqrt(matrix: Array, eigen: tuple[Array, Array] | None = None) -> Array:
+    """M^(−1/2) = B D⁻¹ Bᵀ from the eigendecomposition M = B D² Bᵀ of a symmetric PSD matrix.
+
+    ``eigen`` is ``numpy.linalg.eigh(matrix)`` if the caller has it already.
+    """
+    values, vectors = np.linalg.eigh(matrix) if eigen is None else eigen
     return (vectors / np.sqrt(np.maximum(values, 1e-300 * max(values[-1], 1e-300)))) @ vectors.T
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from creps_gym.runner.history import History, atomic_write_text
 
-__all__ = ["IOH_COLUMNS", "iohanalyzer_rows", "write_iohanalyzer"]
+__all__ = ["IOH_COLUMNS", "iohanalyzer_rows", "iohanalyzer_text", "write_iohanalyzer"]
 
 IOH_COLUMNS = ("evaluations", "value", "function_id", "algorithm_id", "dimension", "run_id")
 
@@ -43,11 +43,16 @@ def iohanalyzer_rows(histories: Sequence[History]) -> tuple[list[tuple], str]:
     return rows, "regret" if use_regret else "return"
 
 
-def write_iohanalyzer(histories: Sequence[History], path: str | os.PathLike[str]) -> Path:
-    """Write the rows of :func:`iohanalyzer_rows` to ``path`` (atomically); returns the path."""
+def iohanalyzer_text(histories: Sequence[History]) -> str:
+    """The CSV text of :func:`write_iohanalyzer`."""
     rows, _ = iohanalyzer_rows(histories)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(IOH_COLUMNS)
     writer.writerows(rows)
-    return atomic_write_text(path, buffer.getvalue())
+    return buffer.getvalue()
+
+
+def write_iohanalyzer(histories: Sequence[History], path: str | os.PathLike[str]) -> Path:
+    """Write the rows of :func:`iohanalyzer_rows` to ``path`` (atomically); returns the path."""
+    return atomic_write_text(path, iohanalyzer_text(histories))

@@ -32,6 +32,7 @@ import platform
 import re
 import sys
 import warnings
+import zlib
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
@@ -69,6 +70,10 @@ def config_fingerprint(config: RunConfig) -> str:
     data = config.to_dict()
     document = {"format": CHECKPOINT_FORMAT, **{name: data[name] for name in FINGERPRINT_FIELDS}}
     return hashlib.sha256(json.dumps(document, sort_keys=True, allow_nan=False).encode()).hexdigest()
+
+
+def _crc(entry: dict[str, Any]) -> int:
+    return zlib.crc32(json.dumps(entry, allow_nan=False).encode())
 
 
 class RunDir:
@@ -191,7 +196,10 @@ class RunDir:
 
     # -- log -------------------------------------------------------------------------------------------------
     def append_log(self, entry: dict[str, Any]) -> None:
-        """Append one JSON line (flushed); a line cut by a crash is closed first so it stays one bad line."""
+        """Append one JSON line (flushed), ending with the ``crc32`` of the rest, so damage is found.
+
+        A line cut by a crash is closed first so it stays one bad line.
+        """
         path = self.file(self.LOG)
         prefix = ""
         if path.exists() and path.stat().st_size > 0:
@@ -199,7 +207,7 @@ class RunDir:
                 stream.seek(-1, os.SEEK_END)
                 prefix = "" if stream.read(1) == b"\n" else "\n"
         with open(path, "a", encoding="utf-8") as stream:
-            stream.write(prefix + json.dumps(entry, allow_nan=False) + "\n")
+            stream.write(prefix + json.dumps({**entry, "crc32": _crc(entry)}, allow_nan=False) + "\n")
             stream.flush()
 
     def read_log(
@@ -218,6 +226,8 @@ class RunDir:
         for number, line in enumerate(data.splitlines(), 1):
             try:
                 entry = json.loads(line.decode("utf-8"))
+                if entry.pop("crc32", None) not in (None, _crc(entry)):  # (older logs have none)
+                    raise ValueError("checksum mismatch")
                 if "event" in entry:
                     events.append(entry)
                 else:
@@ -270,6 +280,7 @@ class RunDir:
             raise self.damaged(self.CHECKPOINT, found, RESTART)
         if config is not None:
             self._check_owner(flat, config)
+            self._check_state(flat, config)
         prefix = "optimizer."
         optimizer_state = {k[len(prefix) :]: v for k, v in flat.items() if k.startswith(prefix)}
         state = {
@@ -291,6 +302,25 @@ class RunDir:
                 f"{self.CONFIG} (env {config.env}, seed {config.seed}, ...), got one written by a run with "
                 f"another configuration (copied from another run?); {RESTART}"
             )
+
+    def _check_state(self, flat: dict[str, Any], config: RunConfig) -> None:
+        """Refuse runner state that no run of ``config`` can have written (types, counts, history)."""
+        try:
+            iteration, episodes, elapsed = flat["iteration"], flat["episodes"], flat["elapsed"]
+            records = History.from_dict(flat["history"]).records
+            counts_ok = (
+                all(type(v) is int for v in (iteration, episodes)) and 0 <= iteration <= config.iterations
+            )
+            ok = counts_ok and episodes == iteration * config.samples and isinstance(flat["env_rng"], dict)
+            ok = ok and isinstance(elapsed, (int, float)) and 0 <= elapsed < float("inf")
+            ok = ok and [r.iteration for r in records] == list(range(1, iteration + 1))
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise self.damaged(self.CHECKPOINT, exc, RESTART) from None
+        if not ok:
+            found = (
+                f"iteration {iteration!r}, episodes {episodes!r}, {len(records)} records, elapsed {elapsed!r}"
+            )
+            raise self.damaged(self.CHECKPOINT, f"inconsistent runner state: {found}", RESTART)
 
     # -- results ---------------------------------------------------------------------------------------------
     def write_results(self, history: History, *, only_changed: bool = False) -> list[str]:
@@ -326,33 +356,33 @@ class RunDir:
     def read_history(self) -> History:
         """``history.json`` if the run finished, else the checkpoint's history and the iterations after it.
 
-        Nothing is skipped silently: a damaged ``history.json`` is rebuilt from the checkpoint and the log,
-        and damaged log lines are named, with a :class:`RunDirWarning`; the history then stops before the
-        first iteration that is missing. A damaged checkpoint raises :class:`RunDirError`.
+        Nothing is skipped silently: a damaged ``history.json`` (or one that differs from the final
+        checkpoint's) is rebuilt from the checkpoint and the log, and damaged log lines are named, with a
+        :class:`RunDirWarning`; the history then stops before the first missing iteration. A damaged
+        checkpoint raises :class:`RunDirError`.
         """
+        loaded = self.load_checkpoint()
+        try:
+            saved = None if loaded is None else History.from_dict(loaded[0]["history"])
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise self.damaged(self.CHECKPOINT, exc, RESTART) from None
         path = self.file(self.HISTORY_JSON)
         if path.exists():
             try:
-                return History.from_json(path)
+                final = History.from_json(path)
+                if saved is None or (final.equals(saved, include_time=True) and final.meta == saved.meta):
+                    return final
+                problem = f"differs from the final history in {self.CHECKPOINT}"
             except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-                message = (
-                    f"{path}: damaged ({type(exc).__name__}: {exc}); rebuilt from {self.CHECKPOINT} and "
-                )
-                warnings.warn(
-                    message + f"{self.LOG} (`creps-gym resume` rewrites it)", RunDirWarning, stacklevel=2
-                )
-        history = History(meta=dict(self.document().get("meta", {})))
-        loaded = self.load_checkpoint()
-        if loaded is not None:
-            try:
-                history = History.from_dict(loaded[0]["history"])
-            except (KeyError, TypeError, ValueError, AttributeError) as exc:
-                raise self.damaged(self.CHECKPOINT, exc, RESTART) from None
+                problem = f"damaged ({type(exc).__name__}: {exc})"
+            message = f"{path}: {problem}; rebuilt from {self.CHECKPOINT} and {self.LOG}"
+            warnings.warn(message + " (`creps-gym resume` rewrites it)", RunDirWarning, stacklevel=2)
+        history = saved if saved is not None else History(meta=dict(self.document().get("meta", {})))
         damaged: list[int] = []
         records, _ = self.read_log(damaged)
         from_checkpoint = len(history)
         for record in records:
-            if record.iteration == len(history) + 1:
+            if record.iteration == len(history) + 1 and history.stop_reason is None:
                 history.append(record)
         lost = [record.iteration for record in records if record.iteration > len(history)]
         if damaged or lost:

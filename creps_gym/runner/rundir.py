@@ -11,8 +11,8 @@ file                      content
                           again; :meth:`RunDir.read_log` keeps the last copy of each iteration.
 ``checkpoint.npz``        the last checkpoint (``.npz`` arrays + one embedded JSON document, never pickle),
                           replaced atomically (temporary file + rename; the run's own temporaries left by
-                          a killed process are removed when the run resumes). It records the
-                          :func:`config_fingerprint` of the run, and a checkpoint of another run is refused
+                          a killed process are removed when the run resumes). It records the run's
+                          :func:`~creps_gym.runner.trust.config_fingerprint`: another run's is refused
 ``run.lock``              the live writer's process id (see :mod:`creps_gym.runner.session`)
 ``history.json`` / .csv   the final :class:`~creps_gym.runner.history.History` (written at the end)
 ``iohanalyzer.csv``       the evaluations in IOHanalyzer's CSV layout (written at the end)
@@ -25,7 +25,6 @@ the file and what to do, and ``config.json`` is checked by :func:`creps_gym.runn
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import platform
@@ -41,16 +40,16 @@ from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History, IterationRecord, atomic_write_text
 from creps_gym.runner.session import RunDirError, RunDirWarning, RunLock
-from creps_gym.runner.trust import check_trusted
+from creps_gym.runner.trust import (
+    CHECKPOINT_FORMAT,
+    LEGACY_FORMATS,
+    check_checkpoint,
+    check_trusted,
+    config_fingerprint,
+)
 
-__all__ = ["RunDir", "RunDirError", "RunDirWarning", "config_fingerprint", "package_versions"]
+__all__ = ["RunDir", "RunDirError", "RunDirWarning", "package_versions"]
 
-CHECKPOINT_FORMAT = "creps_gym.run/2"
-LEGACY_FORMATS = ("creps_gym.run/1",)  # no fingerprint: matched on the history's seed, samples and env
-#: The configuration fields that define a run's results (the others only say where and how it runs).
-FINGERPRINT_FIELDS = ("env", "env_kwargs", "optimizer", "optimizer_options", "seed", "samples", "iterations",
-                      "eval_every", "eval_contexts", "initial_mean", "initial_std", "max_episodes",
-                      "target_regret", "max_time")  # fmt: skip
 RESTART = "delete it to restart the run from its first iteration, or restore it from a backup"
 
 
@@ -63,13 +62,6 @@ def package_versions() -> dict[str, str]:
         except PackageNotFoundError:
             found[package] = "not installed"
     return found
-
-
-def config_fingerprint(config: RunConfig) -> str:
-    """SHA-256 (hex) of the checkpoint format and the :data:`FINGERPRINT_FIELDS` of ``config``."""
-    data = config.to_dict()
-    document = {"format": CHECKPOINT_FORMAT, **{name: data[name] for name in FINGERPRINT_FIELDS}}
-    return hashlib.sha256(json.dumps(document, sort_keys=True, allow_nan=False).encode()).hexdigest()
 
 
 def _crc(entry: dict[str, Any]) -> int:
@@ -279,48 +271,13 @@ class RunDir:
             found = f"format {flat.get('format')!r}, expected {CHECKPOINT_FORMAT!r}"
             raise self.damaged(self.CHECKPOINT, found, RESTART)
         if config is not None:
-            self._check_owner(flat, config)
-            self._check_state(flat, config)
+            check_checkpoint(flat, config, str(path), RESTART)
         prefix = "optimizer."
         optimizer_state = {k[len(prefix) :]: v for k, v in flat.items() if k.startswith(prefix)}
         state = {
             k: v for k, v in flat.items() if not k.startswith(prefix) and k not in ("format", "fingerprint")
         }
         return state, optimizer_state
-
-    def _check_owner(self, flat: dict[str, Any], config: RunConfig) -> None:
-        """Refuse a checkpoint that another run (another configuration) wrote."""
-        if flat["format"] == CHECKPOINT_FORMAT:
-            same = flat.get("fingerprint") == config_fingerprint(config)
-        else:  # a legacy checkpoint: its history's metadata
-            meta = flat.get("history", {}).get("meta", {}) if isinstance(flat.get("history"), dict) else {}
-            expected = {"seed": config.seed, "samples": config.samples, "env": config.env or meta.get("env")}
-            same = all(meta.get(key) == value for key, value in expected.items())
-        if not same:
-            raise RunDirError(
-                f"{self.file(self.CHECKPOINT)}: expected the checkpoint of the run configured in "
-                f"{self.CONFIG} (env {config.env}, seed {config.seed}, ...), got one written by a run with "
-                f"another configuration (copied from another run?); {RESTART}"
-            )
-
-    def _check_state(self, flat: dict[str, Any], config: RunConfig) -> None:
-        """Refuse runner state that no run of ``config`` can have written (types, counts, history)."""
-        try:
-            iteration, episodes, elapsed = flat["iteration"], flat["episodes"], flat["elapsed"]
-            records = History.from_dict(flat["history"]).records
-            counts_ok = (
-                all(type(v) is int for v in (iteration, episodes)) and 0 <= iteration <= config.iterations
-            )
-            ok = counts_ok and episodes == iteration * config.samples and isinstance(flat["env_rng"], dict)
-            ok = ok and isinstance(elapsed, (int, float)) and 0 <= elapsed < float("inf")
-            ok = ok and [r.iteration for r in records] == list(range(1, iteration + 1))
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise self.damaged(self.CHECKPOINT, exc, RESTART) from None
-        if not ok:
-            found = (
-                f"iteration {iteration!r}, episodes {episodes!r}, {len(records)} records, elapsed {elapsed!r}"
-            )
-            raise self.damaged(self.CHECKPOINT, f"inconsistent runner state: {found}", RESTART)
 
     # -- results ---------------------------------------------------------------------------------------------
     def write_results(self, history: History, *, only_changed: bool = False) -> list[str]:
@@ -385,15 +342,17 @@ class RunDir:
             if record.iteration == len(history) + 1 and history.stop_reason is None:
                 history.append(record)
         lost = [record.iteration for record in records if record.iteration > len(history)]
-        if damaged or lost:
+        kept = {record.iteration for record in records}
+        missing = [i for i in range(1, from_checkpoint + 1) if i not in kept]
+        problems = [f"damaged lines {damaged}"] if damaged else []
+        if missing and not damaged:
+            problems.append(f"iterations {missing[0]} to {missing[-1]} are missing (a truncated log?)")
+        if lost:
+            problems.append(f"logged iterations {lost[0]} to {lost[-1]} follow a gap and are left out")
+        if problems:
             warnings.warn(
-                f"{self.file(self.LOG)}: damaged lines {damaged}; the history has iterations 1 to "
-                f"{len(history)} ({from_checkpoint} from {self.CHECKPOINT}, the rest from the log)"
-                + (
-                    f"; logged iterations {lost[0]} to {lost[-1]} follow a gap and are left out"
-                    if lost
-                    else ""
-                ),
+                f"{self.file(self.LOG)}: {'; '.join(problems)}; the history has iterations 1 to "
+                f"{len(history)} ({from_checkpoint} from {self.CHECKPOINT}, the rest from the log)",
                 RunDirWarning,
                 stacklevel=2,
             )

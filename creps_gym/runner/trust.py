@@ -12,13 +12,18 @@ the configuration read back from ``config.json`` may only name
 Anything else raises :class:`~creps_gym.runner.session.RunDirError`. The user imports the module
 (``creps-gym resume --import MODULE``, or ``import MODULE`` before :func:`creps_gym.runner.resume`).
 
+**Checkpoints.** A checkpoint records the :func:`config_fingerprint` of its run; :func:`check_checkpoint`
+refuses one written under another configuration, and runner state that no run can have written.
+
 **Sizes.** :func:`check_run_memory` refuses, before the optimiser or the batch is allocated, a run whose
 arrays would not fit in memory (:func:`creps_gym._validation.check_fits_in_memory`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib
+import json
 import re
 import sys
 from collections.abc import Iterator, Sequence
@@ -31,7 +36,23 @@ from creps_gym.optimizers.registry import optimizer_names
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.session import RunDirError
 
-__all__ = ["check_run_memory", "check_trusted", "import_modules", "module_reference", "registered_env_id"]
+__all__ = [
+    "CHECKPOINT_FORMAT",
+    "check_checkpoint",
+    "check_run_memory",
+    "check_trusted",
+    "config_fingerprint",
+    "import_modules",
+    "module_reference",
+    "registered_env_id",
+]
+
+CHECKPOINT_FORMAT = "creps_gym.run/2"
+LEGACY_FORMATS = ("creps_gym.run/1",)  # no fingerprint: matched on the history's seed, samples and env
+#: The configuration fields that define a run's results (the others only say where and how it runs).
+FINGERPRINT_FIELDS = ("env", "env_kwargs", "optimizer", "optimizer_options", "seed", "samples", "iterations",
+                      "eval_every", "eval_contexts", "initial_mean", "initial_std", "max_episodes",
+                      "target_regret", "max_time")  # fmt: skip
 
 _MODULE_PREFIX = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*:")
 
@@ -117,3 +138,52 @@ def check_run_memory(config: RunConfig, n_params: int, n_context_dims: int, *, c
         name, value = "env", config.env
     what = f"the covariance (p x p, p = {p}) and the batch (samples x p)"
     check_fits_in_memory(8.0 * (square + batch), name, value, what)
+
+
+def config_fingerprint(config: RunConfig) -> str:
+    """SHA-256 (hex) of the checkpoint format and the :data:`FINGERPRINT_FIELDS` of ``config``."""
+    data = config.to_dict()
+    document = {"format": CHECKPOINT_FORMAT, **{name: data[name] for name in FINGERPRINT_FIELDS}}
+    return hashlib.sha256(json.dumps(document, sort_keys=True, allow_nan=False).encode()).hexdigest()
+
+
+def _same_run(flat: dict[str, Any], config: RunConfig) -> bool:
+    if flat["format"] == CHECKPOINT_FORMAT:
+        return flat.get("fingerprint") == config_fingerprint(config)
+    meta = flat["history"]["meta"]  # a legacy checkpoint: its history's metadata
+    expected = {"seed": config.seed, "samples": config.samples, "env": config.env or meta.get("env")}
+    return all(meta.get(key) == value for key, value in expected.items())
+
+
+def _consistent(flat: dict[str, Any], config: RunConfig) -> bool:
+    """Counts, types and records that a run of ``config`` can have written."""
+    iteration, episodes, elapsed = flat["iteration"], flat["episodes"], flat["elapsed"]
+    records = flat["history"]["records"]
+    ok = all(type(v) is int for v in (iteration, episodes)) and 0 <= iteration <= config.iterations
+    ok = ok and episodes == iteration * config.samples and isinstance(flat["env_rng"], dict)
+    ok = ok and type(elapsed) in (int, float) and 0 <= elapsed < float("inf") and len(records) == iteration
+    for number, record in enumerate(records, 1):
+        counts = record["iteration"], record["episodes"]
+        ok = ok and all(type(v) is int for v in counts) and counts == (number, number * config.samples)
+    return ok
+
+
+def check_checkpoint(flat: dict[str, Any], config: RunConfig, path: str, advice: str) -> None:
+    """Refuse a checkpoint (``load_state`` content) of another run, or with runner state no run wrote."""
+    try:
+        same, consistent = _same_run(flat, config), _consistent(flat, config)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise RunDirError(
+            f"{path}: damaged or not written by creps_gym ({type(exc).__name__}: {exc}); {advice}"
+        ) from None
+    if not same:
+        raise RunDirError(
+            f"{path}: expected the checkpoint of the run configured in config.json (env {config.env}, seed "
+            f"{config.seed}, ...), got one written by a run with another configuration (copied from another "
+            f"run?); {advice}"
+        )
+    if not consistent:
+        found = {key: flat[key] for key in ("iteration", "episodes", "elapsed")}
+        raise RunDirError(
+            f"{path}: damaged or not written by creps_gym (inconsistent runner state {found}); {advice}"
+        )

@@ -102,13 +102,14 @@ def _import_modules(args: argparse.Namespace) -> None:
     """Import the ``--import`` modules, then check ``--env`` (a ``module:Env-v0``'s module is imported)."""
     from creps_gym.runner.trust import import_modules, registered_env_id
 
-    flag = "--import"
-    try:
-        import_modules(args.imports)
-        flag = "--env"
-        _ = getattr(args, "env", None) is None or registered_env_id(args.env, import_module=True)
-    except ValueError as exc:
-        raise UsageError(f"argument {flag}: {exc}") from None
+    checks = [("--import", lambda: import_modules(args.imports))]
+    if getattr(args, "env", None) is not None:
+        checks.append(("--env", lambda: registered_env_id(args.env, import_module=True)))
+    for flag, check in checks:
+        try:
+            check()
+        except ValueError as exc:
+            raise UsageError(f"argument {flag}: {exc}") from None
 
 
 def _optimizer_name(text: str) -> str:

@@ -16,6 +16,7 @@ __all__ = [
     "as_float_array",
     "check_bool",
     "check_finite",
+    "check_fits_in_memory",
     "check_positive_int",
     "check_real",
     "check_real_in_range",
@@ -155,3 +156,71 @@ def check_bool(value: Any, name: str) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name}: expected a bool, got {type(value).__name__} {value!r}")
     return bool(value)
+
+
+#: The share of the available memory that one allocation plan may claim (see :func:`check_fits_in_memory`).
+MEMORY_FRACTION = 0.8
+
+
+def _read_int(path: str, field: str | None = None) -> int | None:
+    """An integer from a /proc or /sys file (one ``field:`` line of it, in kB), or None if unreadable."""
+    try:
+        with open(path, encoding="ascii") as stream:
+            text = stream.read()
+    except OSError:
+        return None
+    if field is None:
+        return int(text) if text.strip().isdigit() else None
+    for line in text.splitlines():
+        name, _, value = line.partition(":")
+        if name == field and value.split() and value.split()[0].isdigit():
+            return int(value.split()[0]) * 1024
+    return None
+
+
+def available_memory() -> int | None:
+    """Bytes this process may still allocate, or None where unknown (not Linux).
+
+    The smallest of the system's ``MemAvailable``, the cgroup's limit minus its usage, and the address-space
+    limit (``ulimit -v``) minus the process's current size.
+    """
+    limits = [_read_int("/proc/meminfo", "MemAvailable")]
+    cgroup_max, cgroup_now = (
+        _read_int("/sys/fs/cgroup/memory.max"),
+        _read_int("/sys/fs/cgroup/memory.current"),
+    )
+    if cgroup_max is not None and cgroup_now is not None:
+        limits.append(cgroup_max - cgroup_now)
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        size = _read_int("/proc/self/status", "VmSize")
+        if soft != resource.RLIM_INFINITY and size is not None:
+            limits.append(soft - size)
+    except (ImportError, OSError, ValueError):  # pragma: no cover - not POSIX
+        pass
+    known = [max(0, limit) for limit in limits if limit is not None]
+    return min(known) if known else None
+
+
+def check_fits_in_memory(n_bytes: float, name: str, value: Any, what: str) -> None:
+    """Refuse, before allocating, a size whose arrays need over :data:`MEMORY_FRACTION` of the free memory.
+
+    Parameters
+    ----------
+    n_bytes : float
+        Estimated bytes of the arrays ``value`` leads to.
+    name : str
+        The argument that sets the size (named in the error).
+    value : Any
+        Its value (shown in the error).
+    what : str
+        What needs the memory, e.g. ``"the rotation matrix (p x p floats)"``.
+    """
+    free = available_memory()
+    if free is not None and n_bytes > MEMORY_FRACTION * free:
+        raise ValueError(
+            f"{name}: expected a size whose arrays fit in memory ({what} need {n_bytes / 2**30:.3g} GiB; "
+            f"{free / 2**30:.3g} GiB available, of which {MEMORY_FRACTION:.0%} may be used), got {value!r}"
+        )

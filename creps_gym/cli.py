@@ -10,12 +10,14 @@ Exit codes
     Usage error: unknown command, flag, env or optimiser, or a bad value (the message names the flag,
     what was expected and what was given).
 3
-    Run-directory error: ``--out`` already holds a run, or ``resume``/``plot`` got a folder that is not
-    a run directory.
+    Run-directory error: ``--out`` holds a run or other files, ``resume``/``plot``/``export`` got a folder
+    that is not a run directory, a damaged file, a checkpoint of another run, a ``config.json`` that names
+    a module that is not imported (``--import MODULE``), or another process writes the run directory.
 4
     An optional dependency is missing (e.g. ``pip install creps-gym[plot]`` for ``plot``).
 130
-    Interrupted (Ctrl-C); ``creps-gym resume DIR`` continues from the last checkpoint.
+    Interrupted (Ctrl-C): the run completes its iteration and checkpoints first, so ``creps-gym resume
+    DIR`` loses nothing (a second Ctrl-C stops at once).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import json
 import math
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 from dataclasses import fields
 from typing import Any
@@ -95,17 +98,24 @@ def _key_value(text: str) -> tuple[str, Any]:
         return key, raw
 
 
-def _env_id(text: str) -> str:
-    import gymnasium as gym
+def _import_modules(args: argparse.Namespace) -> None:
+    """Import the ``--import`` modules, then check ``--env`` (a ``module:Env-v0``'s module is imported)."""
+    from creps_gym.runner.trust import import_modules, registered_env_id
 
-    import creps_gym
+    checks = [("--import", lambda: import_modules(args.imports))]
+    if getattr(args, "env", None) is not None:
+        checks.append(("--env", lambda: registered_env_id(args.env, import_module=True)))
+    for flag, check in checks:
+        try:
+            check()
+        except ValueError as exc:
+            hint = ""
+            if flag == "--env":  # a mistyped id: suggest the registered ones it resembles
+                import creps_gym
+                from creps_gym.listing import did_you_mean
 
-    if text not in gym.registry:
-        from creps_gym.listing import did_you_mean
-
-        ids = creps_gym.registered_ids()
-        raise argparse.ArgumentTypeError(f"expected one of {ids}, got {text!r}{did_you_mean(text, ids)}")
-    return text
+                hint = did_you_mean(args.env, creps_gym.registered_ids())
+            raise UsageError(f"argument {flag}: {exc}{hint}") from None
 
 
 def _optimizer_name(text: str) -> str:
@@ -133,6 +143,7 @@ def _add_progress(parser: argparse.ArgumentParser) -> None:
         "--no-progress", dest="progress", action="store_false", help="never show the progress bar"
     )
     parser.add_argument("--no-plot", action="store_true", help="do not write learning_curve.png at the end")
+    _add_import(parser)
 
 
 def _add_run(commands: Any) -> None:
@@ -144,7 +155,7 @@ def _add_run(commands: Any) -> None:
         "run", help="run an optimiser on an env", description="Run an optimiser on an env."
     )
     required = [
-        ("--env", _env_id, "registered env id (see `creps-gym list`)"),
+        ("--env", str, "registered env id (see `creps-gym list`), or module:Env-v0"),
         ("--optimizer", _optimizer_name, "optimiser name (see `creps-gym list`)"),
         ("--iterations", _integer(1), "maximum number of iterations"),
         ("--seed", _integer(0), "master seed (>= 0)"),
@@ -193,6 +204,18 @@ def _add_run(commands: Any) -> None:
             help=f"{text}; VALUE is JSON or a string (repeatable)",
         )
     _add_progress(run)
+
+
+def _add_import(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--import",
+        dest="imports",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="import MODULE first (e.g. the package that registers the env; repeatable); a run directory "
+        "never makes creps-gym import anything",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -292,6 +315,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from creps_gym.runner.loop import Runner
     from creps_gym.runner.rundir import RunDir
 
+    _import_modules(args)
     options = {f.name: getattr(args, f.name) for f in fields(RunConfig) if hasattr(args, f.name)}
     options.update(optimizer_options=dict(args.opt), env_kwargs=dict(args.env_kwarg))
     try:
@@ -308,6 +332,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
     from creps_gym.runner.loop import Runner
     from creps_gym.runner.rundir import RunDir
 
+    _import_modules(args)
     directory = RunDir.open(args.run_dir)
     config = directory.config()
     if config.env is None or config.optimizer is None:
@@ -353,16 +378,23 @@ _COMMANDS = {
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``creps-gym`` console script; returns the exit code (see the module docstring)."""
     from creps_gym.runner.backends import EpisodeError
+    from creps_gym.runner.session import RunDirError
 
     parser = build_parser()
     args = parser.parse_args(argv)  # exits with code 2 on usage errors
     prog = f"creps-gym {args.command}"
+
+    def show_warning(message: Any, category: type, *_: Any, **__: Any) -> None:
+        print(f"{prog}: warning: {message}", file=sys.stderr)
+
     try:
-        return _COMMANDS[args.command](args)
+        with warnings.catch_warnings():
+            warnings.showwarning = show_warning
+            return _COMMANDS[args.command](args)
     except UsageError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_CODES["usage"]
-    except (FileExistsError, FileNotFoundError, NotADirectoryError) as exc:
+    except (FileExistsError, FileNotFoundError, NotADirectoryError, RunDirError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_CODES["run_dir"]
     except ImportError as exc:

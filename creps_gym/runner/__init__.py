@@ -7,7 +7,8 @@ directory (config, JSONL log, versions, atomic ``.npz`` checkpoints) that :func:
 
 Modules: :mod:`.config` (RunConfig), :mod:`.loop` (the Runner), :mod:`.api` (run, resume),
 :mod:`.history` (History), :mod:`.backends` (serial, vector, Ray), :mod:`.callbacks` (callbacks, progress
-bar), :mod:`.rundir` (run directory), :mod:`.export` (IOHanalyzer CSV), :mod:`.plots` (matplotlib).
+bar), :mod:`.rundir` (run directory), :mod:`.session` (lock file, Ctrl-C), :mod:`.trust` (what a run
+directory may name, memory limits), :mod:`.export` (IOHanalyzer CSV), :mod:`.plots` (matplotlib).
 """
 
 from creps_gym.runner.api import resume, run
@@ -19,6 +20,7 @@ from creps_gym.runner.history import History, IterationRecord
 from creps_gym.runner.loop import Runner, default_initial_distribution, split_seed
 from creps_gym.runner.plots import load_history, plot_histories, plot_run_dirs
 from creps_gym.runner.rundir import RunDir, package_versions
+from creps_gym.runner.session import RunDirError, RunDirWarning
 
 __all__ = [
     "BACKENDS",
@@ -31,6 +33,8 @@ __all__ = [
     "ProgressBar",
     "RunConfig",
     "RunDir",
+    "RunDirError",
+    "RunDirWarning",
     "Runner",
     "default_initial_distribution",
     "load_history",

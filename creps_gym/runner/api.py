@@ -22,6 +22,7 @@ def run(
     seed: int,
     *,
     run_dir: str | os.PathLike[str] | None = None,
+    overwrite: bool = False,
     callbacks: Sequence[Any] = (),
     env_kwargs: dict[str, Any] | None = None,
     optimizer_options: dict[str, Any] | None = None,
@@ -44,8 +45,11 @@ def run(
     seed : int
         Master seed (>= 0).
     run_dir : path-like, optional
-        A new directory for the config, log, checkpoints and final history (see
-        :mod:`creps_gym.runner.rundir`); ``FileExistsError`` if it already holds a run.
+        A new or empty directory for the config, log, checkpoints and final history (see
+        :mod:`creps_gym.runner.rundir`). ``FileExistsError`` if it holds other files, or a run (unless
+        ``overwrite``); :class:`~creps_gym.runner.session.RunDirError` while another process writes it.
+    overwrite : bool
+        Replace a run already in ``run_dir`` (only the run's own files are deleted), like ``--overwrite``.
     callbacks : sequence of Callback or callables ``f(record, history) -> bool | None``
     env_kwargs, optimizer_options : dict, optional
         Keyword arguments of ``gymnasium.make`` (id envs) and of the optimiser (name optimisers).
@@ -72,7 +76,7 @@ def run(
     objects = {"env": None if by_id else env, "optimizer": None if by_name else optimizer}
     runner = Runner(config, **objects, callbacks=callbacks)
     if run_dir is not None:
-        runner.run_dir = RunDir.create(run_dir, runner.config, runner.history.meta)
+        runner.run_dir = RunDir.create(run_dir, runner.config, runner.history.meta, overwrite=overwrite)
     return runner.run()
 
 
@@ -86,7 +90,11 @@ def resume(
     """Continue a run from its last checkpoint (or from the start if it has none); returns the History.
 
     The resumed History equals the one an uninterrupted run would have produced (wall times aside). A
-    finished run is returned as is.
+    finished run is returned as is (its missing or damaged result files are rewritten first).
+
+    A run directory is untrusted input: its ``config.json`` never makes this import a module (see
+    :mod:`creps_gym.runner.trust`; import the module that registers the env first), and a damaged file,
+    a checkpoint of another run or a live writer raise :class:`~creps_gym.runner.session.RunDirError`.
 
     Parameters
     ----------

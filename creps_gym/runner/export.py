@@ -28,7 +28,14 @@ from pathlib import Path
 
 from creps_gym.runner.history import History, atomic_write_text
 
-__all__ = ["IOH_COLUMNS", "check_one_env", "env_key", "iohanalyzer_rows", "write_iohanalyzer"]
+__all__ = [
+    "IOH_COLUMNS",
+    "check_one_env",
+    "env_key",
+    "iohanalyzer_rows",
+    "iohanalyzer_text",
+    "write_iohanalyzer",
+]
 
 IOH_COLUMNS = ("evaluations", "value", "function_id", "algorithm_id", "dimension", "run_id")
 
@@ -66,13 +73,18 @@ def iohanalyzer_rows(histories: Sequence[History], mix_envs: bool = False) -> tu
     return rows, "regret" if use_regret else "return"
 
 
-def write_iohanalyzer(
-    histories: Sequence[History], path: str | os.PathLike[str], *, mix_envs: bool = False
-) -> Path:
-    """Write the rows of :func:`iohanalyzer_rows` to ``path`` (atomically); returns the path."""
+def iohanalyzer_text(histories: Sequence[History], mix_envs: bool = False) -> str:
+    """The CSV text of :func:`write_iohanalyzer`."""
     rows, _ = iohanalyzer_rows(histories, mix_envs)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(IOH_COLUMNS)
     writer.writerows(rows)
-    return atomic_write_text(path, buffer.getvalue())
+    return buffer.getvalue()
+
+
+def write_iohanalyzer(
+    histories: Sequence[History], path: str | os.PathLike[str], *, mix_envs: bool = False
+) -> Path:
+    """Write the rows of :func:`iohanalyzer_rows` to ``path`` (atomically); returns the path."""
+    return atomic_write_text(path, iohanalyzer_text(histories, mix_envs))

@@ -166,9 +166,13 @@ class History:
         records = [IterationRecord.from_dict(r) for r in data["records"]]
         return cls(records, dict(data.get("meta", {})), data.get("stop_reason"))
 
+    def json_text(self) -> str:
+        """The JSON document :meth:`to_json` writes."""
+        return json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n"
+
     def to_json(self, path: str | os.PathLike[str]) -> Path:
         """Write the history as one JSON document (atomically)."""
-        return atomic_write_text(path, json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n")
+        return atomic_write_text(path, self.json_text())
 
     @classmethod
     def from_json(cls, path: str | os.PathLike[str]) -> History:
@@ -178,6 +182,10 @@ class History:
     # -- CSV -------------------------------------------------------------------------------------------------
     def to_csv(self, path: str | os.PathLike[str]) -> Path:
         """Write one row per iteration: the fields, then ``diag.<key>`` columns (metadata is not written)."""
+        return atomic_write_text(path, self.csv_text())
+
+    def csv_text(self) -> str:
+        """The CSV text :meth:`to_csv` writes."""
         keys = sorted({k for r in self.records for k in r.diagnostics})
         buffer = io.StringIO()
         writer = csv.writer(buffer, lineterminator="\n")
@@ -186,7 +194,7 @@ class History:
             values = [r.iteration, r.episodes, *(repr(float(getattr(r, n))) for n in FIELDS[2:])]
             values += [repr(float(r.diagnostics[k])) if k in r.diagnostics else "" for k in keys]
             writer.writerow(values)
-        return atomic_write_text(path, buffer.getvalue())
+        return buffer.getvalue()
 
     @classmethod
     def from_csv(cls, path: str | os.PathLike[str]) -> History:

@@ -35,7 +35,9 @@ from creps_gym.runner.backends import EnvSource, EpisodeError, make_backend, ret
 from creps_gym.runner.callbacks import as_callback
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History, IterationRecord
-from creps_gym.runner.rundir import RunDir
+from creps_gym.runner.rundir import RESTART, RunDir
+from creps_gym.runner.session import DeferredInterrupt
+from creps_gym.runner.trust import check_run_memory
 
 __all__ = ["Runner", "default_initial_distribution", "split_seed"]
 
@@ -109,16 +111,12 @@ class Runner:
         if config.samples is None:
             batch = recommended_samples(config.optimizer or optimizer, self.n_params, self.n_context_dims)
             self.config = config = dataclasses.replace(config, samples=batch)
+        check_run_memory(config, self.n_params, self.n_context_dims, covariance=config.optimizer is not None)
         self.optimizer = optimizer
         if optimizer is None and config.optimizer is not None:
             self.optimizer = self._make_optimizer(optimizer_seed)
         self._optimizer_class = optimizer_class or (type(optimizer) if optimizer is not None else None)
-        for attribute, expected in (("n_params", self.n_params), ("n_context_dims", self.n_context_dims)):
-            got = getattr(self.optimizer, attribute, expected)
-            if got != expected:
-                raise ValueError(
-                    f"optimizer: expected {attribute} = {expected} for {self.env_name}, got {got}"
-                )
+        self._check_optimizer_sizes("optimizer")
         self._model = self._contextual_model()
         self.test_contexts = self._test_contexts(eval_seed)
         if config.target_regret is not None and not self.has_regret:
@@ -133,7 +131,12 @@ class Runner:
         self._elapsed_before = 0.0
         self._clock = time.perf_counter()
         if run_dir is not None:
-            self._restore(run_dir)
+            run_dir.lock.acquire()  # held until run() ends: one writer per run directory
+            try:
+                self._restore(run_dir)
+            except BaseException:
+                run_dir.lock.release()
+                raise
 
     # -- set-up ----------------------------------------------------------------------------------------------
     @property
@@ -141,6 +144,12 @@ class Runner:
         """The env id, or the env's class name for env objects without a spec."""
         spec = getattr(self.env, "spec", None)
         return self.config.env or (spec.id if spec is not None else type(self.env.unwrapped).__name__)
+
+    def _check_optimizer_sizes(self, name: str) -> None:
+        for attribute, expected in (("n_params", self.n_params), ("n_context_dims", self.n_context_dims)):
+            got = getattr(self.optimizer, attribute, expected)
+            if got != expected:
+                raise ValueError(f"{name}: expected {attribute} = {expected} for {self.env_name}, got {got}")
 
     def _uniform_mean(self) -> Array:
         """The paper's initialisation: a mean drawn uniformly in the action box from the master seed."""
@@ -224,18 +233,23 @@ class Runner:
 
     # -- checkpoints -----------------------------------------------------------------------------------------
     def _restore(self, run_dir: RunDir) -> None:
-        loaded = run_dir.load_checkpoint()
+        """Continue from the run's checkpoint (RunDirError if it is damaged or belongs to another run)."""
+        loaded = run_dir.load_checkpoint(self.config)
         if loaded is None:
             return
         state, optimizer_state = loaded
-        if self.config.optimizer is not None:
-            self.optimizer = restore_optimizer(self.config.optimizer, optimizer_state)
-        else:
-            self.optimizer = self._optimizer_class.from_state_dict(optimizer_state)
-        self.env_rng.bit_generator.state = state["env_rng"]
-        self.history = History.from_dict(state["history"])
-        self.iteration, self.episodes = int(state["iteration"]), int(state["episodes"])
-        self._elapsed_before = float(state["elapsed"])
+        try:
+            if self.config.optimizer is not None:
+                self.optimizer = restore_optimizer(self.config.optimizer, optimizer_state)
+            else:
+                self.optimizer = self._optimizer_class.from_state_dict(optimizer_state)
+            self._check_optimizer_sizes("optimizer state")
+            self.env_rng.bit_generator.state = state["env_rng"]
+            self.history = History.from_dict(state["history"])
+            self.iteration, self.episodes = int(state["iteration"]), int(state["episodes"])
+            self._elapsed_before = float(state["elapsed"])
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+            raise run_dir.damaged(RunDir.CHECKPOINT, exc, RESTART) from None
 
     def _checkpoint(self) -> None:
         if self.run_dir is None:
@@ -247,7 +261,7 @@ class Runner:
             "episodes": self.episodes,
             "elapsed": self.elapsed,
         }
-        self.run_dir.save_checkpoint(state, self.optimizer.state_dict())
+        self.run_dir.save_checkpoint(state, self.optimizer.state_dict(), self.config)
 
     @property
     def elapsed(self) -> float:
@@ -324,9 +338,25 @@ class Runner:
 
     # -- the loop --------------------------------------------------------------------------------------------
     def run(self) -> History:
-        """Iterate until a stop condition holds; log, checkpoint and call the callbacks on the way."""
-        if self.history.stop_reason is not None:
-            return self.history
+        """Iterate until a stop condition holds; log, checkpoint and call the callbacks on the way.
+
+        With a run directory: holds its lock; a finished run only gets its missing or damaged result files
+        rewritten; the first Ctrl-C completes the iteration and checkpoints before ``KeyboardInterrupt``.
+        """
+        if self.run_dir is not None:
+            self.run_dir.lock.acquire()
+        try:
+            finished = self.history.stop_reason is not None
+            if not finished:
+                with DeferredInterrupt(enabled=self.run_dir is not None) as interrupt:
+                    self._iterate(interrupt)
+            self._finish(completing=finished)
+        finally:
+            if self.run_dir is not None:
+                self.run_dir.lock.release()
+        return self.history
+
+    def _iterate(self, interrupt: DeferredInterrupt) -> None:
         self._clock = time.perf_counter()
         if self.run_dir is not None:
             self.run_dir.remove_temporaries()
@@ -352,27 +382,32 @@ class Runner:
                 if any(wants_stop) and reason is None:
                     reason = "callback"
                 self.history.stop_reason = reason
-                if reason is not None or self.iteration % self.config.checkpoint_every == 0:
+                if (
+                    reason is not None
+                    or interrupt.requested
+                    or self.iteration % self.config.checkpoint_every == 0
+                ):
                     self._checkpoint()
+                if interrupt.requested and reason is None:
+                    raise KeyboardInterrupt
         finally:
             backend.close()
             if self.config.optimizer is not None and hasattr(self.optimizer, "close"):
                 self.optimizer.close()  # built by name here: release its library's threads
             for callback in self.callbacks:
                 callback.on_end(self.history)
-        self._finish()
-        return self.history
 
     def _log(self, entry: dict[str, Any]) -> None:
         if self.run_dir is not None:
             self.run_dir.append_log(entry)
 
-    def _finish(self) -> None:
+    def _finish(self, completing: bool) -> None:
+        """Write the result files; when ``completing`` a finished run, only those missing or damaged."""
         if self.run_dir is None:
             return
-        from creps_gym.runner.export import write_iohanalyzer
-
-        self._log({"event": "end", "iteration": self.iteration, "stop_reason": self.history.stop_reason})
-        self.history.to_json(self.run_dir.file(RunDir.HISTORY_JSON))
-        self.history.to_csv(self.run_dir.file(RunDir.HISTORY_CSV))
-        write_iohanalyzer([self.history], self.run_dir.file(RunDir.IOH))
+        end = {"event": "end", "iteration": self.iteration, "stop_reason": self.history.stop_reason}
+        if not completing:
+            self._log(end)
+        written = self.run_dir.write_results(self.history, only_changed=completing)
+        if completing and written:  # killed between its last checkpoint and its result files
+            self._log({**end, "rewritten": written})

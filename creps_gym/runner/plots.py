@@ -125,13 +125,11 @@ def plot_histories(
 
 
 def load_history(path: str | os.PathLike[str]) -> History:
-    """The history of a run directory: ``history.json`` if finished, else the last checkpoint or the log."""
-    run_dir = RunDir.open(path)
-    if run_dir.file(RunDir.HISTORY_JSON).exists():
-        return History.from_json(run_dir.file(RunDir.HISTORY_JSON))
-    records, _ = run_dir.read_log()
-    document = run_dir.document()
-    return History(records, dict(document.get("meta", {})))
+    """The history of a run directory: ``history.json`` if finished, else the last checkpoint and the log.
+
+    Damage is never skipped silently (see :meth:`RunDir.read_history`).
+    """
+    return RunDir.open(path).read_history()
 
 
 def plot_run_dirs(

@@ -11,12 +11,17 @@ file                      content
                           "end", ...}``). After a resume, iterations done after the last checkpoint appear
                           again; :meth:`RunDir.read_log` keeps the last copy of each iteration.
 ``checkpoint.npz``        the last checkpoint (``.npz`` arrays + one embedded JSON document, never pickle),
-                          replaced atomically (temporary file + rename; temporaries left by a killed
-                          process are removed when the run resumes)
+                          replaced atomically (temporary file + rename; the run's own temporaries left by
+                          a killed process are removed when the run resumes). It records the run's
+                          :func:`~creps_gym.runner.trust.config_fingerprint`: another run's is refused
+``run.lock``              the live writer's process id (see :mod:`creps_gym.runner.session`)
 ``history.json`` / .csv   the final :class:`~creps_gym.runner.history.History` (written at the end)
 ``iohanalyzer.csv``       the evaluations in IOHanalyzer's CSV layout (written at the end)
 ``learning_curve.png``    the plot written by ``creps-gym run`` (when matplotlib is installed)
 ========================= ===========================================================================
+
+A run directory is untrusted input: a damaged file raises :class:`RunDirError` (a ``ValueError``) naming
+the file and what to do, and ``config.json`` is checked by :func:`creps_gym.runner.trust.check_trusted`.
 """
 
 from __future__ import annotations
@@ -24,18 +29,29 @@ from __future__ import annotations
 import json
 import os
 import platform
+import re
 import sys
+import warnings
+import zlib
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
 from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.runner.config import RunConfig
-from creps_gym.runner.history import IterationRecord, atomic_write_text
+from creps_gym.runner.history import History, IterationRecord, atomic_write_text
+from creps_gym.runner.session import RunDirError, RunDirWarning, RunLock
+from creps_gym.runner.trust import (
+    CHECKPOINT_FORMAT,
+    LEGACY_FORMATS,
+    check_checkpoint,
+    check_trusted,
+    config_fingerprint,
+)
 
-__all__ = ["RunDir", "package_versions"]
+__all__ = ["RunDir", "RunDirError", "RunDirWarning", "package_versions"]
 
-CHECKPOINT_FORMAT = "creps_gym.run/1"
+RESTART = "delete it to restart the run from its first iteration, or restore it from a backup"
 
 
 def package_versions() -> dict[str, str]:
@@ -50,6 +66,10 @@ def package_versions() -> dict[str, str]:
     return found
 
 
+def _crc(entry: dict[str, Any]) -> int:
+    return zlib.crc32(json.dumps(entry, allow_nan=False).encode())
+
+
 class RunDir:
     """A run directory (see the module docstring for its files)."""
 
@@ -61,59 +81,119 @@ class RunDir:
     HISTORY_CSV = "history.csv"
     IOH = "iohanalyzer.csv"
     PLOT = "learning_curve.png"
+    LOCK = "run.lock"
+    FILES = (CONFIG, VERSIONS, LOG, CHECKPOINT, HISTORY_JSON, HISTORY_CSV, IOH, PLOT)
+    #: The run's own temporary files: ``atomic_write_text``'s ``.NAME.PID.tmp`` and ``save_state``'s
+    #: ``checkpoint.npzXXXXXXXX.tmp``. Other ``*.tmp`` files are the user's and are never touched.
+    TEMPORARY = re.compile(
+        r"^(\.(" + "|".join(map(re.escape, FILES)) + r")\.\d+|" + re.escape(CHECKPOINT) + r"\w+)\.tmp$"
+    )
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
+        self.lock = RunLock(self.path / self.LOCK)
 
     def file(self, name: str) -> Path:
         """Path of one of the files."""
         return self.path / name
 
+    def damaged(self, name: str, error: BaseException | str, advice: str) -> RunDirError:
+        """The error for a damaged file: names the file, what is wrong and what to do."""
+        what = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
+        return RunDirError(f"{self.file(name)}: damaged or not written by creps_gym ({what}); {advice}")
+
     @classmethod
     def create(
         cls, path: str | os.PathLike[str], config: RunConfig, meta: dict[str, Any], *, overwrite: bool = False
     ) -> RunDir:
-        """Start a new run directory.
+        """Start a new run directory (an empty or new folder, or a run with ``overwrite``) and lock it.
 
-        A directory that already holds a run raises ``FileExistsError``, unless ``overwrite`` is True: then
-        the run's files (those listed in the module docstring, and nothing else) are deleted first.
+        A folder that holds other files than a run's raises ``FileExistsError``, and so does one that holds
+        a run (or the files of one without its ``config.json``) unless ``overwrite`` is True: then the
+        run's files (those listed in the module docstring, and nothing else) are deleted first.
         """
         run_dir = cls(path)
-        if run_dir.file(cls.CONFIG).exists():
-            if not overwrite:
-                raise FileExistsError(
-                    f"out: expected a new or empty directory, got {run_dir.path} which holds a run "
-                    "(continue it with `creps-gym resume`, pass --overwrite, or choose another directory)"
-                )
-            run_dir.remove_temporaries()
-            for name in (cls.CONFIG, cls.VERSIONS, cls.LOG, cls.CHECKPOINT, cls.HISTORY_JSON, cls.HISTORY_CSV,
-                         cls.IOH, cls.PLOT):  # fmt: skip
-                run_dir.file(name).unlink(missing_ok=True)
+        if run_dir.path.exists() and not run_dir.path.is_dir():
+            raise NotADirectoryError(f"out: expected a directory, got the file {run_dir.path}")
         run_dir.path.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(run_dir.file(cls.VERSIONS), json.dumps(package_versions(), indent=1) + "\n")
+        run_dir.lock.acquire()
+        try:
+            run_dir._check_new(overwrite)
+        except BaseException:
+            run_dir.lock.release()
+            raise
+        run_dir.remove_temporaries()
+        for name in cls.FILES:
+            run_dir.file(name).unlink(missing_ok=True)
         document = {"config": config.to_dict(), "meta": meta}
         atomic_write_text(run_dir.file(cls.CONFIG), json.dumps(document, indent=1, allow_nan=False) + "\n")
+        atomic_write_text(run_dir.file(cls.VERSIONS), json.dumps(package_versions(), indent=1) + "\n")
         return run_dir
+
+    def _check_new(self, overwrite: bool) -> None:
+        entries = sorted(
+            p.name for p in self.path.iterdir() if p.name != self.LOCK and not self.TEMPORARY.match(p.name)
+        )
+        foreign = [name for name in entries if name not in self.FILES]
+        if self.CONFIG in entries:
+            if not overwrite:
+                raise FileExistsError(
+                    f"out: expected a new or empty directory, got {self.path} which holds a run "
+                    "(continue it with `creps-gym resume`, pass --overwrite, or choose another directory)"
+                )
+        elif foreign:
+            raise FileExistsError(
+                f"out: expected a new or empty directory (or a run to overwrite), got {self.path} which "
+                f"holds other files ({', '.join(foreign[:5])}{', ...' if len(foreign) > 5 else ''}); choose "
+                "another directory"
+            )
+        elif entries and not overwrite:
+            raise FileExistsError(
+                f"out: expected a new or empty directory, got {self.path} which holds {', '.join(entries)} "
+                f"but no {self.CONFIG} (the rest of a run); pass --overwrite to delete them, or choose "
+                "another directory"
+            )
 
     @classmethod
     def open(cls, path: str | os.PathLike[str]) -> RunDir:
         """An existing run directory (``FileNotFoundError`` naming the path if it is not one)."""
         run_dir = cls(path)
         if not run_dir.file(cls.CONFIG).is_file():
-            raise FileNotFoundError(f"run directory: expected a folder with {cls.CONFIG}, got {run_dir.path}")
+            extra = ""
+            if run_dir.file(cls.CHECKPOINT).exists():
+                extra = f" ({cls.CHECKPOINT} without its {cls.CONFIG} cannot be matched with a configuration)"
+            raise FileNotFoundError(
+                f"run directory: expected a folder with {cls.CONFIG}, got {run_dir.path}{extra}"
+            )
         return run_dir
 
     def document(self) -> dict[str, Any]:
-        """The content of ``config.json``: ``{"config": ..., "meta": ...}``."""
-        return json.loads(self.file(self.CONFIG).read_text(encoding="utf-8"))
+        """``config.json``'s content ``{"config": ..., "meta": ...}`` (:class:`RunDirError` if damaged)."""
+        try:
+            document = json.loads(self.file(self.CONFIG).read_text(encoding="utf-8"))
+            if not isinstance(document, dict) or not isinstance(document.get("config"), dict):
+                raise ValueError("expected a JSON object with a 'config' object")
+        except (OSError, ValueError) as exc:
+            raise self.damaged(self.CONFIG, exc, "restore it from a backup or start a new run") from None
+        return document
 
     def config(self) -> RunConfig:
-        """The run's configuration."""
-        return RunConfig.from_dict(self.document()["config"])
+        """The run's configuration, checked by :func:`~creps_gym.runner.trust.check_trusted`."""
+        try:
+            config = RunConfig.from_dict(self.document()["config"])
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, RunDirError):
+                raise
+            raise self.damaged(self.CONFIG, exc, "restore it from a backup or start a new run") from None
+        check_trusted(config, str(self.file(self.CONFIG)))
+        return config
 
     # -- log -------------------------------------------------------------------------------------------------
     def append_log(self, entry: dict[str, Any]) -> None:
-        """Append one JSON line (flushed); a line cut by a crash is closed first so it stays one bad line."""
+        """Append one JSON line (flushed), ending with the ``crc32`` of the rest, so damage is found.
+
+        A line cut by a crash is closed first so it stays one bad line.
+        """
         path = self.file(self.LOG)
         prefix = ""
         if path.exists() and path.stat().st_size > 0:
@@ -121,56 +201,163 @@ class RunDir:
                 stream.seek(-1, os.SEEK_END)
                 prefix = "" if stream.read(1) == b"\n" else "\n"
         with open(path, "a", encoding="utf-8") as stream:
-            stream.write(prefix + json.dumps(entry, allow_nan=False) + "\n")
+            stream.write(prefix + json.dumps({**entry, "crc32": _crc(entry)}, allow_nan=False) + "\n")
             stream.flush()
 
-    def read_log(self) -> tuple[list[IterationRecord], list[dict[str, Any]]]:
-        """Iteration records (last copy of each, in order) and events; malformed lines are skipped."""
+    def read_log(
+        self, damaged: list[int] | None = None
+    ) -> tuple[list[IterationRecord], list[dict[str, Any]]]:
+        """Iteration records (last copy of each, in order) and events.
+
+        Damaged lines are never skipped silently: their (1-based) numbers are appended to ``damaged`` when
+        it is given, else a :class:`RunDirWarning` names them.
+        """
         records: dict[int, IterationRecord] = {}
         events: list[dict[str, Any]] = []
+        bad: list[int] = []
         path = self.file(self.LOG)
-        lines = path.read_text(encoding="utf-8").splitlines() if path.exists() else []
-        for line in lines:
+        data = path.read_bytes() if path.exists() else b""
+        for number, line in enumerate(data.splitlines(), 1):
             try:
-                entry = json.loads(line)
+                entry = json.loads(line.decode("utf-8"))
+                if entry.pop("crc32", None) not in (None, _crc(entry)):  # (older logs have none)
+                    raise ValueError("checksum mismatch")
                 if "event" in entry:
                     events.append(entry)
                 else:
                     record = IterationRecord.from_dict(entry)
                     records[record.iteration] = record
-            except (ValueError, KeyError, TypeError):
-                continue
+            except (ValueError, KeyError, TypeError, AttributeError):
+                bad.append(number)
+        if damaged is not None:
+            damaged.extend(bad)
+        elif bad:
+            warnings.warn(f"{path}: damaged lines {bad} were skipped", RunDirWarning, stacklevel=2)
         return [records[k] for k in sorted(records)], events
 
     def remove_temporaries(self) -> list[Path]:
-        """Delete ``*.tmp`` files left by a writer killed before its rename; returns what was removed.
+        """Delete the run's own temporaries (:attr:`TEMPORARY`) left by a writer killed before its rename.
 
-        Only one process may write a run directory at a time, so any temporary file found when a session
-        starts belongs to a dead one.
+        Call it only with the lock held: then any such file belongs to a dead writer. Returns the files.
         """
-        stale = sorted(self.path.glob("*.tmp")) + sorted(self.path.glob(".*.tmp"))
+        stale = sorted(p for p in self.path.iterdir() if self.TEMPORARY.match(p.name))
         for path in stale:
             path.unlink(missing_ok=True)
         return stale
 
     # -- checkpoint ------------------------------------------------------------------------------------------
-    def save_checkpoint(self, state: dict[str, Any], optimizer_state: dict[str, Any]) -> Path:
-        """Write the runner's state and the optimiser's ``state_dict()`` atomically to ``checkpoint.npz``."""
-        flat = {"format": CHECKPOINT_FORMAT, **state}
+    def save_checkpoint(
+        self, state: dict[str, Any], optimizer_state: dict[str, Any], config: RunConfig
+    ) -> Path:
+        """Write the runner's state, the optimiser's ``state_dict()`` and ``config``'s fingerprint."""
+        flat = {"format": CHECKPOINT_FORMAT, "fingerprint": config_fingerprint(config), **state}
         flat.update({f"optimizer.{key}": value for key, value in optimizer_state.items()})
         path = save_state(flat, self.file(self.CHECKPOINT))
         os.chmod(path, self.file(self.CONFIG).stat().st_mode & 0o777)  # one mode for all the run's files
         return path
 
-    def load_checkpoint(self) -> tuple[dict[str, Any], dict[str, Any]] | None:
-        """``(runner state, optimiser state)`` of the last checkpoint, or None if there is none yet."""
+    def load_checkpoint(
+        self, config: RunConfig | None = None
+    ) -> tuple[dict[str, Any], dict[str, Any]] | None:
+        """``(runner state, optimiser state)`` of the last checkpoint, or None if there is none yet.
+
+        With ``config``, a checkpoint written under another configuration (another seed, env, dimension,
+        optimiser, ...) raises :class:`RunDirError`, and so does a damaged one.
+        """
         path = self.file(self.CHECKPOINT)
         if not path.exists():
             return None
-        flat = load_state(path)
-        if flat.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"checkpoint: expected format {CHECKPOINT_FORMAT!r}, got {flat.get('format')!r}")
+        try:
+            flat = load_state(path)
+        except Exception as exc:  # an untrusted file: every way of failing to parse it is damage
+            raise self.damaged(self.CHECKPOINT, exc, RESTART) from None
+        if flat.get("format") not in (CHECKPOINT_FORMAT, *LEGACY_FORMATS):
+            found = f"format {flat.get('format')!r}, expected {CHECKPOINT_FORMAT!r}"
+            raise self.damaged(self.CHECKPOINT, found, RESTART)
+        if config is not None:
+            check_checkpoint(flat, config, str(path), RESTART)
         prefix = "optimizer."
         optimizer_state = {k[len(prefix) :]: v for k, v in flat.items() if k.startswith(prefix)}
-        state = {k: v for k, v in flat.items() if not k.startswith(prefix) and k != "format"}
+        state = {
+            k: v for k, v in flat.items() if not k.startswith(prefix) and k not in ("format", "fingerprint")
+        }
         return state, optimizer_state
+
+    # -- results ---------------------------------------------------------------------------------------------
+    def write_results(self, history: History, *, only_changed: bool = False) -> list[str]:
+        """Write ``history.json``, ``history.csv`` and ``iohanalyzer.csv``; returns the names written.
+
+        With ``only_changed``, a file whose content is already right is left alone (a missing, truncated or
+        damaged one is rewritten).
+        """
+        from creps_gym.runner.export import iohanalyzer_text
+
+        texts = {
+            self.HISTORY_JSON: history.json_text(),
+            self.HISTORY_CSV: history.csv_text(),
+            self.IOH: iohanalyzer_text([history]),
+        }
+        written = []
+        for name, text in texts.items():
+            path = self.file(name)
+            if only_changed and self._holds(name, text):
+                continue
+            atomic_write_text(path, text)
+            written.append(name)
+        return written
+
+    def _holds(self, name: str, text: str) -> bool:
+        """Whether the file ``name`` holds ``text`` (for JSON: the same document, keys in any order)."""
+        try:
+            found = self.file(name).read_bytes().decode("utf-8")
+            return json.loads(found) == json.loads(text) if name.endswith(".json") else found == text
+        except (OSError, ValueError):
+            return False
+
+    def read_history(self) -> History:
+        """``history.json`` if the run finished, else the checkpoint's history and the iterations after it.
+
+        Nothing is skipped silently: a damaged ``history.json`` (or one that differs from the final
+        checkpoint's) is rebuilt from the checkpoint and the log, and damaged log lines are named, with a
+        :class:`RunDirWarning`; the history then stops before the first missing iteration. A damaged
+        checkpoint raises :class:`RunDirError`.
+        """
+        loaded = self.load_checkpoint()
+        try:
+            saved = None if loaded is None else History.from_dict(loaded[0]["history"])
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise self.damaged(self.CHECKPOINT, exc, RESTART) from None
+        path = self.file(self.HISTORY_JSON)
+        if path.exists():
+            try:
+                final = History.from_json(path)
+                if saved is None or (final.equals(saved, include_time=True) and final.meta == saved.meta):
+                    return final
+                problem = f"differs from the final history in {self.CHECKPOINT}"
+            except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+                problem = f"damaged ({type(exc).__name__}: {exc})"
+            message = f"{path}: {problem}; rebuilt from {self.CHECKPOINT} and {self.LOG}"
+            warnings.warn(message + " (`creps-gym resume` rewrites it)", RunDirWarning, stacklevel=2)
+        history = saved if saved is not None else History(meta=dict(self.document().get("meta", {})))
+        damaged: list[int] = []
+        records, _ = self.read_log(damaged)
+        from_checkpoint = len(history)
+        for record in records:
+            if record.iteration == len(history) + 1 and history.stop_reason is None:
+                history.append(record)
+        lost = [record.iteration for record in records if record.iteration > len(history)]
+        kept = {record.iteration for record in records}
+        missing = [i for i in range(1, from_checkpoint + 1) if i not in kept]
+        problems = [f"damaged lines {damaged}"] if damaged else []
+        if missing and not damaged:
+            problems.append(f"iterations {missing[0]} to {missing[-1]} are missing (a truncated log?)")
+        if lost:
+            problems.append(f"logged iterations {lost[0]} to {lost[-1]} follow a gap and are left out")
+        if problems:
+            warnings.warn(
+                f"{self.file(self.LOG)}: {'; '.join(problems)}; the history has iterations 1 to "
+                f"{len(history)} ({from_checkpoint} from {self.CHECKPOINT}, the rest from the log)",
+                RunDirWarning,
+                stacklevel=2,
+            )
+        return history

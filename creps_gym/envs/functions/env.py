@@ -21,7 +21,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from creps_gym._validation import as_float_array, check_positive_int
+from creps_gym._validation import as_float_array, check_fits_in_memory, check_positive_int
 from creps_gym.envs.base import Array, ContextualEpisodicEnv, ContextualEpisodicVectorEnv, InfoBatch
 from creps_gym.envs.functions.instance import FunctionInstance, make_instance
 from creps_gym.envs.functions.specs import FunctionSpec
@@ -52,6 +52,11 @@ class ContextualFunctionEnv(ContextualEpisodicEnv):
         context_dim = check_positive_int(context_dim, "context_dim", minimum=1)
         self.instance = check_positive_int(instance, "instance", minimum=0)
         spec = self.function
+        rotation = 2 * self.dim**2 if spec.rotated else 0  # the Gaussian and the orthonormalised matrix
+        arrays = "the instance's arrays (A, shift, bounds" + (
+            ", 2 p x p rotation matrices)" if rotation else ")"
+        )
+        check_fits_in_memory(8.0 * (self.dim * (context_dim + 12) + rotation), "dim", dim, arrays)
         #: The seeded A, o, R and x* of this instance.
         self.problem: FunctionInstance = make_instance(
             self.dim,

@@ -1,0 +1,189 @@
+"""A run directory is untrusted input: what it may name, and how big a run may be.
+
+**No imports from a run directory.** Gymnasium imports ``module`` for an env id ``"module:Env-v0"``, and
+envs that wrap another env (e.g. ``creps_gym/PointMazeGoal-v0``'s ``env`` keyword) pass such ids on. So
+the configuration read back from ``config.json`` may only name
+
+* a registered env id, or ``"module:Env-v0"`` whose ``module`` is already imported;
+* strings of the form ``"module:..."`` (in the env keywords and optimiser options) whose module is already
+  imported;
+* a registered optimiser name (the registry never imports a ``"module:Class"`` read from a file).
+
+Anything else raises :class:`~creps_gym.runner.session.RunDirError`. The user imports the module
+(``creps-gym resume --import MODULE``, or ``import MODULE`` before :func:`creps_gym.runner.resume`).
+
+**Checkpoints.** A checkpoint records the :func:`config_fingerprint` of its run; :func:`check_checkpoint`
+refuses one written under another configuration, and runner state that no run can have written.
+
+**Sizes.** :func:`check_run_memory` refuses, before the optimiser or the batch is allocated, a run whose
+arrays would not fit in memory (:func:`creps_gym._validation.check_fits_in_memory`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import json
+import re
+import sys
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+import gymnasium as gym
+
+from creps_gym._validation import check_fits_in_memory
+from creps_gym.optimizers.registry import optimizer_names
+from creps_gym.runner.config import RunConfig
+from creps_gym.runner.session import RunDirError
+
+__all__ = [
+    "CHECKPOINT_FORMAT",
+    "check_checkpoint",
+    "check_run_memory",
+    "check_trusted",
+    "config_fingerprint",
+    "import_modules",
+    "module_reference",
+    "registered_env_id",
+]
+
+CHECKPOINT_FORMAT = "creps_gym.run/2"
+LEGACY_FORMATS = ("creps_gym.run/1",)  # no fingerprint: matched on the history's seed, samples and env
+#: The configuration fields that define a run's results (the others only say where and how it runs).
+FINGERPRINT_FIELDS = ("env", "env_kwargs", "optimizer", "optimizer_options", "seed", "samples", "iterations",
+                      "eval_every", "eval_contexts", "initial_mean", "initial_std", "max_episodes",
+                      "target_regret", "max_time")  # fmt: skip
+
+_MODULE_PREFIX = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*:")
+
+
+def module_reference(text: str) -> str | None:
+    """The module a ``"module:name"`` string makes Gymnasium (or a registry) import, or None."""
+    match = _MODULE_PREFIX.match(text)
+    return match.group(1) if match else None
+
+
+def import_modules(modules: Sequence[str]) -> None:
+    """Import the modules a user names (``--import``): the only code imported on a user's word."""
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ValueError(f"expected an importable module, got {module!r} ({exc})") from None
+
+
+def registered_env_id(env_id: str, *, import_module: bool = False) -> str:
+    """``env_id`` if registered (a ``module:Env-v0``'s module imported first with ``import_module``)."""
+    import creps_gym
+
+    module = module_reference(env_id)
+    if module is not None and import_module:
+        import_modules([module])
+    if env_id.split(":", 1)[-1] not in gym.registry:
+        raise ValueError(f"expected one of {creps_gym.registered_ids()}, got {env_id!r}")
+    return env_id
+
+
+def _strings(value: Any, where: str) -> Iterator[tuple[str, str]]:
+    """Every string in a JSON value (keys included), with where it is."""
+    if isinstance(value, str):
+        yield where, value
+    elif isinstance(value, dict):
+        for key, item in value.items():
+            yield f"{where}.{key}", str(key)
+            yield from _strings(item, f"{where}.{key}")
+    elif isinstance(value, (list, tuple)):
+        for index, item in enumerate(value):
+            yield from _strings(item, f"{where}[{index}]")
+
+
+def check_trusted(config: RunConfig, source: str) -> None:
+    """Refuse a configuration read from ``source`` that would import code (see the module docstring)."""
+
+    def refuse(field: str, value: str, why: str) -> RunDirError:
+        return RunDirError(
+            f"{source}: {field}: expected {why}, got {value!r}; a run directory never makes the runner "
+            "import code: import the module yourself (`creps-gym resume --import MODULE`, or `import "
+            "MODULE` before `resume`) if you trust it"
+        )
+
+    if config.optimizer is not None and config.optimizer not in optimizer_names():
+        raise refuse("optimizer", config.optimizer, f"a registered optimiser name {optimizer_names()}")
+    found = [("env", config.env)] if config.env is not None else []
+    found += _strings(config.env_kwargs, "env_kwargs")
+    found += _strings(config.optimizer_options, "optimizer_options")
+    for field, text in found:
+        module = module_reference(text)
+        if module is not None and module not in sys.modules:
+            raise refuse(field, text, f"no reference to a module that is not imported (here {module!r})")
+    if config.env is not None and module_reference(config.env) is None and config.env not in gym.registry:
+        raise refuse("env", config.env, "a registered env id")
+
+
+def check_run_memory(config: RunConfig, n_params: int, n_context_dims: int, *, covariance: bool) -> None:
+    """Refuse a run whose optimiser and batch arrays would not fit in memory, before they are allocated.
+
+    The estimate counts 8-byte floats: about ``6 p²`` for a covariance and its factors (when
+    ``covariance``), ``4 N p`` for the batch of parameters and its copies, ``4 N z`` for the contexts and
+    features, and ``2 E p`` for the evaluation (N samples, E test contexts).
+    """
+    p, z, n, e = n_params, n_context_dims, config.samples, config.eval_contexts
+    square = 6.0 * p * p if covariance else 0.0
+    batch = 4.0 * n * p + 4.0 * n * (z + 1) + 2.0 * e * p
+    if batch > square:
+        name, value = "samples", n
+    elif config.env_kwargs:
+        name, value = "env_kwargs", config.env_kwargs
+    else:
+        name, value = "env", config.env
+    what = f"the covariance (p x p, p = {p}) and the batch (samples x p)"
+    check_fits_in_memory(8.0 * (square + batch), name, value, what)
+
+
+def config_fingerprint(config: RunConfig) -> str:
+    """SHA-256 (hex) of the checkpoint format and the :data:`FINGERPRINT_FIELDS` of ``config``."""
+    data = config.to_dict()
+    document = {"format": CHECKPOINT_FORMAT, **{name: data[name] for name in FINGERPRINT_FIELDS}}
+    return hashlib.sha256(json.dumps(document, sort_keys=True, allow_nan=False).encode()).hexdigest()
+
+
+def _same_run(flat: dict[str, Any], config: RunConfig) -> bool:
+    if flat["format"] == CHECKPOINT_FORMAT:
+        return flat.get("fingerprint") == config_fingerprint(config)
+    meta = flat["history"]["meta"]  # a legacy checkpoint: its history's metadata
+    expected = {"seed": config.seed, "samples": config.samples, "env": config.env or meta.get("env")}
+    return all(meta.get(key) == value for key, value in expected.items())
+
+
+def _consistent(flat: dict[str, Any], config: RunConfig) -> bool:
+    """Counts, types and records that a run of ``config`` can have written."""
+    iteration, episodes, elapsed = flat["iteration"], flat["episodes"], flat["elapsed"]
+    records = flat["history"]["records"]
+    ok = all(type(v) is int for v in (iteration, episodes)) and 0 <= iteration <= config.iterations
+    ok = ok and episodes == iteration * config.samples and isinstance(flat["env_rng"], dict)
+    ok = ok and type(elapsed) in (int, float) and 0 <= elapsed < float("inf") and len(records) == iteration
+    for number, record in enumerate(records, 1):
+        counts = record["iteration"], record["episodes"]
+        ok = ok and all(type(v) is int for v in counts) and counts == (number, number * config.samples)
+    return ok
+
+
+def check_checkpoint(flat: dict[str, Any], config: RunConfig, path: str, advice: str) -> None:
+    """Refuse a checkpoint (``load_state`` content) of another run, or with runner state no run wrote."""
+    try:
+        same, consistent = _same_run(flat, config), _consistent(flat, config)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise RunDirError(
+            f"{path}: damaged or not written by creps_gym ({type(exc).__name__}: {exc}); {advice}"
+        ) from None
+    if not same:
+        raise RunDirError(
+            f"{path}: expected the checkpoint of the run configured in config.json (env {config.env}, seed "
+            f"{config.seed}, ...), got one written by a run with another configuration (copied from another "
+            f"run?); {advice}"
+        )
+    if not consistent:
+        found = {key: flat[key] for key in ("iteration", "episodes", "elapsed")}
+        raise RunDirError(
+            f"{path}: damaged or not written by creps_gym (inconsistent runner state {found}); {advice}"
+        )

@@ -1,0 +1,380 @@
+"""A run directory is untrusted input: no imports, no foreign checkpoints, clear errors, one writer."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from helpers import SPHERE, cli_command
+
+from creps_gym.cli import main
+from creps_gym.runner import History, RunDir, RunDirError, RunDirWarning, load_history, resume, run
+
+SETTINGS = {
+    "iterations": 6,
+    "samples_per_iteration": 6,
+    "env_kwargs": {"dim": 3},
+    "eval_every": 2,
+    "checkpoint_every": 2,
+}
+PAYLOAD = "import pathlib\npathlib.Path(__file__).with_name('PAYLOAD_RAN').write_text('yes')\n"
+
+
+class Stop(Exception):
+    """Raised by a callback to leave a run unfinished (as a crash would)."""
+
+
+def make_run(path: Path, *, seed: int = 0, stop_after: int | None = None, **changes) -> Path:
+    """A finished run in ``path``, or one that crashed after ``stop_after`` iterations."""
+    settings = {**SETTINGS, **changes}
+
+    def crash(record, history):
+        if stop_after is not None and record.iteration >= stop_after:
+            raise Stop
+
+    try:
+        run("creps-cma-old", SPHERE, seed=seed, run_dir=path, callbacks=[crash], **settings)
+    except Stop:
+        pass
+    return path
+
+
+def uninterrupted(seed: int = 0, **changes) -> History:
+    return run("creps-cma-old", SPHERE, seed=seed, **{**SETTINGS, **changes})
+
+
+def cli(*args, cwd=None, timeout=120):
+    return subprocess.run(cli_command(*args), capture_output=True, text=True, cwd=cwd, timeout=timeout)
+
+
+def wait_for(ready, process: subprocess.Popen, what: str, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not ready():
+        if process.poll() is not None or time.monotonic() > deadline:
+            process.kill()
+            pytest.fail(f"{what}: the process ended or timed out: {process.communicate()[1]}")
+        time.sleep(0.005)
+
+
+def iterations_logged(path: Path) -> int:
+    log = path / RunDir.LOG
+    return (
+        sum(line.startswith(b'{"iteration"') for line in log.read_bytes().splitlines()) if log.exists() else 0
+    )
+
+
+def edit_config(path: Path, **changes) -> None:
+    document = json.loads((path / RunDir.CONFIG).read_text())
+    document["config"].update(changes)
+    (path / RunDir.CONFIG).write_text(json.dumps(document))
+
+
+# -- item 13: config.json never makes resume import code --------------------------------------------------
+@pytest.mark.parametrize("env", ["evil_payload:X-v0", "this:X-v0"])
+def test_resume_never_imports_a_module_named_by_config_json(tmp_path, env):
+    out = make_run(tmp_path / "run", stop_after=3)
+    (out / "evil_payload.py").write_text(PAYLOAD)
+    edit_config(out, env=env)
+    result = cli("resume", ".", "--no-plot", cwd=out)  # the run directory is sys.path[0]
+    assert not (out / "PAYLOAD_RAN").exists()
+    assert "Beautiful is better than ugly" not in result.stdout
+    assert result.returncode == 3 and "Traceback" not in result.stderr
+    module = env.split(":")[0]
+    assert f"config.json: env: expected no reference to a module that is not imported (here {module!r})" in (
+        result.stderr
+    )
+    assert "--import MODULE" in result.stderr
+
+
+def test_env_kwargs_and_optimizer_from_a_run_directory_import_nothing(tmp_path, monkeypatch):
+    out = make_run(tmp_path / "run", stop_after=3)
+    (out / "evil_payload.py").write_text(PAYLOAD)
+    monkeypatch.syspath_prepend(str(out))
+    # creps_gym/PointMazeGoal-v0 hands its `env` keyword to gymnasium.make
+    edit_config(out, env="creps_gym/PointMazeGoal-v0", env_kwargs={"env": "evil_payload:X-v0"})
+    with pytest.raises(RunDirError, match=r"env_kwargs\.env: expected no reference to a module"):
+        resume(out)
+    edit_config(out, env=SPHERE, env_kwargs={"dim": 3}, optimizer="evil_payload:Optimizer")
+    with pytest.raises(RunDirError, match="optimizer: expected a registered optimiser name"):
+        resume(out)
+    assert "evil_payload" not in sys.modules and not (out / "PAYLOAD_RAN").exists()
+
+
+def test_a_module_named_with_import_on_the_command_line_is_trusted(tmp_path):
+    package = tmp_path / "pkg"
+    package.mkdir()
+    (package / "my_envs.py").write_text(
+        "import gymnasium\nfrom creps_gym.envs.functions.suite import SphereEnv\n"
+        "gymnasium.register('MyEnvs/Sphere-v0', entry_point=SphereEnv)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(package), os.environ.get("PYTHONPATH", "")])}
+    out = tmp_path / "run"
+    args = ["--optimizer", "creps", "--iterations", 3, "--samples", 6, "--seed", 0, "--no-plot"]
+    start = cli_command("run", "--env", "MyEnvs/Sphere-v0", "--out", out, *args, "--import", "my_envs")
+    assert subprocess.run(start, capture_output=True, env=env, timeout=120).returncode == 0
+    (out / RunDir.HISTORY_JSON).unlink()
+    refused = subprocess.run(cli_command("resume", out), capture_output=True, text=True, env=env, timeout=120)
+    assert refused.returncode == 3 and "env: expected a registered env id" in refused.stderr
+    allowed = cli_command("resume", out, "--import", "my_envs", "--no-plot")
+    assert subprocess.run(allowed, capture_output=True, env=env, timeout=120).returncode == 0
+    assert (out / RunDir.HISTORY_JSON).exists()
+    missing = cli_command("resume", out, "--import", "no_such_module_xyz")
+    result = subprocess.run(missing, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2 and "argument --import: expected an importable module" in result.stderr
+
+
+# -- item 14: a checkpoint belongs to its run -------------------------------------------------------------
+@pytest.mark.parametrize(
+    "other", [{"seed": 2}, {"env_kwargs": {"dim": 4}}, {"iterations": 10}], ids=["seed", "dim", "iterations"]
+)
+def test_a_checkpoint_copied_from_another_run_is_refused_at_once(tmp_path, other):
+    mine = make_run(tmp_path / "mine", seed=1, stop_after=3)
+    theirs = make_run(tmp_path / "theirs", **{"seed": 1, **other})
+    shutil.copy(theirs / RunDir.CHECKPOINT, mine / RunDir.CHECKPOINT)
+    before = (mine / RunDir.LOG).read_bytes()
+    result = cli("resume", mine, "--no-plot")
+    assert result.returncode == 3 and "Traceback" not in result.stderr
+    assert f"{mine / RunDir.CHECKPOINT}: expected the checkpoint of the run configured in config.json" in (
+        result.stderr
+    )
+    assert (mine / RunDir.LOG).read_bytes() == before  # refused before anything ran
+
+
+def test_a_folder_with_a_checkpoint_and_no_config_is_not_a_run(tmp_path):
+    old = make_run(tmp_path / "old", iterations=8)
+    (old / RunDir.CONFIG).unlink()
+    checkpoint = (old / RunDir.CHECKPOINT).read_bytes()
+    assert main(["resume", str(old), "--no-plot"]) == 3
+    args = ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", "4", "--samples", "6"]
+    args += ["--seed", "0", "--env-kwarg", "dim=3", "--out", str(old), "--no-plot"]
+    assert main(args) == 3 and (old / RunDir.CHECKPOINT).read_bytes() == checkpoint
+    with pytest.raises(FileExistsError, match=r"but no config\.json"):
+        run("creps-cma-old", SPHERE, 4, 6, 0, env_kwargs={"dim": 3}, run_dir=old)
+    assert main([*args, "--overwrite"]) == 0  # the user says so: the old files go
+    assert len(History.from_json(old / RunDir.HISTORY_JSON)) == 4
+
+
+# -- item 1: damaged files get a clear error naming the file (exit code 3) -------------------------------
+def truncate(path: Path) -> None:
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+
+
+def flip_bit(path: Path) -> None:
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0x10
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize(
+    ("name", "damage"),
+    [
+        (RunDir.CHECKPOINT, truncate),
+        (RunDir.CHECKPOINT, lambda p: p.write_bytes(b"")),
+        (RunDir.CHECKPOINT, flip_bit),
+        (RunDir.CONFIG, truncate),
+        (RunDir.CONFIG, lambda p: p.write_text("[]")),
+    ],
+    ids=[
+        "checkpoint-truncated",
+        "checkpoint-empty",
+        "checkpoint-bit-flip",
+        "config-truncated",
+        "config-list",
+    ],
+)
+def test_a_damaged_file_gives_exit_code_3_naming_the_file(tmp_path, capsys, name, damage):
+    out = make_run(tmp_path / "run", stop_after=3)
+    damage(out / name)
+    assert main(["resume", str(out), "--no-plot"]) == 3
+    error = capsys.readouterr().err
+    assert f"{out / name}: damaged or not written by creps_gym (" in error
+    assert ("delete it to restart" if name == RunDir.CHECKPOINT else "restore it from a backup") in error
+
+
+# -- item 2: a finished run can always be completed --------------------------------------------------------
+@pytest.mark.parametrize("damage", ["missing", "truncated"])
+def test_resume_rewrites_missing_or_damaged_result_files(tmp_path, damage):
+    out = make_run(tmp_path / "run")
+    results = (RunDir.HISTORY_JSON, RunDir.HISTORY_CSV, RunDir.IOH)
+    expected = {name: (out / name).read_bytes() for name in results}
+    for name in results:
+        (out / name).unlink() if damage == "missing" else truncate(out / name)
+    assert main(["resume", str(out), "--no-plot"]) == 0
+    for name in results:
+        if name == RunDir.HISTORY_JSON:
+            assert json.loads((out / name).read_bytes()) == json.loads(expected[name])
+        else:
+            assert (out / name).read_bytes() == expected[name], name
+    assert History.from_json(out / RunDir.HISTORY_JSON).equals(uninterrupted())
+    assert RunDir.open(out).read_log()[1][-1]["rewritten"] == list(results)
+
+
+# -- item 3: no silent loss in load_history, export and plot ---------------------------------------------
+def damage_log_line(path: Path, iteration: int) -> None:
+    lines = path.read_text().splitlines(keepends=True)
+    index = next(i for i, line in enumerate(lines) if line.startswith(f'{{"iteration": {iteration},'))
+    lines[index] = lines[index].replace('"mean_return": -', '"mean_return": -1')  # a changed value
+    path.write_text("".join(lines))
+
+
+def test_load_history_recovers_damaged_log_lines_from_the_checkpoint_and_says_so(tmp_path):
+    out = make_run(tmp_path / "run", stop_after=5)  # checkpoint at 4, iterations 5 logged after it
+    expected = uninterrupted().records[:5]
+    damage_log_line(out / RunDir.LOG, 2)
+    with pytest.warns(
+        RunDirWarning, match=r"damaged lines \[3\]; the history has iterations 1 to 5 \(4 from"
+    ):
+        history = load_history(out)
+    assert History(history.records).equals(History(expected))
+    damage_log_line(out / RunDir.LOG, 5)
+    with pytest.warns(RunDirWarning, match=r"damaged lines \[3, 6\]; the history has iterations 1 to 4"):
+        assert History(load_history(out).records).equals(History(expected[:4]))
+
+
+def test_export_of_a_damaged_history_json_rebuilds_it_and_warns(tmp_path, capsys):
+    out = make_run(tmp_path / "run")
+    expected = (out / RunDir.IOH).read_text()
+    truncate(out / RunDir.HISTORY_JSON)
+    assert main(["export", str(out), "-o", str(tmp_path / "ioh.csv")]) == 0
+    error = capsys.readouterr().err
+    assert f"creps-gym export: warning: {out / RunDir.HISTORY_JSON}: damaged (JSONDecodeError" in error
+    assert (tmp_path / "ioh.csv").read_text() == expected
+
+
+# -- item 5: one writer per run directory; only the run's own temporaries are removed ---------------------
+def test_a_second_writer_is_refused_while_the_first_lives(tmp_path):
+    out = tmp_path / "run"
+    args = ["--env", SPHERE, "--optimizer", "creps", "--iterations", 100000, "--samples", 6, "--seed", 0]
+    live = subprocess.Popen(
+        cli_command("run", *args, "--out", out, "--checkpoint-every", 1, "--no-plot"),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        wait_for(lambda: (out / RunDir.CHECKPOINT).exists(), live, "first checkpoint")
+        second = cli("resume", out, "--no-plot", timeout=60)
+        assert second.returncode == 3, second.stderr
+        assert f"process {live.pid} on " in second.stderr
+        assert f"writes this run directory (lock file {out / RunDir.LOCK})" in second.stderr
+        overwrite = cli("run", *args, "--out", out, "--overwrite", "--no-plot", timeout=60)
+        assert overwrite.returncode == 3 and "writes this run directory" in overwrite.stderr
+        assert live.poll() is None  # the live run was not disturbed
+    finally:
+        live.send_signal(signal.SIGKILL)
+        live.wait(timeout=30)
+    # the lock of the killed process is taken over (a shorter run: its checkpoint no longer matches)
+    edit_config(out, iterations=3)
+    (out / RunDir.CHECKPOINT).unlink()
+    with pytest.warns(
+        RunDirWarning, match=f"took over the lock of process {live.pid} on .*, which no longer runs"
+    ):
+        assert len(resume(out)) == 3
+    assert not (out / RunDir.LOCK).exists()
+
+
+def test_only_the_runs_own_temporary_files_are_removed(tmp_path):
+    out = make_run(tmp_path / "run", stop_after=3)
+    mine = ["notes.tmp", ".hidden.tmp", "checkpoint.tmp", ".config.json.tmp"]
+    theirs = [".history.json.123.tmp", "checkpoint.npzab12_x9q.tmp"]  # left by a killed writer
+    for name in mine + theirs:
+        (out / name).write_text("x")
+    resume(out)
+    assert sorted(p.name for p in out.iterdir() if p.name.endswith(".tmp")) == sorted(mine)
+    for name in theirs:
+        (out / name).write_text("x")
+    assert main(["run", "--env", SPHERE, "--optimizer", "creps", "--iterations", "2", "--samples", "6",
+                 "--seed", "0", "--out", str(out), "--overwrite", "--no-plot"]) == 0  # fmt: skip
+    assert sorted(p.name for p in out.iterdir() if p.name.endswith(".tmp")) == sorted(mine)
+
+
+# -- issue 16.2: --out means what it says -------------------------------------------------------------------
+def test_out_refuses_a_folder_that_is_neither_empty_nor_a_run(tmp_path, capsys):
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    (folder / "holiday.jpg").write_text("x")
+    args = ["run", "--env", SPHERE, "--optimizer", "creps", "--iterations", "2", "--samples", "6"]
+    for extra in ([], ["--overwrite"]):
+        assert main([*args, "--seed", "0", "--out", str(folder), "--no-plot", *extra]) == 3
+        assert "which holds other files (holiday.jpg); choose another directory" in capsys.readouterr().err
+    assert sorted(os.listdir(folder)) == ["holiday.jpg"]
+    with pytest.raises(FileExistsError, match="holds other files"):
+        run("creps", SPHERE, 2, 6, 0, run_dir=folder)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert len(run("creps", SPHERE, 2, 6, 0, run_dir=empty)) == 2
+    with pytest.raises(FileExistsError, match="holds a run"):
+        run("creps", SPHERE, 3, 6, 0, run_dir=empty)
+    assert len(run("creps", SPHERE, 3, 6, 0, run_dir=empty, overwrite=True)) == 3
+
+
+# -- issue 16.6: Ctrl-C leaves a checkpoint ---------------------------------------------------------------
+@pytest.mark.skipif(sys.platform == "win32", reason="needs SIGINT to a subprocess")
+def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
+    out = tmp_path / "run"
+    args = ["--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 60, "--samples", 6, "--seed", 3,
+            "--env-kwarg", "dim=3", "--checkpoint-every", 1000, "--eval-every", 2]  # fmt: skip
+    process = subprocess.Popen(
+        cli_command("run", *args, "--out", out, "--no-plot"), stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    wait_for(lambda: iterations_logged(out) >= 5, process, "5 iterations")
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130, stderr
+    assert b"interrupted" in stderr and b"Traceback" not in stderr
+    records, _ = RunDir.open(out).read_log()
+    state = RunDir.open(out).load_checkpoint()[0]
+    assert 5 <= state["iteration"] == records[-1].iteration < 60  # nothing done after the checkpoint
+    assert main(["resume", str(out), "--no-plot"]) == 0
+    expected = run("creps-cma-old", SPHERE, 60, 6, 3, env_kwargs={"dim": 3}, eval_every=2)
+    assert History.from_json(out / RunDir.HISTORY_JSON).equals(expected)
+
+
+# -- issue 15 item 15: sizes that would exhaust the machine are refused up front ---------------------------
+def limited_memory(gigabytes: float):
+    def limit():  # so that a missing guard fails with MemoryError instead of hurting the machine
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, (int(gigabytes * 2**30),) * 2)
+
+    return limit
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/meminfo, sets RLIMIT_AS")
+@pytest.mark.parametrize(
+    ("flags", "expected"),
+    [
+        (
+            ["--env-kwarg", "dim=1000000000"],
+            "argument --env-kwarg: dim: expected a size whose arrays fit in memory",
+        ),
+        (["--env-kwarg", "dim=60000"], "argument --env-kwarg: expected a size whose arrays fit in memory"),
+        (["--samples", "10000000000"], "argument --samples: expected a size whose arrays fit in memory"),
+    ],
+    ids=["function-arrays", "covariance", "batch"],
+)
+def test_sizes_that_would_exhaust_memory_are_refused_before_allocating(tmp_path, flags, expected):
+    args = ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 2, "--samples", 6]
+    args += ["--seed", 0, "--out", tmp_path / "run", "--no-plot"]
+    for flag, value in zip(flags[::2], flags[1::2], strict=True):
+        args = args[: args.index(flag)] + args[args.index(flag) + 2 :] if flag in args else args
+        args += [flag, value]
+    result = subprocess.run(
+        cli_command(*args), capture_output=True, text=True, timeout=120, preexec_fn=limited_memory(6)
+    )
+    assert result.returncode == 2 and expected in result.stderr, result.stderr
+    assert "GiB available" in result.stderr and not (tmp_path / "run").exists()
+
+
+def test_a_rotated_function_too_big_for_memory_is_refused_by_the_env():
+    import gymnasium as gym
+
+    with pytest.raises(ValueError, match=r"dim: expected a size whose arrays fit in memory \(the instance's"):
+        gym.make("creps_gym/ShiftedRotatedElliptic-v0", dim=2_000_000)  # 2 p x p rotation matrices: 64 TB

@@ -557,3 +557,16 @@ def test_ccmaes_study_renders_the_remedies_from_the_cached_runs(tmp_path: Path) 
     text = report.remedies_table({("Rosenbrock", 3, "c-cma-es"): runs}, [3], 1000, 2)
     assert "| 3 | – | – | – | >1,000 (1/2) | – |" in text
     assert "neither at z = 3: 0" in text and "both (the default) at z = 3" not in text
+
+
+def test_ccmaes_cells_count_a_run_that_ended_early_under_a_smaller_budget() -> None:
+    from benchmarks.ccmaes import run
+
+    spec = study_tools.RunSpec("Rosenbrock", 4, 1, "c-cma-es", 0, 2000, 50, options={"restarts": 0})
+    early = study_tools.result_document(
+        dataclasses.replace(spec, budget=1000), [50], [1.0], "optimizer: tolx", 1
+    )
+    assert study_tools.ended_early(early)  # so run_all returns it for the spec with budget 2000
+    assert run.group([("c-cma-es-reuse", spec)], [early]) == {("Rosenbrock", 1, "c-cma-es-reuse"): [early]}
+    other = dataclasses.replace(spec, options={"restarts": 1})
+    assert run.group([("c-cma-es-reuse", other)], [early]) == {}

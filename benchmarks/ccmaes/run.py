@@ -159,12 +159,15 @@ def make_spec(column: Column, function: str, dim: int, z: int, seed: int, budget
 
 
 def group(pairs: Sequence[tuple[str, RunSpec]], documents: Sequence[dict], seeds: int | None = None) -> dict:
-    """The cached documents by (function, z, column); with ``seeds``, only the seeds below it."""
-    by_key = {RunSpec(**d["spec"]).key: d for d in documents}
+    """The cached documents by (function, z, column); with ``seeds``, only the seeds below it. A document
+    matches its run by the key without the budget: a run that ended early under a smaller budget stands
+    for the run under the study's (see :func:`benchmarks.study_tools.cached_result`)."""
+    by_run = {(RunSpec(**d["spec"]).prefix, d["spec"]["samples"]): d for d in documents}
     cells: dict[tuple[str, int, str], list[dict]] = {}
     for column, spec in pairs:
-        if spec.key in by_key and (seeds is None or spec.seed < seeds):
-            cells.setdefault((spec.function, spec.context_dim, column), []).append(by_key[spec.key])
+        document = by_run.get((spec.prefix, spec.samples))
+        if document is not None and (seeds is None or spec.seed < seeds):
+            cells.setdefault((spec.function, spec.context_dim, column), []).append(document)
     return cells
 
 

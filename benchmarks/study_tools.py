@@ -18,17 +18,17 @@ import json
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from benchmarks.study_options import canonical_options, config_fields
 from creps_gym.envs.functions import SPECS
 from creps_gym.envs.functions.specs import UNBOUNDED_TARGET
 from creps_gym.optimizers import optimizer_names
-from creps_gym.optimizers.registry import optimizer_class
 from creps_gym.runner import default_initial_distribution, resume, run
 
 __all__ = [
@@ -103,6 +103,10 @@ class RunSpec:
     initial : str
         Initial search distribution (see :func:`initial_distribution`): ``"centre"`` (the runner's default)
         or ``"uniform5"`` (mean U[-5, 5]^p drawn from the seed, the same for every context, σ0 = 1).
+    options : tuple of (name, value) pairs, or a mapping
+        Further options of the registered optimiser ``method`` (names of its config fields; values bool,
+        int, float or str), sorted by name. They end the key's prefix (``-name=value`` each); without them
+        the key is the same as before the field existed.
     """
 
     function: str
@@ -116,9 +120,11 @@ class RunSpec:
     divide_by_z: bool = True
     eval_contexts: int = 16
     initial: str = "centre"
+    options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
         function_spec(self.function)  # raises for an unknown function
+        object.__setattr__(self, "options", canonical_options(self.method, self.options))
         if not isinstance(self.method, str) or not self.method.replace("-", "").isalnum():
             raise ValueError(f"method: expected a name of letters, digits and '-', got {self.method!r}")
         if self.initial not in INITIALS:
@@ -146,6 +152,7 @@ class RunSpec:
         cap += "" if self.divide_by_z else "-noz"
         cap += "" if self.eval_contexts == 16 else f"-e{self.eval_contexts}"
         cap += "" if self.initial == "centre" else f"-{self.initial}"
+        cap += "".join(f"-{name}={value}" for name, value in self.options)
         return f"{self.function}-p{self.dim}-z{self.context_dim}-{self.method}{cap}-s{self.seed}"
 
     @property
@@ -218,8 +225,10 @@ def result_document(
     target = function_spec(spec.function).target
     met = np.flatnonzero(values_arr <= target)
     keep = curve_indices(len(values_arr))
+    # Without options, the spec is described as before the field existed.
+    described = {name: v for name, v in asdict(spec).items() if name != "options" or spec.options}
     return {
-        "spec": asdict(spec),
+        "spec": described,
         "metric": "regret" if is_bounded(spec.function) else "f",
         "target": target,
         "episodes": [int(e) for e in episodes_arr[keep]],
@@ -260,13 +269,14 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
         iterations = max(1, spec.budget // spec.samples)
         options: dict[str, Any] = {}
         start: dict[str, Any] = {}
-        if _has_option(spec.method, "max_std_growth"):  # CREPS and its variants
+        if "max_std_growth" in config_fields(spec.method):
             options["max_std_growth"] = DIVERGENCE_GROWTH
             options["tolstagnation"] = NO_STAGNATION
         if spec.max_interpolation < 1.0:
             options["max_interpolation"] = spec.max_interpolation
         if not spec.divide_by_z:
             options["divide_by_z"] = False
+        options.update(spec.options)
         if spec.initial != "centre":  # else the runner's default, the same
             mean, std = initial_distribution(spec)
             start = {"initial_mean": mean.tolist(), "initial_std": std.tolist()}
@@ -291,12 +301,6 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
     values = history.column("eval_regret") if bounded else -history.column("eval_return")
     seconds = history.records[-1].wall_time if history.records else 0.0  # summed over resumes
     return result_document(spec, history.column("episodes"), values, history.stop_reason, seconds)
-
-
-def _has_option(method: str, option: str) -> bool:
-    """Whether the registered optimiser ``method`` has a config field ``option`` (CREPS and its variants)."""
-    config = getattr(optimizer_class(method), "config_class", None)
-    return config is not None and option in {f.name for f in fields(config)}
 
 
 #: Baseline runners: method name -> ``f(spec) -> result document`` (module-level functions, so a process

@@ -494,3 +494,79 @@ def test_issue_12_optimisers_fill_their_columns_once_registered(tmp_path: Path, 
     table = (out / "results.md").read_text()
     assert "## C-CMA-ES (`c-cma-es`)" in table and (out / "heatmaps-c-cma-es.png").stat().st_size > 10_000
     assert len(list((tmp_path / "c2").glob("Sphere-p2-z1-c-cma-es-s0-*.json"))) == 1
+
+
+def test_run_spec_options_are_sorted_validated_and_leave_the_keys_without_them_unchanged() -> None:
+    setting = {"eval_contexts": 100, "initial": "uniform5"}
+    plain = study_tools.RunSpec("Rosenbrock", 15, 3, "c-cma-es", 0, 100_000, 50, **setting)
+    assert plain.key == "Rosenbrock-p15-z3-c-cma-es-e100-uniform5-s0-b100000-n50"  # as before options
+    assert "options" not in study_tools.result_document(plain, [50], [1.0], None, 1.0)["spec"]
+    given = {"restarts": 0, "baseline_batches": 1}
+    spec = dataclasses.replace(plain, options=given)
+    assert spec.options == (("baseline_batches", 1), ("restarts", 0))
+    assert spec == dataclasses.replace(plain, options=[("restarts", 0), ("baseline_batches", 1)])
+    assert spec.key == "Rosenbrock-p15-z3-c-cma-es-e100-uniform5-baseline_batches=1-restarts=0-s0-b100000-n50"
+    document = json.loads(json.dumps(study_tools.result_document(spec, [50], [1.0], None, 1.0)))
+    assert study_tools.RunSpec(**document["spec"]) == spec  # the cache's documents name their run
+    for method, options in [
+        ("c-cma-es", {"restart": 0}),  # not an option of c-cma-es
+        ("c-cma-es", {"seed": 3}),  # set by the run, not by its options
+        ("c-cma-es", {"restarts": [0]}),
+        ("cma-fixed", {"restarts": 0}),  # a baseline has no options
+    ]:
+        with pytest.raises(ValueError, match="options"):
+            dataclasses.replace(plain, method=method, options=options)
+
+
+def test_run_spec_options_reach_the_optimiser(tmp_path: Path) -> None:
+    spec = study_tools.RunSpec("Rosenbrock", 4, 1, "c-cma-es", 0, 600, 20, initial="uniform5")
+    reuse = study_tools.execute(spec, tmp_path / "default")
+    bare = study_tools.execute(dataclasses.replace(spec, options={"baseline_batches": 1}), tmp_path / "bare")
+    config = json.loads((tmp_path / "bare" / "config.json").read_text())["config"]
+    assert config["optimizer_options"]["baseline_batches"] == 1
+    assert bare["values"][0] == reuse["values"][0]  # the first update: nothing to reuse yet
+    assert bare["values"] != reuse["values"]
+    assert bare["spec"]["options"] == (("baseline_batches", 1),)  # JSON: [["baseline_batches", 1]]
+
+
+def test_ccmaes_study_renders_the_remedies_from_the_cached_runs(tmp_path: Path) -> None:
+    from benchmarks.ccmaes import report
+
+    cache, out = tmp_path / "cache", tmp_path / "out"
+    args = ["--remedies", "--dim", "4", "--context-dims", "1", "--seeds", "1", "--headline-seeds", "1"]
+    args += ["--budget", "1000", "--workers", "1", "--cache", str(cache), "--out", str(out)]
+    log = _script("ccmaes", *args)
+    assert "0 runs cached" in log and "7 to compute" in log
+    documents = _documents(cache)
+    suffixes = ["-baseline_batches=1-restarts=0", "-restarts=0", "-baseline_batches=1", ""]
+    suffixes += ["-standardise_advantages=True", "-active=False", "-baseline_degree=3"]
+    assert sorted(documents) == sorted(
+        f"Rosenbrock-p4-z1-c-cma-es-e100-uniform5{s}-s0-b1000-n50" for s in suffixes
+    )
+    table = (out / "results.md").read_text()
+    section = table.split("## Rosenbrock: the remedies (1 seed(s), C-CMA-ES, N = 50)")[1].split("## Figures")[
+        0
+    ]
+    row = next(line for line in section.splitlines() if line.startswith("| 1 | "))
+    assert len(row.split(" | ")) == 8 and "Partial" not in section  # z and the 7 variants, every run there
+    assert (
+        "| `baseline_batches=1`, `restarts=0` | `restarts=0` | `baseline_batches=1` | defaults |" in section
+    )
+    # A missing run is named; a cell shows the median and the seeds that got there.
+    runs = [{"hit": 900, "spec": {"seed": 0}}, {"hit": None, "spec": {"seed": 1}}]
+    text = report.remedies_table({("Rosenbrock", 3, "c-cma-es"): runs}, [3], 1000, 2)
+    assert "| 3 | – | – | – | >1,000 (1/2) | – |" in text
+    assert "neither at z = 3: 0" in text and "both (the default) at z = 3" not in text
+
+
+def test_ccmaes_cells_count_a_run_that_ended_early_under_a_smaller_budget() -> None:
+    from benchmarks.ccmaes import run
+
+    spec = study_tools.RunSpec("Rosenbrock", 4, 1, "c-cma-es", 0, 2000, 50, options={"restarts": 0})
+    early = study_tools.result_document(
+        dataclasses.replace(spec, budget=1000), [50], [1.0], "optimizer: tolx", 1
+    )
+    assert study_tools.ended_early(early)  # so run_all returns it for the spec with budget 2000
+    assert run.group([("c-cma-es-reuse", spec)], [early]) == {("Rosenbrock", 1, "c-cma-es-reuse"): [early]}
+    other = dataclasses.replace(spec, options={"restarts": 1})
+    assert run.group([("c-cma-es-reuse", other)], [early]) == {}

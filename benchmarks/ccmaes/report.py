@@ -22,12 +22,15 @@ from benchmarks.study_tools import function_spec
 __all__ = [
     "COLUMNS",
     "HEADLINE",
+    "REMEDIES",
+    "REMEDY_FUNCTION",
     "TARGETS",
     "Column",
     "csa_text",
     "headline_table",
     "median_episodes",
     "plot_curves",
+    "remedies_table",
     "seed_table",
     "target_met",
 ]
@@ -39,13 +42,15 @@ Cells = Mapping[tuple[str, int, str], Sequence[dict[str, Any]]]
 @dataclass(frozen=True)
 class Column:
     """A method at a batch size: ``batch`` is N, ``"recommended"`` (the optimiser's
-    ``recommended_batch_size(p, z)``) or ``"default"`` (pycma's own population, 4 + floor(3 ln p))."""
+    ``recommended_batch_size(p, z)``) or ``"default"`` (pycma's own population, 4 + floor(3 ln p));
+    ``options`` are further options of the optimiser (see :attr:`benchmarks.study_tools.RunSpec.options`)."""
 
     name: str
     method: str
     batch: int | str
     label: str
     colour: str
+    options: tuple[tuple[str, Any], ...] = ()
 
 
 COLUMNS = (
@@ -56,6 +61,26 @@ COLUMNS = (
     Column("cma-fixed-batch", "cma-fixed-batch", 50, "pycma, 1 context, N = 50", "0.55"),
     Column("cma-fixed", "cma-fixed", "default", "pycma, 1 context, default N", "0.25"),
 )
+#: Issue 12's remedies for Rosenbrock at z = 3, as variants of C-CMA-ES at N = 50: the columns of the
+#: remedies table, in its order (``c-cma-es``, the default, has both remedies: its runs are the COLUMNS').
+REMEDIES = (
+    Column("c-cma-es-bare", "c-cma-es", 50, "neither", "0.4", (("baseline_batches", 1), ("restarts", 0))),
+    Column("c-cma-es-reuse", "c-cma-es", 50, "sample reuse only", "0.4", (("restarts", 0),)),
+    Column("c-cma-es-restarts", "c-cma-es", 50, "restarts only", "0.4", (("baseline_batches", 1),)),
+    Column("c-cma-es", "c-cma-es", 50, "both (the default)", "tab:red"),
+    Column(
+        "c-cma-es-std",
+        "c-cma-es",
+        50,
+        "default, standardised advantages",
+        "0.4",
+        (("standardise_advantages", True),),
+    ),
+    Column("c-cma-es-passive", "c-cma-es", 50, "default, active = False", "0.4", (("active", False),)),
+    Column("c-cma-es-cubic", "c-cma-es", 50, "default, cubic baseline", "0.4", (("baseline_degree", 3),)),
+)
+#: The function of the remedies table.
+REMEDY_FUNCTION = "Rosenbrock"
 #: The columns of the headline table (run with the headline seeds).
 HEADLINE = ("creps-cma-old", "c-cma-es", "c-cma-es-rec", "cma-fixed")
 #: Issue 12's targets for C-CMA-ES at N = 50: (function, z) -> (most episodes, least fraction of seeds).
@@ -153,6 +178,24 @@ def headline_table(cells: Cells, rows: Sequence[tuple[str, int]], budget: int) -
             rec_met,
         ]
         lines.append(f"| {name} | {z} | " + " | ".join(texts) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def remedies_table(cells: Cells, dims: Sequence[int], budget: int, seeds: int) -> str:
+    """The :data:`REMEDIES` on :data:`REMEDY_FUNCTION`, one row per z: median episodes (seeds that got
+    there / seeds), and a line naming the cells with fewer than ``seeds`` runs cached."""
+    options = {c.name: ", ".join(f"`{k}={v}`" for k, v in c.options) or "defaults" for c in REMEDIES}
+    lines = ["| z | " + " | ".join(c.label for c in REMEDIES) + " |", "|---" * (len(REMEDIES) + 1) + "|"]
+    lines.append("| options | " + " | ".join(options[c.name] for c in REMEDIES) + " |")
+    missing = []
+    for z in dims:
+        runs = [cells.get((REMEDY_FUNCTION, z, c.name), []) for c in REMEDIES]
+        lines.append(f"| {z} | " + " | ".join(_episodes_text(r, budget) for r in runs) + " |")
+        missing += [
+            f"{c.label} at z = {z}: {len(r)}" for c, r in zip(REMEDIES, runs, strict=True) if len(r) < seeds
+        ]
+    if missing:
+        lines += ["", f"**Partial: runs cached of {seeds} seeds: " + "; ".join(missing) + ".**"]
     return "\n".join(lines) + "\n"
 
 

@@ -10,6 +10,7 @@ process pool; the tables (``results.md``) and the figure are written from the ca
 
     python benchmarks/ccmaes/run.py --quick     # 2 seeds per cell, budget 100k
     python benchmarks/ccmaes/run.py --full      # 5 seeds per cell, 20 for the headline table, budget 200k
+    python benchmarks/ccmaes/run.py --full --remedies   # only the remedies table's runs (Rosenbrock)
 
 (or ``python -m benchmarks.ccmaes.run ...``, from the repository root).
 """
@@ -35,10 +36,13 @@ from benchmarks.baselines import BASELINES
 from benchmarks.ccmaes.report import (
     COLUMNS,
     HEADLINE,
+    REMEDIES,
+    REMEDY_FUNCTION,
     Column,
     csa_text,
     headline_table,
     plot_curves,
+    remedies_table,
     seed_table,
 )
 from benchmarks.study_runner import (
@@ -55,6 +59,8 @@ HERE = Path(__file__).resolve().parent
 FUNCTIONS = ("Sphere", "Rosenbrock", "ShiftedRotatedElliptic")
 #: The issue's setting: N = 50 samples per iteration, 100 test contexts, mean U[-5, 5]^p with σ0 = 1.
 SAMPLES, EVAL_CONTEXTS, INITIAL = 50, 100, "uniform5"
+#: Every column: the methods', then the remedies' variants of C-CMA-ES (on Rosenbrock, headline seeds).
+ALL_COLUMNS = COLUMNS + tuple(c for c in REMEDIES if c.name not in {m.name for m in COLUMNS})
 PRESETS = {
     "quick": {"seeds": 2, "headline_seeds": 2, "budget": 100_000},
     "full": {"seeds": 5, "headline_seeds": 20, "budget": 200_000},
@@ -73,11 +79,18 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--headline-seeds", type=int, help="seeds of the headline table's columns")
     parser.add_argument("--budget", type=int, help="episode budget per run (censoring level)")
     parser.add_argument("--dim", type=int, default=15, help="problem dimension p (the targets are for 15)")
-    names = [c.name for c in COLUMNS]
+    names = [c.name for c in ALL_COLUMNS]
     parser.add_argument("--columns", nargs="+", choices=names, default=names, help="methods to run")
+    parser.add_argument(
+        "--remedies",
+        action="store_true",
+        help=f"only the remedies table's runs: --functions {REMEDY_FUNCTION} and its columns",
+    )
     add_output_options(parser, HERE, out="figure and tables (default docs/results/ccmaes/<mode>)")
     args = parser.parse_args(argv)
     args.mode = args.mode or "full"
+    if args.remedies:
+        args.functions, args.columns = [REMEDY_FUNCTION], [c.name for c in REMEDIES]
     resolve_outputs(args, argv, HERE, args.mode)
     preset = PRESETS[args.mode]
     args.context_dims = sorted(set(args.context_dims))
@@ -105,7 +118,7 @@ def recommended_batch(dim: int, context_dim: int) -> int | None:
 def column_specs(args: argparse.Namespace, log: Any = print) -> list[tuple[str, RunSpec]]:
     """(column name, spec) of every run; the columns whose optimiser (or recommended batch size) does not
     exist yet are skipped with a message."""
-    chosen = [c for c in COLUMNS if c.name in args.columns]
+    chosen = [c for c in ALL_COLUMNS if c.name in args.columns]
     methods = available_methods(list(dict.fromkeys(c.method for c in chosen)), BASELINES, log)
     pairs = []
     for column in chosen:
@@ -115,7 +128,11 @@ def column_specs(args: argparse.Namespace, log: Any = print) -> list[tuple[str, 
             log(f"skipped column {column.name!r}: creps_gym.optimizers.ccmaes has no recommended_batch_size")
             continue
         seeds = max(args.seeds, args.headline_seeds) if column.name in HEADLINE else args.seeds
-        for name, z, seed in itertools.product(args.functions, args.context_dims, range(seeds)):
+        functions = args.functions
+        if column not in COLUMNS:  # a remedy (not c-cma-es): on its function only, with the headline seeds
+            functions = [name for name in functions if name == REMEDY_FUNCTION]
+            seeds = max(args.seeds, args.headline_seeds)
+        for name, z, seed in itertools.product(functions, args.context_dims, range(seeds)):
             pairs.append((column.name, make_spec(column, name, args.dim, z, seed, args.budget)))
     return pairs
 
@@ -137,6 +154,7 @@ def make_spec(column: Column, function: str, dim: int, z: int, seed: int, budget
         samples,
         eval_contexts=EVAL_CONTEXTS,
         initial=INITIAL,
+        options=column.options,
     )
 
 
@@ -191,6 +209,7 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
         seed_table(few, columns, rows, args.budget),
         csa_text(few, rows),
         "",
+        *remedies_text(args, documents),
         "## Figures",
         "",
         f"![curves]({figure})",
@@ -199,6 +218,19 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
     path = args.out / "results.md"
     path.write_text("\n".join(text), encoding="utf-8")
     return path
+
+
+def remedies_text(args: argparse.Namespace, documents: list[dict]) -> list[str]:
+    """The remedies section of ``results.md`` (empty without remedy runs in the study)."""
+    if not any(column not in {c.name for c in COLUMNS} for column, _ in args.pairs):
+        return []
+    seeds = max(args.seeds, args.headline_seeds)
+    cells = group(args.pairs, documents)
+    return [
+        f"## {REMEDY_FUNCTION}: the remedies ({seeds} seed(s), C-CMA-ES, N = 50)",
+        "",
+        remedies_table(cells, args.context_dims, args.budget, seeds),
+    ]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

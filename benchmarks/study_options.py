@@ -1,0 +1,52 @@
+"""The optimiser options of a study's run (:attr:`benchmarks.study_tools.RunSpec.options`): their names are
+checked against the registered optimiser's config fields, and they are kept as sorted (name, value) pairs, so
+that a run's key does not depend on the order they were given in."""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Mapping
+from dataclasses import fields, is_dataclass
+from typing import Any
+
+from creps_gym.optimizers import optimizer_names
+from creps_gym.optimizers.registry import optimizer_class
+
+__all__ = ["OWN_OPTIONS", "canonical_options", "config_fields"]
+
+#: Options a :class:`RunSpec` sets through its own fields, the runner or the study, not through ``options``.
+OWN_OPTIONS = ("max_interpolation", "divide_by_z", "max_std_growth", "seed", "initial_mean", "initial_cov")
+
+
+def canonical_options(method: str, options: Any) -> tuple[tuple[str, Any], ...]:
+    """``options`` as sorted (name, value) pairs, each name a config field of the optimiser ``method``."""
+    pairs = list(options.items()) if isinstance(options, Mapping) else [tuple(p) for p in options]
+    if not pairs:
+        return ()
+    names = [pair[0] for pair in pairs]
+    known = config_fields(method) - set(OWN_OPTIONS)
+    if any(len(pair) != 2 for pair in pairs) or len(set(names)) != len(names) or not set(names) <= known:
+        raise ValueError(
+            f"options: expected distinct (name, value) pairs with names in {sorted(known)} (the options of "
+            f"{method!r}), got {options!r}"
+        )
+    for name, value in pairs:
+        if not isinstance(value, bool | int | float | str) or (
+            isinstance(value, float) and math.isnan(value)
+        ):
+            raise ValueError(f"options: expected a bool, int, float or str for {name!r}, got {value!r}")
+    return tuple(sorted(pairs))
+
+
+def config_fields(method: str) -> set[str]:
+    """The config fields of the registered optimiser ``method`` (its ``config_class``, else the dataclass
+    ``<class name>Config`` of its module, e.g. ``CCMAESConfig``); none for a baseline or an unknown name."""
+    if method not in optimizer_names():
+        return set()
+    cls = optimizer_class(method)
+    default = getattr(sys.modules[cls.__module__], f"{cls.__name__}Config", None)
+    config = getattr(cls, "config_class", default)
+    return (
+        {f.name for f in fields(config)} - {"n_params", "n_context_dims"} if is_dataclass(config) else set()
+    )

@@ -1,4 +1,4 @@
-"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0, creps_gym/KickFlexibility-v0)."""
+"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0, creps_gym/KickFlexibility-v0/v1)."""
 
 from __future__ import annotations
 
@@ -381,3 +381,14 @@ def test_reproduction_script_runs_and_resumes(tmp_path):
     assert second.returncode == 0, second.stderr[-2000:]
     assert result.read_text() == written  # cached: not recomputed
     assert first.stdout.splitlines()[-3:] == second.stdout.splitlines()[-3:]
+
+
+def test_flexibility_v1_pays_forward_distance_only(flexibility):
+    forward_only = gym.make("creps_gym/KickFlexibility-v1", num_threads=1).unwrapped
+    contexts = np.array([[0.2, -0.05], [0.2, -0.05]])
+    kicks = np.array([[5.0, 1.0], [-5.0, 1.0]])  # a forward kick and its backward mirror image
+    v0, v1 = flexibility.task_returns(contexts, kicks), forward_only.task_returns(contexts, kicks)
+    assert v0[0] == v0[1] == 24.0  # the paper's x² - y² pays both the same
+    assert v1[0] == 24.0 and v1[1] == -26.0  # sign(x) x² - y²
+    assert "v1: the return is" in type(forward_only).__doc__
+    forward_only.close()

@@ -410,3 +410,49 @@ def test_the_generic_path_learns_from_the_declared_start():
     start = evaluate_policy(env, env.reference_params(), contexts).mean_return
     assert history.column("eval_return")[-1] > start + 1.0  # measured: -5.64 -> -1.93
     env.close()
+
+
+_VIDEO_SCRIPT = textwrap.dedent(
+    """
+    import sys
+    try:
+        import mujoco  # the GL backend named by MUJOCO_GL is loaded here
+    except Exception as exc:
+        print("NOGL", type(exc).__name__, exc)
+        sys.exit(0)
+    import numpy as np, gymnasium as gym, creps_gym
+    from creps_gym.envs.kick.model import REFERENCE_KICK
+    from creps_gym.envs.kick.rendering import save_video
+    try:
+        env = gym.make("creps_gym/KickPrecision-v0", render_mode="rgb_array_list", width=96, height=64,
+                       num_threads=1)
+        env.reset(seed=0, options={"context": [8.0]})
+        env.step(REFERENCE_KICK)
+        frames = env.render()
+    except RuntimeError as exc:
+        if "OpenGL" in str(exc):
+            print("NOGL", exc)
+            sys.exit(0)
+        raise
+    env.close()
+    path = save_video(frames, sys.argv[1])
+    last = frames[-1].astype(int)
+    red = int(((last[..., 0] > 150) & (last[..., 1] < 90) & (last[..., 2] < 90)).sum())
+    print("VIDEO", len(frames), path.stat().st_size, red)
+    """
+)
+
+
+def test_a_whole_episode_records_to_video_with_the_target_drawn(tmp_path):
+    pytest.importorskip("imageio")
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    path = tmp_path / "kick.gif"
+    out = subprocess.run(
+        [sys.executable, "-c", _VIDEO_SCRIPT, str(path)], capture_output=True, text=True, env=env
+    )
+    if out.stdout.startswith("NOGL"):
+        pytest.skip(f"no working MUJOCO_GL=egl OpenGL backend: {out.stdout[-300:]}")
+    assert out.returncode == 0, out.stderr[-2000:]
+    count, size, red = (int(v) for v in out.stdout.split("VIDEO", 1)[1].split())
+    assert count > 100 and size > 1000 and path.exists()  # the whole episode: swing and roll
+    assert red > 0  # the target disc, 8 m ahead, is in view when the ball comes to rest near it

@@ -112,6 +112,11 @@ class KickEnv(ContextualEpisodicEnv):
         """Return (n,) of ball displacements (n, 2) (x forward, y left) under contexts (n, z)."""
         raise NotImplementedError
 
+    def target_offset(self, context: Array) -> Array | None:
+        """Where the ball should come to rest relative to its start, (x, y) m, drawn on the pitch when
+        rendering; None (the default) for tasks without a target."""
+        return None
+
     def fallen_returns(self, contexts: Array) -> Array:
         """Return of a fall: the 'ball not moved' return minus ``fall_penalty``, shape (n,)."""
         return self.task_returns(contexts, np.zeros((contexts.shape[0], 2))) - self.fall_penalty
@@ -189,9 +194,19 @@ class KickEnv(ContextualEpisodicEnv):
         if self._renderer is None:
             self._renderer = KickRenderer(self.models.full, self.width, self.height)
         frames, index = self._episode_frames()
+        target = self._render_target(frames[0])
         if self.render_mode == "rgb_array":
-            return self._renderer.frame(frames[index])
-        return [self._renderer.frame(q) for q in frames]
+            return self._renderer.frame(frames[index], target)
+        return [self._renderer.frame(q, target) for q in frames]
+
+    def _render_target(self, first_frame: Array) -> Array | None:
+        """World (x, y) of the task's target for the current context (the ball's start plus
+        :meth:`target_offset`), or None."""
+        box = self.observation_space
+        context = self._context if self._context is not None else (box.low + box.high) / 2.0
+        offset = self.target_offset(context)
+        adr = self.models.ball_qpos_address
+        return None if offset is None else first_frame[adr : adr + 2] + offset
 
     def close(self) -> None:
         """Release the renderer's GL context."""

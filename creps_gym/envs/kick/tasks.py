@@ -70,8 +70,11 @@ _MANUAL = """{summary}
     * ``fixed_base`` (False): debug option that welds the torso to the world; not a benchmark setting.
     * ``render_mode`` (None, ``"rgb_array"``, ``"rgb_array_list"``), ``width`` (480), ``height`` (360):
       ``rgb_array`` renders the last kick at the end of its swing, ``rgb_array_list`` the whole last
-      episode at 25 frames/s from a camera tracking robot and ball. Headless: set ``MUJOCO_GL=egl`` or
-      ``osmesa`` before importing mujoco. :func:`creps_gym.envs.kick.rendering.save_video` writes a GIF/MP4.
+      episode at 25 frames/s from a camera tracking robot and ball; the precision target is a red disc on
+      the pitch. Headless: set ``MUJOCO_GL=egl`` or ``osmesa`` before importing mujoco. To record a whole
+      one-step episode to video, make the env with ``rgb_array_list`` and pass ``env.render()`` after the
+      step to :func:`creps_gym.envs.kick.rendering.save_video`, which writes a GIF/MP4 (the documented
+      alternative to Gymnasium's ``RecordVideo``, which needs moviepy).
 
     ## Version History
 {version_history}
@@ -115,6 +118,10 @@ class KickPrecisionEnv(KickEnv):
         """The fixed ball (n, 2); never mirrored."""
         n = contexts.shape[0]
         return np.tile(PRECISION_BALL, (n, 1)), np.zeros(n, dtype=bool)
+
+    def target_offset(self, context: Array) -> Array:
+        """The target: ``s`` metres straight ahead of the ball's start."""
+        return np.array([context[0], 0.0])
 
     def task_returns(self, contexts: Array, displacement: Array) -> Array:
         """``-(x - s)² - y²``, shape (n,)."""

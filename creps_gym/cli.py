@@ -189,7 +189,7 @@ def _add_run(commands: Any) -> None:
         ("--target-regret", _positive_float, "stop once the mean regret is at most this"),
         ("--max-time", _positive_float, "stop after this many seconds"),
         ("--initial-mean", _initial_mean, "a number, p comma-separated numbers, or 'uniform' in the box"),
-        ("--initial-std", _numbers, "initial standard deviation(s); default: box width / 4"),
+        ("--initial-std", _numbers, "initial standard deviation(s); default: the env-declared one"),
     ]
     for flag, parse, text in optional:
         default = run_defaults[flag[2:].replace("-", "_")]

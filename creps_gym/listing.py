@@ -1,7 +1,7 @@
 """What ``creps-gym list`` prints: aligned tables of the envs and optimisers, and "did you mean" hints.
 
 Each env row shows the context space, the parameter space and the initial search distribution the runner
-starts from by default (:func:`initial_hint`; the one place to change when envs declare their own).
+starts from by default (:func:`initial_hint`: the env-declared initial distribution).
 """
 
 from __future__ import annotations
@@ -41,13 +41,17 @@ def box_text(space: Any) -> str:
 
 
 def initial_hint(env: Any) -> str:
-    """The runner's default initial search distribution for ``env``: N(mean, std²) per coordinate."""
-    from creps_gym.runner.loop import default_initial_distribution
+    """The runner's default initial search distribution for ``env`` (the env-declared one): N(mean, std²)."""
+    from creps_gym.envs.base import box_initial_distribution, initial_distribution
 
-    mean, std = default_initial_distribution(env.action_space)
+    mean, std = initial_distribution(env)
     if (mean == mean[0]).all() and (std == std[0]).all():
         return f"N({_number(mean[0])}, {_number(std[0])}^2)"
-    return "N(box centre, (width/4)^2)"
+    box_mean, box_std = box_initial_distribution(env.action_space)
+    if np.array_equal(mean, box_mean) and np.array_equal(std, box_std):
+        return "N(box centre, (width/4)^2)"
+    scale = f"{_number(std[0])}^2" if (std == std[0]).all() else "per-parameter std^2"
+    return f"N(env-declared mean, {scale})"
 
 
 def _description(env: Any) -> str:

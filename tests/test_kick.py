@@ -1,4 +1,4 @@
-"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0, creps_gym/KickFlexibility-v0)."""
+"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0, creps_gym/KickFlexibility-v0/v1)."""
 
 from __future__ import annotations
 
@@ -258,7 +258,7 @@ def test_bad_inputs(precision):
         env.reset(options={"context": [13.0]})
 
 
-_RENDER_SCRIPT = textwrap.dedent(
+_GL_EPISODE = textwrap.dedent(
     """
     import sys
     try:
@@ -269,7 +269,7 @@ _RENDER_SCRIPT = textwrap.dedent(
     import numpy as np, gymnasium as gym, creps_gym
     from creps_gym.envs.kick.model import REFERENCE_KICK
     try:
-        env = gym.make("creps_gym/KickPrecision-v0", render_mode="rgb_array", width=160, height=120,
+        env = gym.make("creps_gym/KickPrecision-v0", render_mode=MODE, width=WIDTH, height=HEIGHT,
                        num_threads=1)
         env.reset(seed=0, options={"context": [8.0]})
         env.step(REFERENCE_KICK)
@@ -280,8 +280,13 @@ _RENDER_SCRIPT = textwrap.dedent(
             sys.exit(0)
         raise
     env.close()
-    print("SHAPE", frame.shape, frame.dtype, float(frame.std()), int(frame.max()) - int(frame.min()))
     """
+)
+"""A script that renders one reference kick (8 m target); it prints NOGL and exits 0 without OpenGL."""
+
+_RENDER_SCRIPT = _GL_EPISODE.replace("MODE", "'rgb_array'").replace("WIDTH", "160").replace("HEIGHT", "120")
+_RENDER_SCRIPT += (
+    'print("SHAPE", frame.shape, frame.dtype, float(frame.std()), int(frame.max()) - int(frame.min()))\n'
 )
 
 
@@ -381,3 +386,59 @@ def test_reproduction_script_runs_and_resumes(tmp_path):
     assert second.returncode == 0, second.stderr[-2000:]
     assert result.read_text() == written  # cached: not recomputed
     assert first.stdout.splitlines()[-3:] == second.stdout.splitlines()[-3:]
+
+
+def test_flexibility_v1_pays_forward_distance_only(flexibility):
+    forward_only = gym.make("creps_gym/KickFlexibility-v1", num_threads=1).unwrapped
+    contexts = np.array([[0.2, -0.05], [0.2, -0.05]])
+    kicks = np.array([[5.0, 1.0], [-5.0, 1.0]])  # a forward kick and its backward mirror image
+    v0, v1 = flexibility.task_returns(contexts, kicks), forward_only.task_returns(contexts, kicks)
+    assert v0[0] == v0[1] == 24.0  # the paper's x² - y² pays both the same
+    assert v1[0] == 24.0 and v1[1] == -26.0  # sign(x) x² - y²
+    assert "v1: the return is" in type(forward_only).__doc__
+    forward_only.close()
+
+
+@pytest.mark.slow
+def test_the_generic_path_learns_from_the_declared_start():
+    """Issue 13: with no initial distribution given, C-CMA-ES through the runner improves on the start.
+
+    The declared start is the reference kick (σ = 0.02); before, the runner started at the box centre, where
+    the robot falls on every sample and the evaluation return never moves.
+    """
+    from creps_gym.envs.evaluation import evaluate_policy, test_contexts
+    from creps_gym.runner import run, split_seed
+
+    history = run("c-cma-es", PRECISION, 10, 20, 0, eval_every=10)
+    env = gym.make(PRECISION, num_threads=0).unwrapped
+    contexts = test_contexts(env, 16, split_seed(0)[2])  # the runner's test contexts for seed 0
+    start = evaluate_policy(env, env.reference_params(), contexts).mean_return
+    assert history.column("eval_return")[-1] > start + 1.0  # measured: -5.64 -> -1.93
+    env.close()
+
+
+_VIDEO_SCRIPT = _GL_EPISODE.replace("MODE", "'rgb_array_list'").replace("WIDTH", "96").replace("HEIGHT", "64")
+_VIDEO_SCRIPT += textwrap.dedent(
+    """
+    from creps_gym.envs.kick.rendering import save_video
+    path = save_video(frame, sys.argv[1])
+    last = frame[-1].astype(int)
+    red = int(((last[..., 0] > 150) & (last[..., 1] < 90) & (last[..., 2] < 90)).sum())
+    print("VIDEO", len(frame), path.stat().st_size, red)
+    """
+)
+
+
+def test_a_whole_episode_records_to_video_with_the_target_drawn(tmp_path):
+    pytest.importorskip("imageio")
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    path = tmp_path / "kick.gif"
+    out = subprocess.run(
+        [sys.executable, "-c", _VIDEO_SCRIPT, str(path)], capture_output=True, text=True, env=env
+    )
+    if out.stdout.startswith("NOGL"):
+        pytest.skip(f"no working MUJOCO_GL=egl OpenGL backend: {out.stdout[-300:]}")
+    assert out.returncode == 0, out.stderr[-2000:]
+    count, size, red = (int(v) for v in out.stdout.split("VIDEO", 1)[1].split())
+    assert count > 100 and size > 1000 and path.exists()  # the whole episode: swing and roll
+    assert red > 0  # the target disc, 8 m ahead, is in view when the ball comes to rest near it

@@ -35,10 +35,50 @@ from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array, check_positive_int
 
-__all__ = ["ContextualEpisodicEnv", "ContextualEpisodicVectorEnv", "SupportsRegret"]
+__all__ = [
+    "ContextualEpisodicEnv",
+    "ContextualEpisodicVectorEnv",
+    "SupportsRegret",
+    "box_initial_distribution",
+    "initial_distribution",
+]
 
 Array = NDArray[np.float64]
 InfoBatch = dict[str, np.ndarray]
+
+
+def box_initial_distribution(space: spaces.Box) -> tuple[Array, Array]:
+    """The box rule: mean and standard deviations (p,) of a search distribution for a Box of parameters.
+
+    The centre of the box and a quarter of its width per coordinate (so mean ± 2 std spans the box);
+    coordinates with an infinite bound get mean 0 and standard deviation 1.
+    """
+    low, high = np.asarray(space.low, np.float64), np.asarray(space.high, np.float64)
+    finite = np.isfinite(low) & np.isfinite(high)
+    low, high = np.where(finite, low, -2.0), np.where(finite, high, 2.0)
+    std = (high - low) / 4.0
+    return np.where(finite, (low + high) / 2.0, 0.0), np.where(std > 0, std, 1.0)
+
+
+def initial_distribution(env: Any) -> tuple[Array, Array]:
+    """The initial search distribution N(mean, diag(std²)) that ``env`` declares: mean and std, shape (p,).
+
+    The one hook: the ``initial_distribution()`` method of the env or of the outermost wrapper that defines
+    one. Every creps_gym env has it (:class:`ContextualEpisodicEnv`); parameter wrappers map it
+    (:class:`~creps_gym.wrappers.NormalizeParams`, :class:`~creps_gym.wrappers.OffsetParams`). Envs without
+    it, and declarations made in other parameter units (the declaring layer's action space differs from
+    ``env.action_space``: a wrapper between changed the parameters without mapping the distribution),
+    fall back to :func:`box_initial_distribution`.
+    """
+    layer = env
+    while not hasattr(type(layer), "initial_distribution") and isinstance(layer, gym.Wrapper):
+        layer = layer.env
+    if hasattr(type(layer), "initial_distribution") and layer.action_space == env.action_space:
+        mean, std = (np.asarray(a, np.float64) for a in layer.initial_distribution())
+        shape = env.action_space.shape
+        if mean.shape == shape and std.shape == shape:
+            return mean.copy(), std.copy()
+    return box_initial_distribution(env.action_space)
 
 
 @runtime_checkable
@@ -120,6 +160,15 @@ class ContextualEpisodicEnv(gym.Env[Array, Array]):
             Per-episode diagnostics, each with leading dimension n.
         """
         raise NotImplementedError
+
+    def initial_distribution(self) -> tuple[Array, Array]:
+        """Mean and standard deviations (p,) a search should start from (the env-declared default).
+
+        Default: :func:`box_initial_distribution` (the box's centre and a quarter of its width). Envs with a
+        better known start override it; the runner, the CLI and :func:`initial_distribution` use it when the
+        user gives no initial mean or standard deviation.
+        """
+        return box_initial_distribution(self.action_space)
 
     def sample_contexts(self, rng: np.random.Generator, n: int) -> Array:
         """Draw ``n`` contexts, shape (n, z). Default: uniform in the observation box."""

@@ -28,6 +28,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym.envs.base import box_initial_distribution, initial_distribution
 from creps_gym.envs.evaluation import contextual_model, evaluate_policy, test_contexts
 from creps_gym.optimizers.registry import make_optimizer, recommended_samples, restore_optimizer
 from creps_gym.optimizers.registry import optimizer_class as registered_class
@@ -60,11 +61,7 @@ def default_initial_distribution(action_space: gym.spaces.Box) -> tuple[Array, A
     The centre of the action box and a quarter of its width per coordinate (so mean ± 2 std spans the box);
     coordinates with an infinite bound get mean 0 and standard deviation 1.
     """
-    low, high = np.asarray(action_space.low, np.float64), np.asarray(action_space.high, np.float64)
-    finite = np.isfinite(low) & np.isfinite(high)
-    low, high = np.where(finite, low, -2.0), np.where(finite, high, 2.0)
-    std = (high - low) / 4.0
-    return np.where(finite, (low + high) / 2.0, 0.0), np.where(std > 0, std, 1.0)
+    return box_initial_distribution(action_space)
 
 
 class Runner:
@@ -160,7 +157,7 @@ class Runner:
         return np.random.default_rng(init_seq).uniform(low, high)
 
     def _make_optimizer(self, seed: int) -> Any:
-        mean, std = default_initial_distribution(self.env.action_space)
+        mean, std = initial_distribution(self.env)  # the env-declared start (box rule for foreign envs)
         if isinstance(self.config.initial_mean, str) and self.config.initial_mean == "uniform":
             mean = self._uniform_mean()
         else:

@@ -2,7 +2,8 @@
 
 * Context wrappers (:mod:`~creps_gym.wrappers.contexts`, vector counterparts in
   :mod:`~creps_gym.wrappers.vector`): :class:`FixedContexts`, :class:`SampleContexts`, :class:`HideContext`,
-  :class:`NormalizeParams`; samplers and named splits in :mod:`~creps_gym.wrappers.samplers`.
+  :class:`NormalizeParams`, :class:`OffsetParams` (:mod:`~creps_gym.wrappers.offset`); samplers and
+  named splits in :mod:`~creps_gym.wrappers.samplers`.
 * Episodic conversion (:mod:`~creps_gym.wrappers.episodic`): :class:`EpisodicEnv` runs a whole inner episode
   per parameter vector with a controller (:mod:`~creps_gym.wrappers.controllers`) and reads/imposes the
   context through an accessor (:mod:`~creps_gym.wrappers.access`).
@@ -21,6 +22,7 @@ from creps_gym.wrappers.controllers import (
     make_controller,
 )
 from creps_gym.wrappers.episodic import EpisodicEnv, EpisodicVectorEnv
+from creps_gym.wrappers.offset import OffsetParams
 from creps_gym.wrappers.samplers import ContextSampler, GaussianContexts, UniformContexts, context_splits
 from creps_gym.wrappers.vector import (
     FixedContextsVector,
@@ -45,6 +47,7 @@ __all__ = [
     "LinearFeedbackController",
     "NormalizeParams",
     "NormalizeParamsVector",
+    "OffsetParams",
     "QposContext",
     "SampleContexts",
     "SampleContextsVector",

@@ -8,7 +8,9 @@ Registered ids
 ``creps_gym/KickPrecision-v0``
     Kick a fixed ball to a target distance s in [3, 12] m; return -(x - s)² - y².
 ``creps_gym/KickFlexibility-v0``
-    Kick a ball placed at (x_B, y_B) as far as possible; return x² - y².
+    Kick a ball placed at (x_B, y_B) as far as possible; return x² - y² (the paper's).
+``creps_gym/KickFlexibility-v1``
+    As v0 with a return for forward distance only: sign(x) x² - y².
 """
 
 from __future__ import annotations
@@ -31,5 +33,11 @@ REGISTRATIONS: list[dict[str, Any]] = [
         "entry_point": f"{_TASKS}:KickFlexibilityEnv",
         "vector_entry_point": f"{_TASKS}:KickFlexibilityVectorEnv",
         "kwargs": {"rolling_friction": 0.003, "fall_penalty": 1.0},
+    },
+    {
+        "id": "creps_gym/KickFlexibility-v1",
+        "entry_point": f"{_TASKS}:KickFlexibilityEnv",
+        "vector_entry_point": f"{_TASKS}:KickFlexibilityVectorEnv",
+        "kwargs": {"rolling_friction": 0.003, "fall_penalty": 1.0, "forward_only": True},
     },
 ]

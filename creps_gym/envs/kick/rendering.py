@@ -50,8 +50,11 @@ class KickRenderer:
         self._torso = model.body("torso").id
         self._ball = model.body("ball").id
 
-    def frame(self, qpos: NDArray[np.float64]) -> NDArray[np.uint8]:
-        """Render the pose ``qpos`` (nq,): a (height, width, 3) uint8 image."""
+    def frame(
+        self, qpos: NDArray[np.float64], target: NDArray[np.float64] | None = None
+    ) -> NDArray[np.uint8]:
+        """Render the pose ``qpos`` (nq,), with a red disc on the pitch at ``target`` (x, y) if given:
+        a (height, width, 3) uint8 image."""
         self.data.qpos[:] = qpos
         mujoco.mj_kinematics(self.model, self.data)
         torso, ball = self.data.xpos[self._torso], self.data.xpos[self._ball]
@@ -59,7 +62,24 @@ class KickRenderer:
         self.camera.lookat[:] = (torso + ball) / 2.0 if gap > 0.5 else torso * np.array([1.0, 1.0, 0.6])
         self.camera.distance = 1.2 + 0.9 * gap  # robot and ball stay in view
         self._renderer.update_scene(self.data, camera=self.camera)
+        if target is not None:
+            self._draw_target(target)
         return self._renderer.render().copy()
+
+    def _draw_target(self, target: NDArray[np.float64]) -> None:
+        """Add a flat red disc (radius 0.25 m) lying on the pitch at ``target`` (x, y) to the scene."""
+        scene = self._renderer.scene
+        if scene.ngeom >= scene.maxgeom:
+            return
+        mujoco.mjv_initGeom(
+            scene.geoms[scene.ngeom],
+            mujoco.mjtGeom.mjGEOM_CYLINDER,
+            np.array([0.25, 0.25, 0.003]),
+            np.array([target[0], target[1], 0.003]),
+            np.eye(3).ravel(),
+            np.array([0.9, 0.1, 0.1, 0.9], np.float32),
+        )
+        scene.ngeom += 1
 
     def close(self) -> None:
         """Release the GL context (osmesa otherwise complains at exit)."""

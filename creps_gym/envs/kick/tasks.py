@@ -7,6 +7,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._validation import check_bool
 from creps_gym.envs.kick.env import KickEnv, KickVectorEnv
 
 __all__ = [
@@ -42,7 +43,12 @@ _MANUAL = """{summary}
     the physical units and ``param_names`` the names. Values outside [-1, 1] are clipped. The motion is the
     paper's linear interpolator: from the settled standing pose to the initial pose in 0.4 s, hold 0.1 s,
     linear to the final pose over t, hold. ``env.unwrapped.reference_params()`` is a right-leg kick that
-    ships as the recommended initial mean.
+    ships as the recommended initial mean. ``env.unwrapped.initial_distribution()`` (the runner's default
+    start) is the reference kick with σ = 0.02 per parameter, at which few sampled kicks fall. Fall rates
+    of 200 kicks sampled around the reference (seed 0, uniform contexts): precision 2.5 % at σ = 0.02,
+    16 % at 0.03, 54 % at 0.05, 81 % at 0.08; flexibility 3.5 % at σ = 0.02, 21 % at 0.03, 55 % at 0.05,
+    84 % at 0.08. From this start ``creps-gym run --optimizer c-cma-es --iterations 20 --samples 20 --seed
+    0`` raises the mean policy's evaluation return from -5.64 (the reference kick) to -4.69.
 
     ## Return
 {returns}
@@ -64,17 +70,32 @@ _MANUAL = """{summary}
     * ``fixed_base`` (False): debug option that welds the torso to the world; not a benchmark setting.
     * ``render_mode`` (None, ``"rgb_array"``, ``"rgb_array_list"``), ``width`` (480), ``height`` (360):
       ``rgb_array`` renders the last kick at the end of its swing, ``rgb_array_list`` the whole last
-      episode at 25 frames/s from a camera tracking robot and ball. Headless: set ``MUJOCO_GL=egl`` or
-      ``osmesa`` before importing mujoco. :func:`creps_gym.envs.kick.rendering.save_video` writes a GIF/MP4.
+      episode at 25 frames/s from a camera tracking robot and ball; the precision target is a red disc on
+      the pitch. Headless: set ``MUJOCO_GL=egl`` or ``osmesa`` before importing mujoco. To record a whole
+      one-step episode to video, make the env with ``rgb_array_list`` and pass ``env.render()`` after the
+      step to :func:`creps_gym.envs.kick.rendering.save_video`, which writes a GIF/MP4 (the documented
+      alternative to Gymnasium's ``RecordVideo``, which needs moviepy).
 
     ## Version History
-    * v0: initial version.
+{version_history}
 """
 
 
-def _manual(summary: str, description: str, context: str, returns: str) -> str:
+def _manual(
+    summary: str,
+    description: str,
+    context: str,
+    returns: str,
+    version_history: str = "    * v0: initial version.",
+) -> str:
     """The class docstring: the task's sections and the shared ones, in Gymnasium's order."""
-    return _MANUAL.format(summary=summary, description=description, context=context, returns=returns)
+    return _MANUAL.format(
+        summary=summary,
+        description=description,
+        context=context,
+        returns=returns,
+        version_history=version_history,
+    )
 
 
 class KickPrecisionEnv(KickEnv):
@@ -98,6 +119,10 @@ class KickPrecisionEnv(KickEnv):
         n = contexts.shape[0]
         return np.tile(PRECISION_BALL, (n, 1)), np.zeros(n, dtype=bool)
 
+    def target_offset(self, context: Array) -> Array:
+        """The target: ``s`` metres straight ahead of the ball's start."""
+        return np.array([context[0], 0.0])
+
     def task_returns(self, contexts: Array, displacement: Array) -> Array:
         """``-(x - s)² - y²``, shape (n,)."""
         return -((displacement[:, 0] - contexts[:, 0]) ** 2) - displacement[:, 1] ** 2
@@ -117,12 +142,18 @@ class KickFlexibilityEnv(KickEnv):
     within this robot's reach: CMA-ES from the reference kick (60 iterations of 24 episodes) kicked 7.4 m
     at (0.30, -0.05) and 1.4 m at the hardest corner (0.30, -0.15) without falling, so the paper's box is
     kept.""",
-        """    ``x² - y²``, with x, y the ball's displacement (m) forward and to the left (the paper's
-    reward).
+        """    v1 (``forward_only=True``): ``sign(x) x² - y²``, with x, y the ball's displacement (m) forward
+    and to the left, so only forward distance pays and a backward kick is penalised.
+    v0 (``forward_only=False``): the paper's ``x² - y²``, which pays a backward kick as much as the
+    mirrored forward one.
     A fall returns ``-fall_penalty``.""",
+        version_history="""    * v1: the return is ``sign(x) x² - y²`` (forward distance only;
+      ``forward_only=True``).
+    * v0: initial version, the paper's ``x² - y²``.""",
     )
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, *, forward_only: bool = False, **kwargs: Any) -> None:
+        self.forward_only = check_bool(forward_only, "forward_only")
         super().__init__(FLEXIBILITY_LOW, FLEXIBILITY_HIGH, **kwargs)
 
     def ball_positions(self, contexts: Array) -> tuple[Array, NDArray[np.bool_]]:
@@ -130,8 +161,10 @@ class KickFlexibilityEnv(KickEnv):
         return contexts.copy(), contexts[:, 1] > 0.0
 
     def task_returns(self, contexts: Array, displacement: Array) -> Array:
-        """``x² - y²``, shape (n,)."""
-        return displacement[:, 0] ** 2 - displacement[:, 1] ** 2
+        """``sign(x) x² - y²`` (v1, ``forward_only``) or ``x² - y²`` (v0), shape (n,)."""
+        x, y = displacement[:, 0], displacement[:, 1]
+        forward = np.sign(x) * x**2 if self.forward_only else x**2
+        return forward - y**2
 
 
 class KickPrecisionVectorEnv(KickVectorEnv):

@@ -86,7 +86,9 @@ class PlanarReacherEnv(ContextualEpisodicEnv):
     by ``x Σψw/Σψ``. The phase falls from 1 to 0.05 over the motion, so the late weights need larger values
     for the same effect (learned policies use ``|w|`` up to about 16, on the last basis functions, which
     pull the lagging spring onto the goal); the box ``[-30, 30]`` holds every useful motion with a margin.
-    Parameters outside the box are evaluated as given. ``θ = 0`` (the plain DMP) is the natural start.
+    Parameters outside the box are evaluated as given. ``θ = 0`` (the plain DMP) is the natural start:
+    ``initial_distribution()`` declares N(0, 15²) per weight (the mean ± 2σ spans the box and covers the
+    learned weights), which is also the box rule, so runs from the default start are unchanged.
 
     ## Return
     ``R = −w_p (d50² + d100²) − w_a A``, with ``d50 = ‖p_50 − v50‖`` and ``d100 = ‖p_100 − v100‖`` the hand's
@@ -138,6 +140,10 @@ class PlanarReacherEnv(ContextualEpisodicEnv):
         self.dmp = DiscreteDMP(N_LINKS, config)
         bound = np.full(self.dmp.n_params, 30.0)
         super().__init__(np.zeros(2), np.full(2, 2.0), -bound, bound, render_mode=render_mode)
+
+    def initial_distribution(self) -> tuple[Array, Array]:
+        """The env-declared search start: the plain DMP (θ = 0) and σ = 15 per weight (see the manual)."""
+        return np.zeros(self.param_dim), np.full(self.param_dim, 15.0)
 
     def joint_trajectories(self, params: Any) -> DMPTrajectory:
         """DMP joint trajectories for params (n, 5 n_basis): each array of shape (n, 101, 5)."""

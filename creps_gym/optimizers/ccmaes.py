@@ -46,7 +46,6 @@ from creps_gym.optimizers.cma_rules import (
     inverse_sqrt,
     rank_weights,
     record_mean_return,
-    stagnated,
     stagnation_window,
     update_paths_and_cov,
 )
@@ -350,10 +349,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             met["tolupsigma"] = growth
         if diagnostics["cond_cov"] > config.max_condition:
             met["max_condition"] = diagnostics["cond_cov"]
-        if self.flat_iterations >= config.tolflatfitness:
-            met["tolflatfitness"] = self.flat_iterations
-        if stagnated(self.mean_returns, self.stagnation_window):
-            met["tolstagnation"] = self.stagnation_window
+        met.update(self._no_signal_stops())
         return met
 
     # -- checkpoints ---------------------------------------------------------------------------------------

@@ -26,7 +26,7 @@ from scipy import linalg
 
 from creps_gym._validation import as_float_array, check_positive_int, check_real_in_range, check_seed
 from creps_gym.optimizers.base import ContextualOptimizer
-from creps_gym.optimizers.cma_rules import record_mean_return, stagnated, stagnation_window
+from creps_gym.optimizers.cma_rules import record_mean_return, stagnation_window
 from creps_gym.optimizers.dual import DUAL_KL_TOL, DualSolution, solve_dual
 from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import (
@@ -301,10 +301,7 @@ class CREPS(PolicyAccess, ContextualOptimizer):
             met["max_condition"] = diagnostics["cond_cov"]
         if diagnostics["max_std"] > self.config.max_std_growth * self._initial_max_std:
             met["max_std_growth"] = diagnostics["max_std"] / self._initial_max_std
-        if self.flat_iterations >= self.config.tolflatfitness:
-            met["tolflatfitness"] = self.flat_iterations
-        if stagnated(self.mean_returns, self.stagnation_window):
-            met["tolstagnation"] = self.stagnation_window
+        met.update(self._no_signal_stops())
         return met
 
     # -- checkpoints ---------------------------------------------------------------------------------------

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from scipy import linalg
 
 from creps_gym._validation import as_float_array
+from creps_gym.optimizers.cma_rules import stagnated
 from creps_gym.optimizers.features import FeatureMap
 
 __all__ = [
@@ -288,6 +289,15 @@ class PolicyAccess:
 
     def _sample(self, contexts: Array) -> Array:
         return self.policy.sample(contexts, self.rng)
+
+    def _no_signal_stops(self) -> dict[str, Any]:
+        """``tolflatfitness`` and ``tolstagnation``, if met: the returns carry no signal any more."""
+        met: dict[str, Any] = {}
+        if self.flat_iterations >= self.config.tolflatfitness:  # type: ignore[attr-defined]
+            met["tolflatfitness"] = self.flat_iterations  # type: ignore[attr-defined]
+        if stagnated(self.mean_returns, self.stagnation_window):  # type: ignore[attr-defined]
+            met["tolstagnation"] = self.stagnation_window  # type: ignore[attr-defined]
+        return met
 
     def _policy_state(self) -> dict[str, Any]:
         """The config, the Generator, the initial distribution and the policy: what every checkpoint holds."""

@@ -6,7 +6,6 @@ env) so that vector backends can make copies.
 
 from __future__ import annotations
 
-import itertools
 from typing import Any
 
 import gymnasium as gym
@@ -15,7 +14,7 @@ import numpy as np
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
 
 FLAKY_ID = "test/Flaky-v0"
-_INSTANCES = itertools.count()  # every copy draws its own failures (a rebuilt env does not replay them)
+_INSTANCES = {"made": 0}  # every copy draws its own failures (a rebuilt env does not replay them)
 
 
 class Flaky(ContextualEpisodicEnv):
@@ -37,7 +36,8 @@ class Flaky(ContextualEpisodicEnv):
     ) -> None:
         super().__init__([0.0], [1.0], [-2.0, -2.0], [2.0, 2.0])
         self.step_rate, self.reset_rate, self.fail_above = step_rate, reset_rate, fail_above
-        self.flakes = np.random.default_rng([flake_seed, next(_INSTANCES)])
+        _INSTANCES["made"] += 1
+        self.flakes = np.random.default_rng([flake_seed, _INSTANCES["made"]])
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple:
         if self.flakes.random() < self.reset_rate:

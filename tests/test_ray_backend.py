@@ -11,6 +11,7 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
+import flaky_envs  # noqa: E402
 from helpers import SPHERE  # noqa: E402
 
 from creps_gym.envs.base import ContextualEpisodicEnv  # noqa: E402
@@ -40,6 +41,7 @@ class Target(ContextualEpisodicEnv):
 @pytest.fixture(scope="module")
 def local_ray():
     ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])  # workers cannot import this test file
+    ray.cloudpickle.register_pickle_by_value(flaky_envs)
     started = not ray.is_initialized()
     if started:
         ray.init(num_cpus=2, include_dashboard=False, logging_level="ERROR", log_to_driver=False)
@@ -69,3 +71,19 @@ def test_failures_after_the_retries_stop_the_run_with_a_clear_error(local_ray, t
     marker = tmp_path / "deaths"
     with pytest.raises(EpisodeError, match=r"iteration 1, episodes \d+\.\.\d+: the Ray task failed 1 time"):
         run(CREPSCMA(2, 1, seed=0), Target(str(marker), deaths=5), 2, 8, 0, backend="ray", retries=0)
+
+
+def test_flaky_episodes_and_resets_are_retried_as_on_serial(local_ray):
+    """The retry policy of every backend (tests/test_failures.py), on Ray."""
+    for seed in (0, 1):
+        reference = run(CREPSCMA(2, 1, seed=seed), flaky_envs.flaky(), 3, 20, seed)
+        for flakes in ({"step_rate": 0.1}, {"reset_rate": 0.1}):
+            env = flaky_envs.flaky(flake_seed=seed, **flakes)
+            history = run(CREPSCMA(2, 1, seed=seed), env, 3, 20, seed, retries=3, backend="ray")
+            assert history.equals(reference), (seed, flakes)
+    errors = []
+    for options in ({}, {"backend": "ray"}):
+        with pytest.raises(EpisodeError) as caught:
+            run(CREPSCMA(2, 1, seed=0), flaky_envs.flaky(fail_above=0.5), 2, 10, 0, **options)
+        errors.append(str(caught.value))
+    assert errors[0] == errors[1] and "failed 3 time(s)" in errors[0]

@@ -2,7 +2,9 @@
 
 An episode is one decision. ``reset`` draws (or is given) a context ``s``; the observation *is* the context.
 ``step(theta)`` evaluates the whole episode for the parameter vector ``theta`` and always returns
-``terminated=True, truncated=False``.
+``terminated=True, truncated=False``. A return that is not finite (an objective that overflows for
+finite parameters far outside the box) is refused with a ``ValueError`` naming the parameters
+(:meth:`ContextualEpisodicEnv.check_returns`); no env returns ±inf or NaN.
 
 Subclasses implement a single pure, batched function::
 
@@ -197,6 +199,25 @@ class ContextualEpisodicEnv(gym.Env[Array, Array]):
         """Validate a batch of finite parameter vectors, shape (n, p)."""
         return as_float_array(params, name, (None, self.param_dim))
 
+    def check_returns(self, returns: Any, params: Array, name: str = "action") -> Array:
+        """Validate the returns (n,) of :meth:`evaluate` for ``params`` (n, p): real and finite.
+
+        Finite parameters far outside the box can overflow an objective (the Sphere at 1e200 gives -inf).
+        That is refused with a ``ValueError`` naming the parameters, never passed on as a silent ±inf or
+        NaN return: the policy of every creps_gym env.
+        """
+        owner = type(self).__name__
+        returns = as_float_array(returns, f"{owner}.evaluate() returns", (params.shape[0],), finite=False)
+        bad = np.flatnonzero(~np.isfinite(returns))
+        if bad.size:
+            row = int(bad[0])
+            raise ValueError(
+                f"{name}: expected a finite return, got {returns[row]} for params {params[row].tolist()} "
+                f"(row {row}); {owner}'s objective is not finite there (e.g. it overflows far outside the "
+                "parameter box)"
+            )
+        return returns
+
     # -- gymnasium API -----------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Array, dict]:
         """Start an episode. ``options={"context": s}`` sets the context (shape (z,)); else it is sampled."""
@@ -227,6 +248,7 @@ class ContextualEpisodicEnv(gym.Env[Array, Array]):
             )
         params = as_float_array(action, "action", (self.param_dim,))[None, :]
         returns, batch_info = self.evaluate(self._context[None, :], params)
+        returns = self.check_returns(returns, params)  # before any state changes
         self._done = True
         self._last_params = params[0].copy()
         info = {"context": self._context.copy()}
@@ -342,7 +364,7 @@ class ContextualEpisodicVectorEnv(VectorEnv):
                 f"actions: expected shape ({self.num_envs}, {self.model.param_dim}), got {params.shape}"
             )
         returns, batch_info = self.model.evaluate(self._contexts, params)
-        returns = as_float_array(returns, f"{type(self.model).__name__}.evaluate() returns", (self.num_envs,))
+        returns = self.model.check_returns(returns, params, "actions")
         ones = np.ones(self.num_envs, dtype=bool)
         step_info: dict[str, Any] = {"context": self._contexts.copy(), "_context": ones.copy()}
         for key, value in batch_info.items():

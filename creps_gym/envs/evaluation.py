@@ -162,7 +162,7 @@ def evaluate_policy(env: Any, policy: Policy | Any, contexts: Any) -> PolicyEval
         raise ValueError("contexts: expected at least one context, got shape " + str(contexts.shape))
     params = _policy_params(policy, contexts, model.param_dim)
     returns, _ = model.evaluate(contexts, params)
-    returns = as_float_array(returns, "env.evaluate returns", (contexts.shape[0],))
+    returns = model.check_returns(returns, params, "policy")
     regrets = None
     if isinstance(model, SupportsRegret):
         regrets = as_float_array(model.regret(contexts, params), "env.regret output", (contexts.shape[0],))

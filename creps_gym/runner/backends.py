@@ -11,22 +11,29 @@ therefore computes the same returns, bit for bit, in the same order:
   ``SyncVectorEnv`` with ``vector_mode="sync"``) reset with the per-episode seeds.
 * ``ray``: Ray tasks (``pip install creps-gym[ray]``), one chunk of episodes per task; Ray is imported only
   when this backend is built. An already initialised Ray (e.g. ``ray.init(address=...)`` for a cluster) is
-  used as is; otherwise a local instance is started and shut down by :meth:`RayBackend.close`.
+  used as is; otherwise a local instance is started and shut down by ``RayBackend.close``, with a watchdog
+  that stops it if the run's process dies without shutting it down (see :mod:`.ray_backend`).
 
-**Failure policy.** An episode that raises, or returns a non-finite value, is re-run up to ``retries``
-times (episodes are deterministic, so a retry that succeeds gives the value the first attempt should have
-given). A Ray task whose worker process dies is re-submitted by Ray up to ``retries`` times. A vector env
-that fails is rebuilt and the chunk re-run up to ``retries`` times, then the chunk is re-run episode by
-episode to find the failing one. When the retries are spent the run stops with :class:`EpisodeError`,
-whose message names the iteration, the episode, its seed and context, and the last error. No sample is
-ever dropped. A reset whose context differs from the recorded one raises :class:`EpisodeError` at once
-(the env is not deterministic under ``reset(seed=...)``, so no backend could reproduce the run).
+**Failure policy** (the same on every backend). Every episode gets ``retries + 1`` attempts of its own:
+an episode whose reset or step raises, or whose reward is not a finite real number (a str, bool, None or
+complex reward is refused, never converted), is re-run up to ``retries`` times; episodes are
+deterministic, so a retry that succeeds gives the value the first attempt should have given, and no
+sample is ever dropped. A batch that fails as a whole (a vector env, a Ray task whose worker process
+died) cannot be blamed on one episode and is not charged to any: a vector env is rebuilt and its chunk
+re-run up to ``retries`` times, then the chunk's episodes run one by one in the main process, each with
+the full budget; Ray re-submits a task whose worker died up to ``retries`` times. When an episode's
+attempts are spent the run stops with :class:`EpisodeError`, whose message names the iteration, the
+episode, its seed and context, and the last error: the same message on every backend. A reset whose
+context differs from the recorded one raises :class:`EpisodeError` at once (the env is not
+deterministic under ``reset(seed=...)``, so no backend could reproduce the run). Set-up errors (a
+vector env that cannot be built from the env given) are raised when the backend is built, before any
+episode runs.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
+import numbers
 import os
 from abc import ABC, abstractmethod
 from collections.abc import Callable
@@ -37,16 +44,15 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym.optimizers.adapters.base import import_optional
-
 __all__ = [
     "Backend",
     "EnvSource",
     "EpisodeError",
-    "RayBackend",
     "SerialBackend",
     "VectorBackend",
+    "episode_return",
     "make_backend",
+    "reset_context",
     "retry",
     "run_episodes",
 ]
@@ -120,16 +126,51 @@ def retry(
     return False, None, last
 
 
+def episode_return(reward: Any) -> float:
+    """An episode's reward as a float: a finite real number (a Python or numpy int or float, or a
+    one-element real array). A str, bool, None or complex reward raises TypeError (never 1.0 or a parsed
+    string), a NaN or infinite one ValueError."""
+    if isinstance(reward, np.ndarray) and reward.size == 1 and reward.dtype.kind in "fiu":
+        reward = reward.reshape(())[()]
+    if isinstance(reward, (bool, np.bool_)) or not isinstance(reward, numbers.Real):
+        raise TypeError(f"reward: expected a real number, got {type(reward).__name__} {reward!r}")
+    value = float(reward)
+    if not math.isfinite(value):
+        raise ValueError(f"expected a finite return, got {value}")
+    return value
+
+
+class CheckedReward(gym.Wrapper):
+    """Checks each reward with :func:`episode_return` inside a vector env's sub-env (where the vector env
+    would otherwise store a str or bool reward as a float)."""
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
+        """Step the env and check its reward."""
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        return obs, episode_return(reward), terminated, truncated, info
+
+
+def reset_context(env: gym.Env, seed: int, retries: int, where: str) -> Any:
+    """``env.reset(seed=seed)``'s observation, the reset retried like an episode (EpisodeError at the end).
+
+    ``where`` names the episode in the error (e.g. ``"iteration 3, episode 2"``).
+    """
+    ok, obs, last = retry(lambda: env.reset(seed=int(seed))[0], retries + 1)
+    if not ok:
+        raise EpisodeError(
+            f"{where} (reset seed {seed}): reset failed {retries + 1} time(s); "
+            f"last error: {type(last).__name__}: {last}"
+        ) from last
+    return obs
+
+
 def _one_episode(env: gym.Env, seed: int, context: Array, params: Array) -> float:
     obs, _ = env.reset(seed=int(seed))
     _check_context(obs, context, "reset")
     _, reward, terminated, truncated, _ = env.step(params)
     if not (terminated or truncated):
         raise RuntimeError("expected a one-step episode (terminated or truncated after the first step)")
-    value = float(reward)
-    if not math.isfinite(value):
-        raise ValueError(f"expected a finite return, got {value}")
-    return value
+    return episode_return(reward)
 
 
 def run_episodes(
@@ -202,7 +243,12 @@ class SerialBackend(Backend):
 
 
 class VectorBackend(Backend):
-    """A Gymnasium vector env; batches larger than ``num_envs`` run in chunks (the last one padded)."""
+    """A Gymnasium vector env; batches larger than ``num_envs`` run in chunks (the last one padded).
+
+    The vector env is built when the backend is: an env it cannot replicate (a wrapper that Gymnasium
+    cannot re-create from the spec, or copies whose spaces differ from the env's) raises TypeError then,
+    not as an episode failure.
+    """
 
     name = "vector"
 
@@ -210,22 +256,50 @@ class VectorBackend(Backend):
         super().__init__(source, retries)
         spec = source.spec()
         registered = gym.spec(spec) if isinstance(spec, str) else spec
-        native = registered.vector_entry_point is not None
+        wrapped = bool(registered.additional_wrappers)  # a native vector env cannot apply them
+        native = registered.vector_entry_point is not None and not wrapped
         if mode == "native" and not native:
+            why = "its spec adds wrappers" if wrapped else "not native"
             raise ValueError(
-                f"vector_mode: expected 'auto', 'sync' or 'async' for {registered.id} (not native), "
-                "got 'native'"
+                f"vector_mode: expected 'auto', 'sync' or 'async' for {registered.id} ({why}), got 'native'"
             )
         self.mode = ("native" if native else "async") if mode == "auto" else mode
         default = samples if self.mode == "native" else min(samples, os.cpu_count() or 1)
         self.num_envs = workers or default
-        self._vec: Any = None
         self._single: gym.Env | None = None
+        self._vec: Any = self._build(registered.id)
 
     def _make_vec(self) -> Any:
         modes = {"native": "vector_entry_point", "sync": "sync", "async": "async"}
-        mode = modes[self.mode]
-        return gym.make_vec(self.source.spec(), self.num_envs, vectorization_mode=mode, **self.source.kwargs)
+        wrappers = None if self.mode == "native" else [CheckedReward]
+        return gym.make_vec(
+            self.source.spec(),
+            self.num_envs,
+            vectorization_mode=modes[self.mode],
+            wrappers=wrappers,
+            **self.source.kwargs,
+        )
+
+    def _build(self, env_name: str) -> Any:
+        """The first vector env, with set-up errors named as such."""
+        try:
+            vec = self._make_vec()
+        except Exception as exc:  # a wrapper Gymnasium cannot re-create, an entry point that fails, ...
+            raise TypeError(
+                f"env: the vector backend ({self.mode}) could not build copies of {env_name}: "
+                f"{type(exc).__name__}: {exc}. Register the env, make its wrappers inherit "
+                "gymnasium.utils.RecordConstructorArgs, or use backend='serial' or 'ray'"
+            ) from exc
+        env = self.source.env
+        for name in ("observation_space", "action_space"):
+            if env is not None and getattr(vec, "single_" + name) != getattr(env, name):
+                vec.close()
+                raise TypeError(
+                    f"env: the vector backend's copies of {env_name} have {name} "
+                    f"{getattr(vec, 'single_' + name)}, expected the env object's {getattr(env, name)}; "
+                    "use backend='serial' or 'ray'"
+                )
+        return vec
 
     def _chunk(self, seeds: NDArray[np.int64], contexts: Array, params: Array) -> Array:
         if self._vec is None:
@@ -248,29 +322,26 @@ class VectorBackend(Backend):
         n, m = len(seeds), self.num_envs
         returns = np.empty(n)
         for start in range(0, n, m):
+            stop = min(start + m, n)
             rows = np.minimum(np.arange(start, start + m), n - 1)  # pad by repeating the last episode
-            ok, chunk, last = retry(  # a failed async env is unusable: rebuild it before the next try
+            ok, chunk, _ = retry(  # a failed async env is unusable: rebuild it before the next try
                 lambda rows=rows: self._chunk(seeds[rows], contexts[rows], params[rows]),
                 self.retries + 1,
                 on_failure=self.close,
-                reraise=(),  # even a named failure is retried, then located episode by episode
+                reraise=(),  # even a named failure is retried, then re-run episode by episode
             )
-            if not ok:
-                self._locate(seeds, contexts, params, label, start, min(start + m, n), last)
-            stop = min(start + m, n)
-            returns[start:stop] = chunk[: stop - start]
+            if ok:
+                returns[start:stop] = chunk[: stop - start]
+            else:  # not charged to the chunk's episodes: each runs alone with the serial budget
+                returns[start:stop] = self._one_by_one(seeds, contexts, params, label, start, stop)
         return returns
 
-    def _locate(
-        self, seeds: Any, contexts: Array, params: Array, label: str, a: int, b: int, last: Any
-    ) -> None:
-        """Re-run episodes a..b-1 serially to name the failing one; raise EpisodeError in any case."""
+    def _one_by_one(self, seeds: Any, contexts: Array, params: Array, label: str, a: int, b: int) -> Array:
+        """Episodes a..b-1 one by one in the main process, with the serial backend's retry policy."""
         if self._single is None:
             self._single = self.source.make()
-        run_episodes(self._single, seeds[a:b], contexts[a:b], params[a:b], first=a, label=label, retries=0)
-        raise EpisodeError(
-            f"{label}, episodes {a}..{b - 1}: the vector env failed {self.retries + 1} time(s) although each "
-            f"episode runs alone; last error: {type(last).__name__}: {last}"
+        return run_episodes(
+            self._single, seeds[a:b], contexts[a:b], params[a:b], first=a, label=label, retries=self.retries
         )
 
     def close(self) -> None:
@@ -280,61 +351,6 @@ class VectorBackend(Backend):
                 vec.close()
             except Exception:  # a broken async env may fail to close; it is discarded either way
                 pass
-
-
-_RAY_ENVS: dict[str, gym.Env] = {}
-
-
-def _ray_chunk(
-    key: str, source: EnvSource, seeds: Any, contexts: Array, params: Array, first: int, label: str, n: int
-) -> Array:
-    """Body of a Ray task: the worker keeps one env per source."""
-    if key not in _RAY_ENVS:
-        _RAY_ENVS[key] = source.make()
-    return run_episodes(_RAY_ENVS[key], seeds, contexts, params, first=first, label=label, retries=n)
-
-
-class RayBackend(Backend):
-    """Ray tasks, ``workers`` chunks per batch (default: the cluster's CPU count)."""
-
-    name = "ray"
-
-    def __init__(self, source: EnvSource, retries: int, workers: int | None) -> None:
-        super().__init__(source, retries)
-        self._ray = ray = import_optional("ray", "ray")
-        self._owns = not ray.is_initialized()
-        if self._owns:
-            ray.init(num_cpus=workers, include_dashboard=False, logging_level="ERROR")
-        self.chunks = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
-        self._source_ref = ray.put(source)
-        self._key = self._source_ref.hex()
-        self._task = ray.remote(num_cpus=1, max_retries=retries)(_ray_chunk)
-
-    def evaluate(self, seeds: NDArray[np.int64], contexts: Array, params: Array, label: str) -> Array:
-        ray = self._ray
-        bounds = np.linspace(0, len(seeds), min(self.chunks, len(seeds)) + 1).astype(int)
-        spans = list(itertools.pairwise(int(b) for b in bounds))
-        key, ref, tries = self._key, self._source_ref, self.retries
-        task = self._task.remote
-        refs = [task(key, ref, seeds[a:b], contexts[a:b], params[a:b], a, label, tries) for a, b in spans]
-        returns = []
-        for (a, b), ref in zip(spans, refs, strict=True):
-            try:
-                returns.append(ray.get(ref))
-            except ray.exceptions.RayTaskError as exc:
-                cause = exc.cause if isinstance(exc.cause, Exception) else exc
-                raise EpisodeError(str(cause).splitlines()[-1] if cause is exc else str(cause)) from None
-            except ray.exceptions.RayError as exc:
-                raise EpisodeError(
-                    f"{label}, episodes {a}..{b - 1}: the Ray task failed {self.retries + 1} time(s) "
-                    f"({type(exc).__name__}: {str(exc).splitlines()[0]})"
-                ) from None
-        return np.concatenate(returns)
-
-    def close(self) -> None:
-        if self._owns and self._ray.is_initialized():
-            self._ray.shutdown()
-        self._owns = False
 
 
 def make_backend(
@@ -353,5 +369,7 @@ def make_backend(
     if name == "vector":
         return VectorBackend(source, retries, workers, vector_mode, samples)
     if name == "ray":
+        from creps_gym.runner.ray_backend import RayBackend  # imports Ray only when asked for
+
         return RayBackend(source, retries, workers)
     raise ValueError(f"backend: expected one of ['serial', 'vector', 'ray'], got {name!r}")

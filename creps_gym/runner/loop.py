@@ -4,8 +4,14 @@ One iteration draws ``samples`` episode seeds from the env stream, reads each ep
 ``env.reset(seed=...)``, asks the optimiser, runs the episodes on the backend and tells the returns. At the
 configured interval (and at the last iteration) the recommended (mean) policy is evaluated on a fixed,
 seeded set of test contexts with :func:`creps_gym.envs.evaluation.evaluate_policy` (mean regret where the
-env supports it, mean return otherwise); for envs that are not creps_gym models the evaluation runs test
-episodes with seeded resets instead.
+env supports it, mean return otherwise). For envs that are not creps_gym models, or models under wrappers
+that may change what the agent sees, sends or gets (e.g. ``TransformReward``, ``NormalizeParams``; see
+:func:`creps_gym.runner.checks.unwrapped_model`), the evaluation runs test episodes of the env itself
+with seeded resets, so it sees what training sees.
+
+**Failures.** Resets that read contexts (for training and test episodes) are retried like episodes
+(``config.retries`` times, then :class:`~creps_gym.runner.backends.EpisodeError`), and so is the
+evaluation; the episodes themselves follow the backends' failure policy.
 
 **Seeds.** The master seed is split with ``numpy.random.SeedSequence(seed).spawn(3)`` into the env stream
 (episode seeds), the optimiser's seed and the test contexts' seed. The same seed gives a bit-identical
@@ -19,6 +25,7 @@ exceed the budget), ``"target_regret"``, ``"max_time"``, ``"optimizer: <criteria
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Sequence
@@ -29,11 +36,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym.envs.base import box_initial_distribution, initial_distribution
-from creps_gym.envs.evaluation import contextual_model, evaluate_policy, test_contexts
+from creps_gym.envs.evaluation import evaluate_policy, test_contexts
 from creps_gym.optimizers.registry import make_optimizer, recommended_samples, restore_optimizer
 from creps_gym.optimizers.registry import optimizer_class as registered_class
-from creps_gym.runner.backends import EnvSource, EpisodeError, make_backend, retry, run_episodes
+from creps_gym.runner.backends import (
+    EnvSource,
+    EpisodeError,
+    make_backend,
+    reset_context,
+    retry,
+    run_episodes,
+)
 from creps_gym.runner.callbacks import as_callback
+from creps_gym.runner.checks import check_batch_size, check_optimizer, unwrapped_model
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History, IterationRecord
 from creps_gym.runner.rundir import RESTART, RunDir
@@ -109,13 +124,17 @@ class Runner:
             batch = recommended_samples(config.optimizer or optimizer, self.n_params, self.n_context_dims)
             self.config = config = dataclasses.replace(config, samples=batch)
         check_run_memory(config, self.n_params, self.n_context_dims, covariance=config.optimizer is not None)
+        if optimizer is not None:
+            check_optimizer(optimizer)
         self.optimizer = optimizer
         if optimizer is None and config.optimizer is not None:
             self.optimizer = self._make_optimizer(optimizer_seed)
         self._optimizer_class = optimizer_class or (type(optimizer) if optimizer is not None else None)
         self._check_optimizer_sizes("optimizer")
-        self._model = self._contextual_model()
+        self._model = unwrapped_model(self.env)
         self.test_contexts = self._test_contexts(eval_seed)
+        if config.optimizer is not None and run_dir is None:  # a new run: its batch size must suit it
+            self._check_batch_size(optimizer_seed)
         if config.target_regret is not None and not self.has_regret:
             raise ValueError(
                 f"target_regret: expected None for {self.env_name}, which has no regret, "
@@ -192,18 +211,15 @@ class Runner:
             )
         return np.broadcast_to(values, (self.n_params,)).copy()
 
-    def _contextual_model(self) -> Any:
-        try:
-            model = contextual_model(self.env)
-        except TypeError:
-            return None
-        # A wrapper that changes what the agent sees or sends (e.g. NormalizeParams) makes the raw model's
-        # evaluate/regret the wrong function of the agent's parameters: then evaluate through episodes.
-        same_interface = (
-            model.observation_space == self.env.observation_space
-            and model.action_space == self.env.action_space
-        )
-        return model if same_interface else None
+    def _check_batch_size(self, seed: int) -> None:
+        """One ask/tell of a fresh optimiser on a synthetic batch of ``samples`` contexts (see checks)."""
+        n = self.config.samples
+        if self._model is not None:
+            contexts = self._model.sample_contexts(np.random.default_rng(seed), n)
+        else:
+            contexts = self.test_contexts[np.arange(n) % len(self.test_contexts)]
+        make = functools.partial(self._make_optimizer, seed)
+        check_batch_size(make, contexts, self.config.optimizer_options, repr(self.config.optimizer))
 
     @property
     def has_regret(self) -> bool:
@@ -214,7 +230,7 @@ class Runner:
         if self._model is not None:
             return test_contexts(self._model, self.config.eval_contexts, seed)
         self._eval_seeds = np.random.default_rng(seed).integers(0, 2**63 - 1, size=self.config.eval_contexts)
-        return self._reset_contexts(self._eval_seeds)
+        return self._reset_contexts(self._eval_seeds, "evaluation")
 
     def _meta(self) -> dict[str, Any]:
         optimizer = self.config.optimizer or type(self.optimizer).__name__
@@ -266,8 +282,13 @@ class Runner:
         return self._elapsed_before + time.perf_counter() - self._clock
 
     # -- one iteration ---------------------------------------------------------------------------------------
-    def _reset_contexts(self, seeds: NDArray[np.int64]) -> Array:
-        rows = [np.asarray(self.env.reset(seed=int(s))[0], dtype=np.float64).reshape(-1) for s in seeds]
+    def _reset_contexts(self, seeds: NDArray[np.int64], label: str) -> Array:
+        """The contexts of ``env.reset(seed=s)``, shape (n, z); each reset retried like an episode."""
+        retries = self.config.retries
+        rows = [
+            np.asarray(reset_context(self.env, int(s), retries, f"{label}, episode {k}"), np.float64).ravel()
+            for k, s in enumerate(seeds)
+        ]
         return np.array(rows).reshape(len(seeds), self.n_context_dims)
 
     def _evaluate(self) -> tuple[float, float]:
@@ -315,7 +336,7 @@ class Runner:
         """Run one iteration on ``backend``; returns its record and the stop reason (None: go on)."""
         n = self.config.samples
         seeds = self.env_rng.integers(0, 2**63 - 1, size=n)
-        contexts = self._reset_contexts(seeds)
+        contexts = self._reset_contexts(seeds, f"iteration {self.iteration + 1}")
         params = np.asarray(self.optimizer.ask(contexts), dtype=np.float64)
         returns = backend.evaluate(seeds, contexts, params, f"iteration {self.iteration + 1}")
         self.optimizer.tell(contexts, params, returns)

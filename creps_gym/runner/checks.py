@@ -1,0 +1,112 @@
+"""Checks the runner makes before a run starts, so that bad set-ups fail at once with a clear error.
+
+* :func:`check_optimizer`: an optimiser object follows the ask/tell protocol of
+  :class:`creps_gym.optimizers.AskTellOptimizer`; raw pycma, nevergrad and optuna objects are refused
+  with the adapter to use.
+* :func:`check_batch_size`: one ask/tell of a fresh copy of a named optimiser on a synthetic batch of
+  the run's size, so options that only fail at the first ``tell`` (``epsilon >= log N``, a batch too
+  small for the features) fail before anything is written.
+* :func:`unwrapped_model`: the creps_gym model behind an env, when the wrappers around it change nothing
+  the evaluation computes (so the runner may evaluate the model's batched ``evaluate`` directly).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym.envs.evaluation import contextual_model
+from creps_gym.wrappers import FixedContexts, SampleContexts
+
+__all__ = ["MODEL_PRESERVING_WRAPPERS", "check_batch_size", "check_optimizer", "unwrapped_model"]
+
+PROTOCOL_METHODS = ("ask", "tell", "recommend", "stop", "state_dict")
+_ADAPTERS = {
+    "cma": "creps_gym.optimizers.adapters.pycma.CMAAdapter (registry name 'cma')",
+    "nevergrad": "creps_gym.optimizers.adapters.nevergrad.NevergradAdapter (registry name 'nevergrad')",
+    "optuna": "creps_gym.optimizers.adapters.optuna.OptunaAdapter (registry name 'optuna')",
+}
+
+# Wrappers that change neither the observation, the action nor the reward of a one-step episode.
+MODEL_PRESERVING_WRAPPERS: tuple[type, ...] = (
+    gym.wrappers.OrderEnforcing,
+    gym.wrappers.PassiveEnvChecker,
+    gym.wrappers.TimeLimit,
+    FixedContexts,  # they choose the training contexts; the test contexts come from the model
+    SampleContexts,
+)
+
+
+def check_optimizer(optimizer: Any) -> None:
+    """Raise TypeError unless ``optimizer`` is an ask/tell optimiser object of this package's protocol.
+
+    The protocol: methods ``ask``, ``tell``, ``recommend``, ``stop``, ``state_dict`` and a ``diagnostics``
+    attribute. Objects of pycma, nevergrad or optuna follow their own libraries' protocols: the error
+    names the adapter that wraps them.
+    """
+    cls = optimizer if isinstance(optimizer, type) else type(optimizer)
+    name = f"{cls.__module__}.{cls.__qualname__}"
+    adapter = _ADAPTERS.get(cls.__module__.split(".")[0])
+    if adapter is not None:
+        raise TypeError(
+            f"optimizer: expected a creps_gym ask/tell optimiser or a registry name, got a raw {name}; "
+            f"use the adapter {adapter}"
+        )
+    if isinstance(optimizer, type):
+        raise TypeError(f"optimizer: expected an optimiser object or a registry name, got the class {name}")
+    missing = [method for method in PROTOCOL_METHODS if not callable(getattr(cls, method, None))]
+    if not (hasattr(cls, "diagnostics") or "diagnostics" in getattr(optimizer, "__dict__", {})):
+        missing.append("diagnostics")
+    if missing:
+        raise TypeError(
+            "optimizer: expected an ask/tell optimiser (methods ask, tell, recommend, stop, state_dict and "
+            "a diagnostics property, see creps_gym.optimizers.AskTellOptimizer) or a registry name, got "
+            f"{name} without {', '.join(missing)}"
+        )
+
+
+def check_batch_size(
+    make: Callable[[], Any], contexts: NDArray[np.float64], options: Mapping[str, Any], label: str
+) -> None:
+    """One ask/tell of ``make()`` on ``contexts`` (n, z) with distinct returns; ValueError if it refuses.
+
+    An error naming one of the optimiser ``options`` (e.g. ``epsilon``) is raised as it is; any other
+    ``ValueError`` of the ``tell`` is raised as an error of ``samples``. Other exceptions are left to the
+    run itself (the synthetic batch is not the run's).
+    """
+    optimizer = make()
+    params = optimizer.ask(contexts)
+    returns = -np.arange(contexts.shape[0], dtype=np.float64)
+    try:
+        optimizer.tell(contexts, params, returns)
+    except ValueError as exc:
+        if str(exc).partition(":")[0] in options:
+            raise ValueError(str(exc)) from None
+        raise ValueError(
+            f"samples: expected a batch size that {label} can learn from, got {contexts.shape[0]} ({exc})"
+        ) from None
+    except Exception:  # only the batch size is checked here; the run reports any other failure
+        return
+
+
+def unwrapped_model(env: gym.Env) -> Any:
+    """The creps_gym model behind ``env`` if every wrapper around it is in ``MODEL_PRESERVING_WRAPPERS``.
+
+    None otherwise (an env that is not a creps_gym model, or a wrapper that may change the reward, the
+    observation or the action, e.g. ``TransformReward`` or ``NormalizeParams``): then the runner evaluates
+    through episodes of the env itself, which see what training sees.
+    """
+    try:
+        model = contextual_model(env)
+    except TypeError:
+        return None
+    layer = env
+    while layer is not model:
+        if not isinstance(layer, MODEL_PRESERVING_WRAPPERS):
+            return None
+        layer = layer.env
+    return model

@@ -5,7 +5,9 @@ else is imported) with the ids of the processes to watch. The watchdog records t
 second, their descendants (with their start times, so a recycled process id is never touched). The run
 holds the write end of a pipe: :meth:`Watchdog.release` writes ``done`` and the watchdog exits quietly.
 If the pipe closes without it, or the watchdog's parent changes, the run's process died (e.g. ``kill -9``):
-the watchdog sends SIGTERM to every recorded process still alive, SIGKILL after 2 s, and exits.
+the watchdog sends SIGTERM to every recorded process still alive, SIGKILL after 2 s, and exits
+(:meth:`Watchdog.stop_watched` does the same on purpose). :func:`process_tree` and :func:`terminate` are
+the same steps for a caller that stops a process tree itself (the tests' Ray cluster).
 
 It needs Linux's ``/proc``; elsewhere :meth:`Watchdog.start` returns None and nothing is watched.
 """
@@ -20,7 +22,7 @@ import sys
 import time
 from collections.abc import Sequence
 
-__all__ = ["Watchdog", "child_pids"]
+__all__ = ["Watchdog", "child_pids", "process_tree", "terminate"]
 
 POLL_SECONDS = 0.5
 GRACE_SECONDS = 2.0
@@ -77,6 +79,27 @@ def _signal_alive(tracked: dict[int, int], signum: int) -> int:
     return sent
 
 
+def process_tree(roots: Sequence[int]) -> dict[int, int]:
+    """The live processes ``roots`` and all their descendants: id -> start time (empty without /proc)."""
+    if not os.path.isdir("/proc"):
+        return {}
+    tracked = {pid: stat[1] for pid in roots if (stat := _stat(pid)) is not None}
+    _grow(tracked)
+    return tracked
+
+
+def terminate(tracked: dict[int, int], grace: float = GRACE_SECONDS) -> None:
+    """SIGTERM the tracked processes (id -> start time) still alive, SIGKILL those left after ``grace`` s.
+
+    ``grace=0`` sends SIGKILL at once. A process whose id was recycled (another start time) is never touched.
+    """
+    if grace > 0 and _signal_alive(tracked, signal.SIGTERM):
+        deadline = time.monotonic() + grace
+        while time.monotonic() < deadline and _signal_alive(tracked, 0):
+            time.sleep(0.1)
+    _signal_alive(tracked, signal.SIGKILL)
+
+
 def _watch(read_fd: int, parent: int, roots: Sequence[int]) -> None:
     """The watchdog's loop (runs in its own process)."""
     tracked = {pid: stat[1] for pid in roots if (stat := _stat(pid)) is not None}
@@ -90,11 +113,7 @@ def _watch(read_fd: int, parent: int, roots: Sequence[int]) -> None:
         if os.getppid() != parent:
             break
     _grow(tracked)
-    if _signal_alive(tracked, signal.SIGTERM):
-        deadline = time.monotonic() + GRACE_SECONDS
-        while time.monotonic() < deadline and _signal_alive(tracked, 0):
-            time.sleep(0.1)
-        _signal_alive(tracked, signal.SIGKILL)
+    terminate(tracked)
 
 
 class Watchdog:
@@ -121,6 +140,14 @@ class Watchdog:
         )
         os.close(read_fd)
         return cls(process, write_fd)
+
+    def stop_watched(self) -> None:
+        """Make the watchdog stop the watched processes now, as when the run dies, and wait until it has."""
+        if self._write_fd is None:
+            return
+        os.close(self._write_fd)  # end of file without "done"
+        self._write_fd = None
+        self.process.wait(timeout=GRACE_SECONDS + 30)
 
     def release(self) -> None:
         """Tell the watchdog the run ended normally: it exits without touching anything (idempotent)."""

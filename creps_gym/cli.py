@@ -174,6 +174,13 @@ def _add_run(commands: Any) -> None:
         "--backend", default=run_defaults["backend"], choices=BACKENDS, help="where episodes run"
     )
     run.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="HOST:PORT",
+        help="--backend ray: join the running Ray cluster at HOST:PORT (or 'auto') and leave it running "
+        "(default: $RAY_ADDRESS if set, else a local Ray for this run)",
+    )
+    run.add_argument(
         "--vector-mode",
         default=run_defaults["vector_mode"],
         choices=VECTOR_MODES,

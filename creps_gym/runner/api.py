@@ -56,7 +56,7 @@ def run(
     **options
         The other :class:`~creps_gym.runner.config.RunConfig` fields: ``eval_every``, ``eval_contexts``,
         ``backend``, ``workers``, ``vector_mode``, ``retries``, ``max_episodes``, ``target_regret``,
-        ``max_time``, ``checkpoint_every``, ``initial_mean``, ``initial_std``.
+        ``max_time``, ``checkpoint_every``, ``initial_mean``, ``initial_std``, ``ray_address``.
 
     Returns
     -------

@@ -9,10 +9,11 @@ therefore computes the same returns, bit for bit, in the same order:
 * ``vector``: a Gymnasium vector env. The native one (``vector_entry_point``, one batched ``evaluate`` call,
   contexts set through ``reset(options={"context": ...})``) where registered, else ``AsyncVectorEnv`` (or
   ``SyncVectorEnv`` with ``vector_mode="sync"``) reset with the per-episode seeds.
-* ``ray``: Ray tasks (``pip install creps-gym[ray]``), one chunk of episodes per task; Ray is imported only
-  when this backend is built. An already initialised Ray (e.g. ``ray.init(address=...)`` for a cluster) is
-  used as is; otherwise a local instance is started and shut down by ``RayBackend.close``, with a watchdog
-  that stops it if the run's process dies without shutting it down (see :mod:`.ray_backend`).
+* ``ray``: Ray tasks (``pip install creps-gym[ray]``), one chunk of episodes per cluster CPU; Ray is imported
+  only when this backend is built. An already initialised Ray is used as is; a running cluster at
+  ``ray_address`` (or ``RAY_ADDRESS``) is joined and left running; otherwise a local instance is started
+  and shut down by ``RayBackend.close``, with a watchdog that stops it if the run's process dies without
+  shutting it down (see :mod:`.ray_backend`).
 
 **Failure policy** (the same on every backend). Every episode gets ``retries + 1`` attempts of its own:
 an episode whose reset or step raises, or whose reward is not a finite real number (a str, bool, None or
@@ -228,6 +229,10 @@ class Backend(ABC):
     def close(self) -> None:  # noqa: B027 (most backends hold nothing to release)
         """Release workers (idempotent)."""
 
+    def log_entry(self) -> dict[str, Any] | None:
+        """An event for the run directory's log about where the episodes run (None: nothing to add)."""
+        return None
+
 
 class SerialBackend(Backend):
     """Episodes one after the other in the main process."""
@@ -362,8 +367,9 @@ def make_backend(
     vector_mode: str,
     samples: int,
     env: gym.Env | None = None,
+    ray_address: str | None = None,
 ) -> Backend:
-    """Build a backend by name (``"serial"``, ``"vector"`` or ``"ray"``)."""
+    """Build a backend by name (``"serial"``, ``"vector"`` or ``"ray"``; ``ray_address`` for Ray only)."""
     if name == "serial":
         return SerialBackend(source, retries, env)
     if name == "vector":
@@ -371,5 +377,5 @@ def make_backend(
     if name == "ray":
         from creps_gym.runner.ray_backend import RayBackend  # imports Ray only when asked for
 
-        return RayBackend(source, retries, workers)
+        return RayBackend(source, retries, workers, ray_address)
     raise ValueError(f"backend: expected one of ['serial', 'vector', 'ray'], got {name!r}")

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from creps_gym._validation import check_positive_int
 
-__all__ = ["BACKENDS", "VECTOR_MODES", "RunConfig"]
+__all__ = ["BACKENDS", "VECTOR_MODES", "RunConfig", "check_ray_address"]
 
 BACKENDS = ("serial", "vector", "ray")
 VECTOR_MODES = ("auto", "native", "sync", "async")
@@ -23,6 +24,25 @@ def _optional_positive(value: Any, name: str, *, integer: bool) -> Any:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < math.inf:
         raise ValueError(f"{name}: expected a positive finite number or None, got {value!r}")
     return float(value)
+
+
+_HOST_PORT = re.compile(r"(?:[A-Za-z0-9._-]+|\[[0-9A-Fa-f:.]+\]):[0-9]{1,5}")
+
+
+def check_ray_address(value: Any, name: str = "ray_address") -> str:
+    """``value`` if it is ``"auto"`` or ``"HOST:PORT"`` (the address ``ray start --head`` prints).
+
+    Raises ``TypeError`` for a non-str and ``ValueError`` for anything else (Ray Client's ``ray://``
+    addresses included), naming ``name``.
+    """
+    if not isinstance(value, str):
+        raise TypeError(f"{name}: expected a str 'HOST:PORT' or 'auto', got {type(value).__name__} {value!r}")
+    if value != "auto" and not (_HOST_PORT.fullmatch(value) and 0 < int(value.rpartition(":")[2]) < 65536):
+        raise ValueError(
+            f"{name}: expected 'HOST:PORT' (the address `ray start --head` prints, e.g. '10.0.0.1:6379') "
+            f"or 'auto', got {value!r}"
+        )
+    return value
 
 
 def _vector_or_scalar(value: Any, name: str, positive: bool) -> Any:
@@ -81,6 +101,12 @@ class RunConfig:
         Initial search distribution; None = the action box's centre and a quarter of its width.
         ``initial_mean="uniform"`` draws the mean uniformly in the action box from the master seed (the
         paper's initialisation), from a fourth ``SeedSequence`` child that no other stream uses.
+    ray_address : str or None
+        ``backend="ray"`` only: join the running Ray cluster at ``"HOST:PORT"`` (or ``"auto"``, the
+        cluster last started on this machine) and leave it running. None: the ``RAY_ADDRESS`` environment
+        variable's cluster if set, else a local Ray started and stopped by the run (see
+        :mod:`creps_gym.runner.ray_backend`). Not part of the run's identity: a resumed run never joins
+        the address its ``config.json`` records.
     """
 
     env: str | None
@@ -102,6 +128,7 @@ class RunConfig:
     checkpoint_every: int = 10
     initial_mean: Any = None
     initial_std: Any = None
+    ray_address: str | None = None
 
     def __post_init__(self) -> None:
         for name in ("env", "optimizer"):
@@ -124,6 +151,13 @@ class RunConfig:
             raise ValueError(f"backend: expected one of {list(BACKENDS)}, got {self.backend!r}")
         if self.vector_mode not in VECTOR_MODES:
             raise ValueError(f"vector_mode: expected one of {list(VECTOR_MODES)}, got {self.vector_mode!r}")
+        if self.ray_address is not None:
+            check_ray_address(self.ray_address)
+            if self.backend != "ray":
+                raise ValueError(
+                    f"ray_address: expected None unless backend='ray' (backend is {self.backend!r}), "
+                    f"got {self.ray_address!r}"
+                )
         _optional_positive(self.workers, "workers", integer=True)
         _optional_positive(self.max_episodes, "max_episodes", integer=True)
         for name in ("target_regret", "max_time"):

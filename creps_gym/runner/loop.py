@@ -387,8 +387,11 @@ class Runner:
             vector_mode=self.config.vector_mode,
             samples=self.config.samples,
             env=self.env,
+            ray_address=self.config.ray_address,
         )
         try:
+            if (entry := backend.log_entry()) is not None:
+                self._log(entry)  # e.g. the Ray cluster the run joined
             for callback in self.callbacks:
                 callback.on_start(self.history, self.config.iterations)
             reason = None

@@ -1,8 +1,25 @@
 """The Ray backend: one chunk of episodes per Ray task (``pip install creps-gym[ray]``).
 
-Ray is imported only when a :class:`RayBackend` is built. An already initialised Ray (e.g.
-``ray.init(address=...)`` for a cluster) is used as is and left running. Otherwise the backend starts a
-local Ray (no dashboard) and :meth:`RayBackend.close` shuts it down at the end of the run.
+Ray is imported only when a :class:`RayBackend` is built. Which Ray it uses, in this order:
+
+1. **A Ray already initialised in this process** (e.g. your own ``ray.init(address=...)``) is used as is
+   and left running. With ``ray_address`` set, it must be that cluster (``RuntimeError`` otherwise).
+2. **A running cluster**, at ``ray_address`` (:class:`~creps_gym.runner.config.RunConfig`, ``--ray-address``)
+   or else at the ``RAY_ADDRESS`` environment variable (Ray's convention; ``"local"`` or empty means
+   unset): ``"HOST:PORT"`` as ``ray start --head`` prints it, or ``"auto"``. The run joins it as a
+   driver and, at its end, only disconnects: the cluster keeps running for the next run. An address
+   where nothing answers raises ``ValueError`` at once (Ray itself would retry for minutes).
+3. **Otherwise a local Ray** (``ray.init(address="local")``, so a cluster that ``ray start`` left on
+   this machine is never joined by accident), which :meth:`RayBackend.close` shuts down at the end.
+
+Each iteration's episodes are split into one chunk per CPU of the cluster, counted when the iteration
+starts (``ray.cluster_resources()``), so nodes that join or leave mid-run are taken into account; each
+task asks for one CPU, so the chunks spread over every node. ``workers`` fixes the number of chunks
+instead. The history does not depend on the chunks (each episode replays its own seeded reset).
+
+**Losing a node.** A task whose worker process or node dies is re-submitted by Ray (``retries`` times)
+on the nodes still alive, so no sample is lost and the history stays bit-identical; a run whose head
+node dies stops with an :class:`~creps_gym.runner.backends.EpisodeError`.
 
 **A hard kill of the run.** ``ray.init`` starts its services (GCS server, raylet, log monitor, and the
 raylet's dashboard and runtime-env agents and workers) as processes of their own. After a ``kill -9`` of
@@ -11,13 +28,15 @@ a run that starts its own Ray also starts a small watchdog process (:mod:`creps_
 Linux ``/proc`` only). It records the processes Ray started and their descendants, and when the run's
 process dies without shutting Ray down it terminates them (SIGTERM, then SIGKILL after 2 s) and exits.
 Ray's session files under its temporary directory (``/tmp/ray/session_*``) are left, as after any Ray
-session. A Ray the user initialised is never watched or stopped.
+session. A Ray the user initialised, or a cluster the run joined, is never watched or stopped.
 """
 
 from __future__ import annotations
 
 import itertools
 import os
+import socket
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -26,11 +45,65 @@ from numpy.typing import NDArray
 
 from creps_gym.optimizers.adapters.base import import_optional
 from creps_gym.runner.backends import Array, Backend, EnvSource, EpisodeError, run_episodes
+from creps_gym.runner.config import check_ray_address
 from creps_gym.runner.watchdog import Watchdog, child_pids
 
-__all__ = ["RayBackend"]
+__all__ = ["RayBackend", "cluster_cpus", "plan_chunks", "resolve_address"]
 
 _RAY_ENVS: dict[str, gym.Env] = {}
+CONNECT_TIMEOUT = 5.0  # seconds to wait for a cluster's GCS port to answer before ray.init
+
+
+def resolve_address(ray_address: str | None, environ: Mapping[str, str]) -> tuple[str | None, str]:
+    """The cluster to join and where its address came from: ``ray_address``, else ``RAY_ADDRESS``.
+
+    Returns ``(None, "")`` when neither names a cluster (``RAY_ADDRESS`` unset, empty or ``"local"``).
+    ``ValueError`` (naming ``ray_address`` or ``RAY_ADDRESS``) for an address that is not ``"auto"`` or
+    ``"HOST:PORT"``.
+    """
+    if ray_address is not None:
+        return check_ray_address(ray_address, "ray_address"), "ray_address"
+    value = environ.get("RAY_ADDRESS", "").strip()
+    if value in ("", "local"):
+        return None, ""
+    return check_ray_address(value, "RAY_ADDRESS"), "RAY_ADDRESS"
+
+
+def cluster_cpus(resources: Mapping[str, float]) -> int:
+    """The CPUs of a cluster (``ray.cluster_resources()``: the total over its live nodes); at least 1."""
+    return max(1, int(resources.get("CPU", 0)))
+
+
+def plan_chunks(episodes: int, chunks: int) -> list[tuple[int, int]]:
+    """Split ``range(episodes)`` into ``min(chunks, episodes)`` contiguous spans ``(a, b)``.
+
+    The spans cover every episode once, in order, and their sizes differ by at most one.
+    """
+    count = max(1, min(chunks, episodes))
+    bounds = np.linspace(0, episodes, count + 1).astype(int)
+    return list(itertools.pairwise(int(b) for b in bounds))
+
+
+def _check_reachable(address: str, name: str) -> None:
+    """``ValueError`` naming ``name`` when nothing answers at ``HOST:PORT`` (fast, unlike ``ray.init``)."""
+    host, _, port = address.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=CONNECT_TIMEOUT).close()
+    except OSError as exc:
+        raise ValueError(
+            f"{name}: expected the address of a running Ray cluster (`ray start --head` prints it), got "
+            f"{address!r}, where nothing answers ({type(exc).__name__}: {exc})"
+        ) from None
+
+
+def _canonical(address: str, local_ip: str) -> tuple[str, str]:
+    """``(ip, port)`` of ``HOST:PORT``, this machine's loopback names mapped to ``local_ip``."""
+    host, _, port = address.rpartition(":")
+    try:
+        ip = socket.gethostbyname(host.strip("[]"))
+    except OSError:
+        ip = host
+    return (local_ip if ip.startswith("127.") or ip in ("::1", "localhost") else ip), port
 
 
 def _ray_chunk(
@@ -43,28 +116,85 @@ def _ray_chunk(
 
 
 class RayBackend(Backend):
-    """Ray tasks, ``workers`` chunks per batch (default: the cluster's CPU count)."""
+    """Ray tasks, one chunk of episodes per cluster CPU (``workers`` chunks if given); see the module.
+
+    Attributes
+    ----------
+    cluster : dict
+        What the run used: ``ray`` (``"joined"`` a running cluster, ``"in-process"`` a Ray already
+        initialised, ``"local"`` one started for the run), ``address`` (the cluster's GCS address),
+        ``nodes`` and ``cpus`` (alive when the backend was built). The runner logs it.
+    """
 
     name = "ray"
 
-    def __init__(self, source: EnvSource, retries: int, workers: int | None) -> None:
+    def __init__(
+        self, source: EnvSource, retries: int, workers: int | None, address: str | None = None
+    ) -> None:
         super().__init__(source, retries)
         self._ray = ray = import_optional("ray", "ray")
-        self._owns = not ray.is_initialized()
+        address, origin = resolve_address(address, os.environ)
+        self._shutdown = False  # whether close() calls ray.shutdown() (never stopping a cluster)
         self._watchdog: Watchdog | None = None
-        if self._owns:
+        if ray.is_initialized():
+            self._check_same_cluster(address, origin)
+            kind = "in-process"
+        elif address is not None:
+            self._join(address, origin)
+            kind = "joined"
+        else:
             before = child_pids(os.getpid())
-            ray.init(num_cpus=workers, include_dashboard=False, logging_level="ERROR")
+            ray.init(address="local", num_cpus=workers, include_dashboard=False, logging_level="ERROR")
+            self._shutdown = True
             self._watchdog = Watchdog.start(sorted(child_pids(os.getpid()) - before))
-        self.chunks = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
-        self._source_ref = ray.put(source)
+            kind = "local"
+        self.workers = workers
+        try:
+            nodes = sum(1 for node in ray.nodes() if node.get("Alive"))
+            address = ray.get_runtime_context().gcs_address
+            self.cluster = {"ray": kind, "address": address, "nodes": nodes, "cpus": self._cpus()}
+            self._source_ref = ray.put(source)
+        except BaseException:
+            self.close()
+            raise
         self._key = self._source_ref.hex()
         self._task = ray.remote(num_cpus=1, max_retries=retries)(_ray_chunk)
 
+    def log_entry(self) -> dict[str, Any]:
+        return {"event": "ray", **self.cluster}
+
+    def _join(self, address: str, origin: str) -> None:
+        """Connect this process to the running cluster at ``address`` as a driver."""
+        if address != "auto":
+            _check_reachable(address, origin)
+        try:
+            self._ray.init(address=address, logging_level="ERROR")
+        except Exception as exc:  # Ray raises ConnectionError, AuthenticationError, RuntimeError, ...
+            raise RuntimeError(
+                f"{origin}: could not join the Ray cluster at {address!r} ({type(exc).__name__}: "
+                f"{str(exc).splitlines()[0] if str(exc) else ''}); a cluster with token authentication "
+                "needs RAY_AUTH_MODE=token and its token here (see docs/runner.md)"
+            ) from None
+        self._shutdown = True  # disconnects this driver only; the cluster keeps running
+
+    def _check_same_cluster(self, address: str | None, origin: str) -> None:
+        """``RuntimeError`` if the Ray initialised in this process is not the cluster at ``address``."""
+        if address is None or address == "auto" or origin != "ray_address":
+            return
+        joined = self._ray.get_runtime_context().gcs_address
+        local_ip = joined.rpartition(":")[0]
+        if _canonical(address, local_ip) != _canonical(joined, local_ip):
+            raise RuntimeError(
+                f"ray_address: expected the cluster this process already joined ({joined!r}), got "
+                f"{address!r}; call ray.shutdown() first to join another cluster"
+            )
+
+    def _cpus(self) -> int:
+        return cluster_cpus(self._ray.cluster_resources())
+
     def evaluate(self, seeds: NDArray[np.int64], contexts: Array, params: Array, label: str) -> Array:
         ray = self._ray
-        bounds = np.linspace(0, len(seeds), min(self.chunks, len(seeds)) + 1).astype(int)
-        spans = list(itertools.pairwise(int(b) for b in bounds))
+        spans = plan_chunks(len(seeds), self.workers or self._cpus())
         key, ref, tries = self._key, self._source_ref, self.retries
         task = self._task.remote
         refs = [task(key, ref, seeds[a:b], contexts[a:b], params[a:b], a, label, tries) for a, b in spans]
@@ -83,9 +213,9 @@ class RayBackend(Backend):
         return np.concatenate(returns)
 
     def close(self) -> None:
-        if self._owns and self._ray.is_initialized():
+        if self._shutdown and self._ray.is_initialized():
             self._ray.shutdown()
         if self._watchdog is not None:
             self._watchdog.release()
             self._watchdog = None
-        self._owns = False
+        self._shutdown = False

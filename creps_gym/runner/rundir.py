@@ -33,6 +33,7 @@ import re
 import sys
 import warnings
 import zlib
+from dataclasses import replace
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
@@ -178,7 +179,13 @@ class RunDir:
         return document
 
     def config(self) -> RunConfig:
-        """The run's configuration, checked by :func:`~creps_gym.runner.trust.check_trusted`."""
+        """The run's configuration, checked by :func:`~creps_gym.runner.trust.check_trusted`.
+
+        Its ``ray_address`` is None: ``config.json`` records the cluster a run was started on, but a run
+        directory never chooses the Ray cluster a resumed run joins (connecting to a cluster lets it run
+        code in this process, and clusters come and go). A resume joins ``RAY_ADDRESS``'s cluster, or an
+        initialised Ray, else starts a local one; the history is the same on any of them.
+        """
         try:
             config = RunConfig.from_dict(self.document()["config"])
         except (TypeError, ValueError) as exc:
@@ -186,7 +193,7 @@ class RunDir:
                 raise
             raise self.damaged(self.CONFIG, exc, "restore it from a backup or start a new run") from None
         check_trusted(config, str(self.file(self.CONFIG)))
-        return config
+        return replace(config, ray_address=None)
 
     # -- log -------------------------------------------------------------------------------------------------
     def append_log(self, entry: dict[str, Any]) -> None:

@@ -5,7 +5,8 @@ cluster tests start a real 2-node cluster on this machine: ``ray start --head --
 node ``ray start --address=HEAD --num-cpus=1``, both with ``--block`` in sessions of their own, every port
 chosen free, and a temporary ``--temp-dir`` (so Ray's "latest cluster" file, which a bare ``ray.init()``
 elsewhere on the machine would read, is never written to ``/tmp/ray``). Token authentication is off for
-this private cluster (``RAY_AUTH_MODE=disabled``), so the test needs no token.
+this private cluster (``RAY_AUTH_MODE=disabled``), so the test needs no token; the test process is set to
+the same mode while the cluster runs (a local ``ray.init`` of an earlier test turns token mode on).
 
 Clean-up never uses ``ray stop``, which stops every Ray on the machine: the fixture stops exactly the
 process trees of the two ``ray start`` processes it launched (:func:`creps_gym.runner.watchdog.process_tree`
@@ -157,7 +158,7 @@ class Probe(ContextualEpisodicEnv):
             _wait_for([self.hang])
 
 
-def _wait_for(paths: list[str], seconds: float = 60.0) -> None:
+def _wait_for(paths: list[str], seconds: float = 20.0) -> None:
     """Wait until every file in ``paths`` exists (at most ``seconds``: the test then fails, never hangs)."""
     deadline = time.monotonic() + seconds
     while not all(os.path.exists(path) for path in paths) and time.monotonic() < deadline:
@@ -205,11 +206,22 @@ def cluster():
     if not os.path.isdir("/proc"):
         pytest.skip("the cluster's clean-up needs Linux's /proc")
     ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the workers cannot import this file
+    if ray.is_initialized():
+        pytest.skip("a Ray is initialised in this process: the runner would use it instead of the cluster")
+    auth_mode = os.environ.get("RAY_AUTH_MODE")
     directory = Path(tempfile.mkdtemp(prefix="crg"))  # short: Ray's socket paths must fit in 107 bytes
-    head_args = ["--head", f"--port={_free_port()}", f"--temp-dir={directory}", "--include-dashboard=false"]
-    head = _ray_start(directory, "head", *head_args, f"--dashboard-port={_free_port()}")
-    nodes, watchdog = {"head": head}, None
+    nodes, watchdog = {}, None
     try:
+        _set_auth_mode(
+            ray, "disabled"
+        )  # the cluster's (a local ray.init earlier in this process set "token")
+        head_args = [
+            "--head",
+            f"--port={_free_port()}",
+            f"--temp-dir={directory}",
+            "--include-dashboard=false",
+        ]
+        nodes["head"] = head = _ray_start(directory, "head", *head_args, f"--dashboard-port={_free_port()}")
         address_file = directory / "ray_current_cluster"
         _wait(address_file.exists, 120, "the head node did not start", head, directory / "head.out")
         address = address_file.read_text().strip()
@@ -229,6 +241,22 @@ def cluster():
         if watchdog is not None:
             watchdog.stop_watched()  # anything the trees lost on the way (nothing, normally)
         shutil.rmtree(directory, ignore_errors=True)
+        _set_auth_mode(ray, auth_mode)
+
+
+def _set_auth_mode(ray, mode: str | None) -> None:
+    """Set this process's Ray token-authentication mode (None: unset), as Ray's own tests do.
+
+    A driver whose mode differs from the cluster's reaches the cluster, but the cluster's workers cannot
+    call back into it (a task then fails to fetch its ``ray.put`` arguments: "the object's owner has
+    exited"). The C++ side caches the mode, so it is re-read explicitly.
+    """
+    if mode is None:
+        os.environ.pop("RAY_AUTH_MODE", None)
+    else:
+        os.environ["RAY_AUTH_MODE"] = mode
+    ray._raylet.Config.initialize("")
+    ray._raylet.AuthenticationTokenLoader.instance().reset_cache()
 
 
 def _crash_at(iteration: int):

@@ -369,25 +369,6 @@ def test_save_video_rejects_bad_input(tmp_path):
         save_video([], tmp_path / "kick.gif")
 
 
-def test_reproduction_script_runs_and_resumes(tmp_path):
-    """benchmarks/kick/run.py on a tiny budget: results, summary and figure; a rerun reads them back."""
-    pytest.importorskip("matplotlib")
-    script = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "kick", "run.py")
-    args = [sys.executable, script, "--only", "precision", "--iterations", "2", "--trials", "1"]
-    args += ["--threads", "1", "--out", str(tmp_path)]
-    first = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
-    assert first.returncode == 0, first.stderr[-2000:]
-    out = tmp_path / "custom_i2_t1"
-    result = out / "precision" / "rbf_trial0.json"
-    assert result.exists() and (out / "fig5c_precision.png").stat().st_size > 10_000
-    assert "precision (paper: 0.34" in (out / "summary.md").read_text()
-    written = result.read_text()
-    second = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
-    assert second.returncode == 0, second.stderr[-2000:]
-    assert result.read_text() == written  # cached: not recomputed
-    assert first.stdout.splitlines()[-3:] == second.stdout.splitlines()[-3:]
-
-
 def test_flexibility_v1_pays_forward_distance_only(flexibility):
     forward_only = gym.make("creps_gym/KickFlexibility-v1", num_threads=1).unwrapped
     contexts = np.array([[0.2, -0.05], [0.2, -0.05]])

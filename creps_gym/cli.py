@@ -313,17 +313,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from creps_gym.runner.callbacks import ProgressBar
     from creps_gym.runner.config import RunConfig
     from creps_gym.runner.loop import Runner
-    from creps_gym.runner.rundir import RunDir
+    from creps_gym.runner.session import RunDirError
 
     _import_modules(args)
     options = {f.name: getattr(args, f.name) for f in fields(RunConfig) if hasattr(args, f.name)}
     options.update(optimizer_options=dict(args.opt), env_kwargs=dict(args.env_kwarg))
     try:
         config = RunConfig(**options)
-        runner = Runner(config, callbacks=[ProgressBar(args.progress)])
+        runner = Runner(
+            config, callbacks=[ProgressBar(args.progress)], run_dir=args.out, overwrite=args.overwrite
+        )
+    except RunDirError:
+        raise
     except (ValueError, TypeError) as exc:
         raise _as_usage_error(exc, args) from None
-    runner.run_dir = RunDir.create(args.out, config, runner.history.meta, overwrite=args.overwrite)
     return _finish(runner, args)
 
 

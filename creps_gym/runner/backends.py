@@ -51,6 +51,7 @@ __all__ = [
     "SerialBackend",
     "VectorBackend",
     "episode_return",
+    "has_native_vector",
     "make_backend",
     "reset_context",
     "retry",
@@ -71,6 +72,8 @@ class EnvSource:
     env_id: str | None = None
     kwargs: dict[str, Any] = field(default_factory=dict)
     env: Any = None
+    #: Episodes reset with ``options={"context": ...}`` as well as their seed (batched context draws).
+    set_context: bool = False
 
     def make(self) -> gym.Env:
         """A fresh env (the object itself for object sources)."""
@@ -140,9 +143,20 @@ def episode_return(reward: Any) -> float:
     return value
 
 
-class CheckedReward(gym.Wrapper):
-    """Checks each reward with :func:`episode_return` inside a vector env's sub-env (where the vector env
-    would otherwise store a str or bool reward as a float)."""
+class SubEnvEpisode(gym.Wrapper):
+    """The runner's wrapper of a Sync/Async vector env's sub-envs.
+
+    It checks each reward with :func:`episode_return` (the vector env would otherwise store a str or bool
+    reward as a float), and a reset with ``options={"contexts": {seed: context}}`` (the batch's table,
+    the same for every sub-env) resets with the sub-env's own context: ``reset(seed=seed,
+    options={"context": table[seed]})``.
+    """
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
+        """Reset; a ``"contexts"`` table picks this sub-env's context by its seed."""
+        if options is not None and "contexts" in options:
+            options = {"context": options["contexts"][seed]}
+        return self.env.reset(seed=seed, options=options)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
         """Step the env and check its reward."""
@@ -164,8 +178,8 @@ def reset_context(env: gym.Env, seed: int, retries: int, where: str) -> Any:
     return obs
 
 
-def _one_episode(env: gym.Env, seed: int, context: Array, params: Array) -> float:
-    obs, _ = env.reset(seed=int(seed))
+def _one_episode(env: gym.Env, seed: int, context: Array, params: Array, set_context: bool) -> float:
+    obs, _ = env.reset(seed=int(seed), options={"context": context} if set_context else None)
     _check_context(obs, context, "reset")
     _, reward, terminated, truncated, _ = env.step(params)
     if not (terminated or truncated):
@@ -174,7 +188,15 @@ def _one_episode(env: gym.Env, seed: int, context: Array, params: Array) -> floa
 
 
 def run_episodes(
-    env: gym.Env, seeds: Any, contexts: Array, params: Array, *, first: int, label: str, retries: int
+    env: gym.Env,
+    seeds: Any,
+    contexts: Array,
+    params: Array,
+    *,
+    first: int,
+    label: str,
+    retries: int,
+    set_context: bool = False,
 ) -> Array:
     """Run episodes one by one with the retry policy of the module docstring.
 
@@ -190,6 +212,8 @@ def run_episodes(
     label : str
         E.g. ``"iteration 3"``.
     retries : int
+    set_context : bool
+        Reset with ``options={"context": ...}`` too (the contexts came from a batched draw).
 
     Returns
     -------
@@ -200,7 +224,8 @@ def run_episodes(
         where = _episode_text(label, first + k, int(seed), contexts[k])
         try:
             ok, value, last = retry(
-                lambda k=k, seed=seed: _one_episode(env, int(seed), contexts[k], params[k]), retries + 1
+                lambda k=k, seed=seed: _one_episode(env, int(seed), contexts[k], params[k], set_context),
+                retries + 1,
             )
         except EpisodeError as exc:
             raise EpisodeError(f"{where}: {exc}") from None
@@ -239,7 +264,16 @@ class SerialBackend(Backend):
         self.env = env if env is not None else source.make()
 
     def evaluate(self, seeds: NDArray[np.int64], contexts: Array, params: Array, label: str) -> Array:
-        return run_episodes(self.env, seeds, contexts, params, first=0, label=label, retries=self.retries)
+        return run_episodes(
+            self.env,
+            seeds,
+            contexts,
+            params,
+            first=0,
+            label=label,
+            retries=self.retries,
+            set_context=self.source.set_context,
+        )
 
 
 class VectorBackend(Backend):
@@ -271,7 +305,7 @@ class VectorBackend(Backend):
 
     def _make_vec(self) -> Any:
         modes = {"native": "vector_entry_point", "sync": "sync", "async": "async"}
-        wrappers = None if self.mode == "native" else [CheckedReward]
+        wrappers = None if self.mode == "native" else [SubEnvEpisode]
         return gym.make_vec(
             self.source.spec(),
             self.num_envs,
@@ -307,7 +341,9 @@ class VectorBackend(Backend):
         if self.mode == "native":
             obs, _ = self._vec.reset(options={"context": contexts})
         else:
-            obs, _ = self._vec.reset(seed=[int(s) for s in seeds])
+            table = {"contexts": dict(zip(map(int, seeds), contexts, strict=True))}
+            options = table if self.source.set_context else None
+            obs, _ = self._vec.reset(seed=[int(s) for s in seeds], options=options)
         got = np.asarray(obs, dtype=np.float64).reshape(len(seeds), -1)
         if got.shape != contexts.shape or not np.array_equal(got, contexts):
             for k in range(len(seeds)):  # find and name the first sub-env that differs
@@ -341,7 +377,14 @@ class VectorBackend(Backend):
         if self._single is None:
             self._single = self.source.make()
         return run_episodes(
-            self._single, seeds[a:b], contexts[a:b], params[a:b], first=a, label=label, retries=self.retries
+            self._single,
+            seeds[a:b],
+            contexts[a:b],
+            params[a:b],
+            first=a,
+            label=label,
+            retries=self.retries,
+            set_context=self.source.set_context,
         )
 
     def close(self) -> None:
@@ -351,6 +394,14 @@ class VectorBackend(Backend):
                 vec.close()
             except Exception:  # a broken async env may fail to close; it is discarded either way
                 pass
+
+
+def has_native_vector(source: EnvSource) -> bool:
+    """Whether ``source`` is a registered id with a native vector entry point and no added wrappers."""
+    if source.env_id is None:
+        return False
+    spec = gym.spec(source.env_id)
+    return spec.vector_entry_point is not None and not spec.additional_wrappers
 
 
 def make_backend(
@@ -363,7 +414,13 @@ def make_backend(
     samples: int,
     env: gym.Env | None = None,
 ) -> Backend:
-    """Build a backend by name (``"serial"``, ``"vector"`` or ``"ray"``)."""
+    """Build a backend by name (``"auto"``, ``"serial"``, ``"vector"`` or ``"ray"``).
+
+    ``"auto"`` is the fastest correct backend: the native vector env of a registered id that has one
+    (:func:`has_native_vector`), else ``"serial"``.
+    """
+    if name == "auto":
+        name = "vector" if has_native_vector(source) else "serial"
     if name == "serial":
         return SerialBackend(source, retries, env)
     if name == "vector":
@@ -372,4 +429,4 @@ def make_backend(
         from creps_gym.runner.ray_backend import RayBackend  # imports Ray only when asked for
 
         return RayBackend(source, retries, workers)
-    raise ValueError(f"backend: expected one of ['serial', 'vector', 'ray'], got {name!r}")
+    raise ValueError(f"backend: expected one of ['auto', 'serial', 'vector', 'ray'], got {name!r}")

@@ -111,6 +111,16 @@ class FixedContexts(_ContextChoice, gym.utils.RecordConstructorArgs):
         contexts, index = self.source.draw(self.np_random, 1)
         return contexts[0], {"context_index": int(index[0])}
 
+    def sample_contexts(self, rng: np.random.Generator, n: int) -> Array:
+        """``n`` contexts (n, z) as ``n`` resets after a seeded one choose them, drawn with ``rng``.
+
+        A cycle starts at the first context; ``"random"`` draws the indices from ``rng``. The wrapper's
+        own state is untouched (the runner draws an iteration's contexts with one call).
+        """
+        m = self.source.contexts.shape[0]
+        index = rng.integers(0, m, size=n) if self.source.order == "random" else np.arange(n) % m
+        return self.source.contexts[index]
+
 
 class SampleContexts(_ContextChoice, gym.utils.RecordConstructorArgs):
     """Draw every episode's context from ``sampler(env.np_random, 1)``.
@@ -133,6 +143,10 @@ class SampleContexts(_ContextChoice, gym.utils.RecordConstructorArgs):
 
     def _choose(self) -> tuple[Array, dict[str, Any]]:
         return checked_samples(self.sampler, self.np_random, 1, self.model)[0], {}
+
+    def sample_contexts(self, rng: np.random.Generator, n: int) -> Array:
+        """``n`` contexts (n, z) from ``sampler(rng, n)``, checked against the env's context box."""
+        return checked_samples(self.sampler, rng, n, self.model)
 
 
 class HideContext(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):

@@ -49,7 +49,9 @@ class PlainLoop:
         self.model = contextual_model(self.vec)
         self.rng, optimizer_seed, eval_seed = split_seed(seed)
         mean, std = self.model.initial_distribution()
-        self.optimizer = make_optimizer(OPTIMIZER, p, z, optimizer_seed, initial_mean=mean, initial_cov=std**2)
+        self.optimizer = make_optimizer(
+            OPTIMIZER, p, z, optimizer_seed, initial_mean=mean, initial_cov=std**2
+        )
         self.test = test_contexts(self.model, eval_contexts, eval_seed)
         self.samples = samples
 

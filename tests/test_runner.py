@@ -33,7 +33,7 @@ from creps_gym.runner import (
     split_seed,
     write_iohanalyzer,
 )
-from creps_gym.runner.rundir import history_crc
+from creps_gym.runner.recovery import history_crc
 
 SMALL = {"env_kwargs": {"dim": 4}}
 

@@ -18,9 +18,8 @@ times, then :class:`~creps_gym.runner.backends.EpisodeError`); episodes follow t
 bit-identical :class:`~creps_gym.runner.history.History` (wall times aside) on every backend and after any
 resume.
 
-**Checkpoints** hold the optimiser's state and the loop's (env stream, counts, wall time, stop reason and
-a checksum of the records so far), so they cost O(1) in the run's length; a resume rebuilds the history
-from the append-only log and checks it against that checksum.
+**Checkpoints** hold the optimiser's and the loop's state (env stream, counts, wall time, stop reason, a
+checksum of the records): O(1) in the run's length. A resume rebuilds the history from the log.
 
 **Stop reasons** (``History.stop_reason``): ``"iterations"``, ``"max_episodes"`` (the next iteration would
 exceed the budget), ``"target_regret"``, ``"max_time"``, ``"optimizer: <criteria>"`` (the optimiser's own
@@ -50,7 +49,8 @@ from creps_gym.runner.checks import check_batch_size, check_optimizer, unwrapped
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
 from creps_gym.runner.history import History, IterationRecord
-from creps_gym.runner.rundir import REBUILD, RESTART, RunDir, RunDirError, chain_crc, history_crc
+from creps_gym.runner.recovery import REBUILD, chain_crc, checkpoint_history, history_crc
+from creps_gym.runner.rundir import RESTART, RunDir, RunDirError
 from creps_gym.runner.session import DeferredInterrupt
 from creps_gym.runner.trust import check_run_memory
 
@@ -231,7 +231,7 @@ class Runner:
             return history
         damaged: list[int] = []
         records, _ = run_dir.read_log(damaged)
-        history = run_dir.checkpoint_history(state, records)
+        history = checkpoint_history(run_dir, state, records)
         if history is None:
             found = f"damaged lines {damaged}" if damaged else "a truncated log"
             count = state["iteration"]

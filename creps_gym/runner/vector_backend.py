@@ -13,8 +13,11 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import load_env_creator
+from gymnasium.vector import AutoresetMode
 from numpy.typing import NDArray
 
+from creps_gym.envs.base import ContextualEpisodicVectorEnv
 from creps_gym.runner.backends import (
     Array,
     Backend,
@@ -84,8 +87,21 @@ class VectorBackend(Backend):
             self.num_envs,
             vectorization_mode=modes[self.mode],
             wrappers=wrappers,
+            **self._no_autoreset(),
             **self.source.kwargs,
         )
+
+    def _no_autoreset(self) -> dict[str, Any]:
+        """A creps_gym native vector env need not draw the next contexts after each step: the backend
+        sets them at every reset (``DISABLED`` autoreset mode)."""
+        if self.mode != "native":
+            return {}
+        spec = self.source.spec()
+        creator = (gym.spec(spec) if isinstance(spec, str) else spec).vector_entry_point
+        if isinstance(creator, str):
+            creator = load_env_creator(creator)
+        ours = isinstance(creator, type) and issubclass(creator, ContextualEpisodicVectorEnv)
+        return {"autoreset_mode": AutoresetMode.DISABLED} if ours else {}
 
     def _build(self, env_name: str) -> Any:
         """The first vector env, with set-up errors named as such."""

@@ -570,3 +570,22 @@ def test_ccmaes_cells_count_a_run_that_ended_early_under_a_smaller_budget() -> N
     assert run.group([("c-cma-es-reuse", spec)], [early]) == {("Rosenbrock", 1, "c-cma-es-reuse"): [early]}
     other = dataclasses.replace(spec, options={"restarts": 1})
     assert run.group([("c-cma-es-reuse", other)], [early]) == {}
+
+
+def test_runner_overhead_script_prints_the_ratio_and_the_checkpoint_costs() -> None:
+    result = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "runner_overhead.py"), "--quick"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        cwd=REPO,
+    )
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    first = next(i for i, line in enumerate(lines) if "runner ms" in line) + 1
+    ratio = lines[first].split()
+    assert ratio[:3] == ["15", "50", "1"] and float(ratio[-1]) > 0
+    below = next(i for i, line in enumerate(lines) if "checkpoint ms" in line) + 1
+    costs = [line.split() for line in lines[below:]]
+    assert [row[0] for row in costs] == ["10", "100"] and all(float(row[1]) > 0 for row in costs)

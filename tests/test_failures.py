@@ -100,10 +100,10 @@ def test_evaluation_goes_through_the_users_reward_wrapper():
     runner = Runner(RunConfig(None, None, 1, 10, 0), env=env, optimizer=CREPSCMA(3, 1, seed=0))
     params = runner.optimizer.recommend(runner.test_contexts)
     by_hand = []
-    for seed, context, theta in zip(runner._eval_seeds, runner.test_contexts, params, strict=True):
+    for seed, context, theta in zip(runner.eval_seeds, runner.test_contexts, params, strict=True):
         assert np.array_equal(env.reset(seed=int(seed))[0], context)
         by_hand.append(env.step(theta)[1])
-    assert runner._evaluate() == (np.mean(by_hand), pytest.approx(math.nan, nan_ok=True))
+    assert runner.evaluate() == (np.mean(by_hand), pytest.approx(math.nan, nan_ok=True))
 
 
 def test_model_preserving_wrappers_keep_the_regret_evaluation():

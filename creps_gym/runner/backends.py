@@ -1,14 +1,17 @@
 """Evaluation backends: where an iteration's episodes run.
 
-An episode is identified by its reset seed and its parameters. The runner draws one seed per episode from
-its env stream and reads the context from ``env.reset(seed=seed)`` in the main process; a backend's worker
-replays ``reset(seed=seed)`` (and checks it gives the same context) then ``step(params)``. Every backend
-therefore computes the same returns, bit for bit, in the same order:
+An episode is identified by its reset seed, its context and its parameters (the runner draws them, see
+:mod:`creps_gym.runner.contexts`). A backend's worker resets with the seed (and, for batched context
+draws, ``options={"context": context}``), checks the reset gives the recorded context, then steps with the
+parameters. Every backend therefore computes the same returns, bit for bit, in the same order:
 
+* ``auto`` (the default): ``vector`` with the native vector env for a registered id that has one, else
+  ``serial``.
 * ``serial``: one env in the main process.
 * ``vector``: a Gymnasium vector env. The native one (``vector_entry_point``, one batched ``evaluate`` call,
   contexts set through ``reset(options={"context": ...})``) where registered, else ``AsyncVectorEnv`` (or
-  ``SyncVectorEnv`` with ``vector_mode="sync"``) reset with the per-episode seeds.
+  ``SyncVectorEnv`` with ``vector_mode="sync"``) reset with the per-episode seeds (and contexts), see
+  :mod:`.vector_backend`.
 * ``ray``: Ray tasks (``pip install creps-gym[ray]``), one chunk of episodes per task; Ray is imported only
   when this backend is built. An already initialised Ray (e.g. ``ray.init(address=...)`` for a cluster) is
   used as is; otherwise a local instance is started and shut down by ``RayBackend.close``, with a watchdog

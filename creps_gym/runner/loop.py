@@ -57,7 +57,6 @@ from creps_gym.runner.trust import check_run_memory
 __all__ = ["Runner", "default_initial_distribution", "split_seed"]
 
 Array = NDArray[np.float64]
-_STATE_ERRORS = (KeyError, TypeError, ValueError, IndexError, AttributeError)
 
 
 class Runner:
@@ -175,10 +174,11 @@ class Runner:
         return self._model is not None and callable(getattr(self._model, "regret", None))
 
     def _test_contexts(self, seed: int) -> Array:
+        """The test contexts; ``eval_seeds`` are the reset seeds of test episodes (envs without a model)."""
+        self.eval_seeds = np.random.default_rng(seed).integers(0, 2**63 - 1, size=self.config.eval_contexts)
         if self._model is not None:
             return test_contexts(self._model, self.config.eval_contexts, seed)
-        self._eval_seeds = np.random.default_rng(seed).integers(0, 2**63 - 1, size=self.config.eval_contexts)
-        return self.draws.reset_contexts(self._eval_seeds, "evaluation")
+        return self.draws.reset_contexts(self.eval_seeds, "evaluation")
 
     def _meta(self) -> dict[str, Any]:
         return {
@@ -220,7 +220,7 @@ class Runner:
             self._elapsed_before = float(state["elapsed"])
         except RunDirError:
             raise
-        except _STATE_ERRORS as exc:
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
             raise run_dir.damaged(RunDir.CHECKPOINT, exc, RESTART) from None
 
     def _checkpoint_history(self, run_dir: RunDir, state: dict[str, Any]) -> History:
@@ -262,7 +262,7 @@ class Runner:
         return self._elapsed_before + time.perf_counter() - self._clock
 
     # -- one iteration ---------------------------------------------------------------------------------------
-    def _evaluate(self) -> tuple[float, float]:
+    def evaluate(self) -> tuple[float, float]:
         """Mean return and mean regret (NaN if none) of the recommended policy on the test contexts.
 
         A failure is retried like an episode's (``config.retries`` times), then raises EpisodeError.
@@ -283,7 +283,7 @@ class Runner:
         params = np.asarray(self.optimizer.recommend(self.test_contexts), dtype=np.float64)
         returns = run_episodes(
             self.env,
-            self._eval_seeds,
+            self.eval_seeds,
             self.test_contexts,
             params,
             first=0,
@@ -315,7 +315,7 @@ class Runner:
         reason = self._stop_before_evaluation()
         eval_return = eval_regret = math.nan
         if reason is not None or self.iteration % self.config.eval_every == 0:
-            eval_return, eval_regret = self._evaluate()
+            eval_return, eval_regret = self.evaluate()
             target = self.config.target_regret
             if reason is None and target is not None and eval_regret <= target:
                 reason = "target_regret"

@@ -10,9 +10,11 @@ file                      content
                           (:meth:`IterationRecord.to_dict`) or an event (``{"event": "start" | "resume" |
                           "end", ...}``). After a resume, iterations done after the last checkpoint appear
                           again; :meth:`RunDir.read_log` keeps the last copy of each iteration.
-``checkpoint.npz``        the last checkpoint (``.npz`` arrays + one embedded JSON document, never pickle),
-                          replaced atomically (temporary file + rename; the run's own temporaries left by
-                          a killed process are removed when the run resumes). It records the run's
+``checkpoint.npz``        the last checkpoint (format ``creps_gym.run/3``: ``.npz`` arrays + one embedded
+                          JSON document, never pickle), replaced atomically (temporary file + rename; the
+                          run's own temporaries left by a killed process are removed when the run
+                          resumes). It holds the optimiser's and the loop's state, not the history (that
+                          is in the log: :mod:`creps_gym.runner.recovery`), and records the run's
                           :func:`~creps_gym.runner.trust.config_fingerprint`: another run's is refused
 ``run.lock``              the live writer's process id (see :mod:`creps_gym.runner.session`)
 ``history.json`` / .csv   the final :class:`~creps_gym.runner.history.History` (written at the end)

@@ -231,14 +231,13 @@ class Runner:
             return history
         damaged: list[int] = []
         records, _ = run_dir.read_log(damaged)
-        history = checkpoint_history(run_dir, state, records)
+        history = checkpoint_history(run_dir, state, records, self._meta())
         if history is None:
             found = f"damaged lines {damaged}" if damaged else "a truncated log"
             count = state["iteration"]
             raise run_dir.damaged(
                 RunDir.LOG, f"iterations 1 to {count} are not all intact ({found})", REBUILD
             )
-        history.meta = self._meta()
         self._log_crc = int(state["log_crc"])
         return history
 

@@ -49,9 +49,14 @@ def _is_final(run_dir: RunDir, final: History, state: dict[str, Any]) -> bool:
 
 
 def checkpoint_history(
-    run_dir: RunDir, state: dict[str, Any], records: list[IterationRecord]
+    run_dir: RunDir,
+    state: dict[str, Any],
+    records: list[IterationRecord],
+    meta: dict[str, Any] | None = None,
 ) -> History | None:
     """The history at the checkpoint ``state``: the first ``state["iteration"]`` ``records`` of the log.
+
+    Its metadata is ``meta``, else the one in ``config.json``.
 
     None if the log lacks one of them (damaged or truncated); :class:`RunDirError` if they are all there
     but differ from those the checkpoint was written after (an edited log or another run's).
@@ -62,7 +67,7 @@ def checkpoint_history(
         return None
     if history_crc(kept) != state["log_crc"]:
         raise run_dir.damaged(run_dir.LOG, f"iterations 1 to {count} differ from those checkpointed", REBUILD)
-    meta = dict(run_dir.document().get("meta", {}))
+    meta = dict(run_dir.document().get("meta", {}) if meta is None else meta)
     return History(list(kept), meta, state["stop_reason"])
 
 

@@ -55,8 +55,8 @@ def run(
         Keyword arguments of ``gymnasium.make`` (id envs) and of the optimiser (name optimisers).
     **options
         The other :class:`~creps_gym.runner.config.RunConfig` fields: ``eval_every``, ``eval_contexts``,
-        ``backend``, ``workers``, ``vector_mode``, ``retries``, ``max_episodes``, ``target_regret``,
-        ``max_time``, ``checkpoint_every``, ``initial_mean``, ``initial_std``.
+        ``context_draws``, ``backend``, ``workers``, ``vector_mode``, ``retries``, ``max_episodes``,
+        ``target_regret``, ``max_time``, ``checkpoint_every``, ``initial_mean``, ``initial_std``.
 
     Returns
     -------

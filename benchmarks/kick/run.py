@@ -46,7 +46,7 @@ SAMPLES = {"precision": 20, "flexibility": 100}
 #: The methods of each experiment: registry name, mean features, options. The CREPS methods use the paper's
 #: RBF features; C-CMA-ES keeps its default affine features, because its mean is a regression on the μ = N/2
 #: selected samples only (μ_eff ≈ 6 at N = 20), too few for 5 RBF coefficients per parameter without a
-#: strong ridge (a 1000-iteration pilot with RBFs and ridge 1e-2 ended at 2.8 m).
+#: strong ridge, which would then pull the mean back towards the reference kick at every update.
 METHODS = {
     "precision": (
         ("c-cma-es", "affine", {}),

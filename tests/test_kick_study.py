@@ -46,6 +46,9 @@ def test_a_finished_run_is_read_back_and_the_seed_changes_it(precision_env, tmp_
     document["values"] = [-1.0] * 10  # a cached result is returned as it is, without training again
     path.write_text(json.dumps(document))
     assert study.train_run(spec, precision_env, 0, 0, tmp_path)["values"] == [-1.0] * 10
+    changed = study.RunSpec("precision", "creps", samples=6, iterations=2, options={"ridge": 1e-3})
+    recomputed = study.train_run(changed, precision_env, 0, 0, tmp_path, checkpoint_every=1)
+    assert recomputed["values"] != [-1.0] * 10 and recomputed["setting"]["options"] == {"ridge": 1e-3}
     other = study.train_run(spec, precision_env, 1, 0, tmp_path / "trial1", checkpoint_every=1)
     assert other["history"]["batch"] != first["history"]["batch"]
 

@@ -140,25 +140,27 @@ def train_run(
 ) -> dict[str, Any]:
     """Train (or resume, or read back) one run and evaluate its mean policy; returns its result document.
 
-    Files under ``folder``: ``<name>-trial<k>.npz`` (optimiser), ``.history.json`` (per iteration: mean
-    return and fall rate of the batch; every ``EVAL_EVERY`` iterations the mean policy's metric) and, when
-    finished, ``.json`` (the result). The run ends at ``spec.iterations`` or when the optimiser's own stop
-    criteria are met.
+    Files under ``folder``: ``<name>-trial<k>.npz`` (optimiser), ``.history.json`` (the setting; per
+    iteration, mean return and fall rate of the batch; every ``EVAL_EVERY`` iterations the mean policy's
+    metric) and, when finished, ``.json`` (the result). A result or checkpoint of another setting (features,
+    options, batch size) is computed again. The run ends at ``spec.iterations`` or when the optimiser's own
+    stop criteria are met.
     """
     folder.mkdir(parents=True, exist_ok=True)
     stem = folder / f"{spec.name}-trial{trial}"
     result_path, ckpt, history_path = (stem.with_suffix(s) for s in (".json", ".npz", ".history.json"))
+    setting = {"features": spec.features, "options": spec.options, "samples": spec.samples}
     if result_path.exists():
         done = json.loads(result_path.read_text())
-        if done["budget_iterations"] == spec.iterations:
+        if done["budget_iterations"] == spec.iterations and done.get("setting") == setting:
             return done
     base_seed = [seed, spec.key, trial]
-    if ckpt.exists():
+    history = json.loads(history_path.read_text()) if ckpt.exists() else {}
+    if history.get("setting") == setting:  # a checkpoint of another setting is started over
         opt = optimizer_class(spec.name).load(ckpt)
-        history = json.loads(history_path.read_text())
     else:
         opt = _new_optimizer(spec, env, int(np.random.SeedSequence(base_seed).generate_state(1)[0]))
-        history = {"batch": [], "evaluations": []}
+        history = {"setting": setting, "batch": [], "evaluations": []}
     history["batch"] = history["batch"][: opt.iteration]
     start = time.perf_counter()
     while opt.iteration < spec.iterations and not opt.stop():
@@ -176,6 +178,7 @@ def train_run(
     result = {
         "experiment": spec.experiment,
         "name": spec.name,
+        "setting": setting,
         "features": spec.features,
         "options": spec.options,
         "trial": trial,

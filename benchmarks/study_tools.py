@@ -255,11 +255,12 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
     """Run a registered optimiser (``spec.method``) through the runner and return its result document.
 
     Episodes run on the functions' native vector env (bit-identical to one env per episode, and about
-    twice as fast); an optimiser with a ``max_std_growth`` option stops a diverging run
-    (:data:`DIVERGENCE_GROWTH`) and never stops on stagnation (:data:`NO_STAGNATION`). With
-    ``checkpoint_dir``, the run checkpoints there (at most
-    :data:`MAX_CHECKPOINTS` times, at least :data:`CHECKPOINT_EVERY` iterations apart) and a run interrupted
-    earlier continues from its last checkpoint instead of restarting.
+    twice as fast). Contexts are read from one seeded reset per episode (``context_draws="reset"``, the
+    runner's stream before issue 14), so every cached document stays what this code computes. An
+    optimiser with a ``max_std_growth`` option stops a diverging run (:data:`DIVERGENCE_GROWTH`) and never
+    stops on stagnation (:data:`NO_STAGNATION`). With ``checkpoint_dir``, the run checkpoints there (at
+    most :data:`MAX_CHECKPOINTS` times, at least :data:`CHECKPOINT_EVERY` iterations apart) and a run
+    interrupted earlier continues from its last checkpoint instead of restarting.
     """
     bounded = is_bounded(spec.function)
     callbacks = () if bounded else (_reached_f_target,)
@@ -294,6 +295,7 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
             eval_contexts=spec.eval_contexts,
             backend="vector",
             vector_mode="native",
+            context_draws="reset",  # the stream the committed run caches were computed with (see below)
             run_dir=checkpoint_dir,
             checkpoint_every=max(CHECKPOINT_EVERY, iterations // MAX_CHECKPOINTS),
             **start,

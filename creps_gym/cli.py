@@ -23,7 +23,6 @@ Exit codes
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -32,6 +31,8 @@ from collections.abc import Sequence
 from dataclasses import fields
 from typing import Any
 
+from creps_gym.cli_types import initial_mean, integer, key_value, numbers, optimizer_name, positive_float
+
 __all__ = ["EXIT_CODES", "build_parser", "main"]
 
 EXIT_CODES = {"ok": 0, "run_failed": 1, "usage": 2, "run_dir": 3, "missing_dependency": 4, "interrupted": 130}
@@ -39,63 +40,6 @@ EXIT_CODES = {"ok": 0, "run_failed": 1, "usage": 2, "run_dir": 3, "missing_depen
 
 class UsageError(Exception):
     """A bad command line (exit code 2)."""
-
-
-# -- argument types: each names what it expected and what it got --------------------------------------------
-def _integer(minimum: int):
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}")
-        return value
-
-    return parse
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not 0 < value < math.inf:
-        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
-    return value
-
-
-def _numbers(text: str) -> float | list[float]:
-    try:
-        values = [float(part) for part in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a number or comma-separated numbers, got {text!r}"
-        ) from None
-    return values[0] if len(values) == 1 else values
-
-
-def _initial_mean(text: str) -> str | float | list[float]:
-    if text == "uniform":
-        return text
-    try:
-        return _numbers(text)
-    except argparse.ArgumentTypeError:
-        raise argparse.ArgumentTypeError(
-            f"expected 'uniform', a number or p comma-separated numbers, got {text!r}"
-        ) from None
-
-
-def _key_value(text: str) -> tuple[str, Any]:
-    key, sep, raw = text.partition("=")
-    if not sep or not key:
-        raise argparse.ArgumentTypeError(
-            f"expected KEY=VALUE (VALUE in JSON or a plain string), got {text!r}"
-        )
-    try:
-        return key, json.loads(raw)
-    except json.JSONDecodeError:
-        return key, raw
 
 
 def _import_modules(args: argparse.Namespace) -> None:
@@ -116,17 +60,6 @@ def _import_modules(args: argparse.Namespace) -> None:
 
                 hint = did_you_mean(args.env, creps_gym.registered_ids())
             raise UsageError(f"argument {flag}: {exc}{hint}") from None
-
-
-def _optimizer_name(text: str) -> str:
-    from creps_gym.optimizers.registry import optimizer_names
-
-    if text not in optimizer_names():
-        from creps_gym.listing import did_you_mean
-
-        names = optimizer_names()
-        raise argparse.ArgumentTypeError(f"expected one of {names}, got {text!r}{did_you_mean(text, names)}")
-    return text
 
 
 # -- parser -------------------------------------------------------------------------------------------------
@@ -156,16 +89,16 @@ def _add_run(commands: Any) -> None:
     )
     required = [
         ("--env", str, "registered env id (see `creps-gym list`), or module:Env-v0"),
-        ("--optimizer", _optimizer_name, "optimiser name (see `creps-gym list`)"),
-        ("--iterations", _integer(1), "maximum number of iterations"),
-        ("--seed", _integer(0), "master seed (>= 0)"),
+        ("--optimizer", optimizer_name, "optimiser name (see `creps-gym list`)"),
+        ("--iterations", integer(1), "maximum number of iterations"),
+        ("--seed", integer(0), "master seed (>= 0)"),
         ("--out", str, "new run directory"),
     ]
     for flag, parse, text in required:
         run.add_argument(flag, required=True, type=parse, help=text)
     run.add_argument(
         "--samples",
-        type=_integer(2),
+        type=integer(2),
         default=None,
         help="episodes per iteration (>= 2; default: the optimiser's recommended batch size)",
     )
@@ -187,16 +120,16 @@ def _add_run(commands: Any) -> None:
         help="vector backend flavour",
     )
     optional = [
-        ("--workers", _integer(1), "vector sub-envs or Ray tasks per iteration"),
-        ("--retries", _integer(0), "re-runs of a failed episode"),
-        ("--eval-every", _integer(1), "evaluate the mean policy every N iterations"),
-        ("--eval-contexts", _integer(1), "number of test contexts"),
-        ("--checkpoint-every", _integer(1), "checkpoint every N iterations"),
-        ("--max-episodes", _integer(2), "episode budget"),
-        ("--target-regret", _positive_float, "stop once the mean regret is at most this"),
-        ("--max-time", _positive_float, "stop after this many seconds"),
-        ("--initial-mean", _initial_mean, "a number, p comma-separated numbers, or 'uniform' in the box"),
-        ("--initial-std", _numbers, "initial standard deviation(s); default: the env-declared one"),
+        ("--workers", integer(1), "vector sub-envs or Ray tasks per iteration"),
+        ("--retries", integer(0), "re-runs of a failed episode"),
+        ("--eval-every", integer(1), "evaluate the mean policy every N iterations"),
+        ("--eval-contexts", integer(1), "number of test contexts"),
+        ("--checkpoint-every", integer(1), "checkpoint every N iterations"),
+        ("--max-episodes", integer(2), "episode budget"),
+        ("--target-regret", positive_float, "stop once the mean regret is at most this"),
+        ("--max-time", positive_float, "stop after this many seconds"),
+        ("--initial-mean", initial_mean, "a number, p comma-separated numbers, or 'uniform' in the box"),
+        ("--initial-std", numbers, "initial standard deviation(s); default: the env-declared one"),
     ]
     for flag, parse, text in optional:
         default = run_defaults[flag[2:].replace("-", "_")]
@@ -205,7 +138,7 @@ def _add_run(commands: Any) -> None:
         run.add_argument(
             flag,
             action="append",
-            type=_key_value,
+            type=key_value,
             default=[],
             metavar="KEY=VALUE",
             help=f"{text}; VALUE is JSON or a string (repeatable)",
@@ -320,17 +253,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from creps_gym.runner.callbacks import ProgressBar
     from creps_gym.runner.config import RunConfig
     from creps_gym.runner.loop import Runner
-    from creps_gym.runner.rundir import RunDir
+    from creps_gym.runner.session import RunDirError
 
     _import_modules(args)
     options = {f.name: getattr(args, f.name) for f in fields(RunConfig) if hasattr(args, f.name)}
     options.update(optimizer_options=dict(args.opt), env_kwargs=dict(args.env_kwarg))
     try:
         config = RunConfig(**options)
-        runner = Runner(config, callbacks=[ProgressBar(args.progress)])
+        runner = Runner(
+            config, callbacks=[ProgressBar(args.progress)], run_dir=args.out, overwrite=args.overwrite
+        )
+    except RunDirError:
+        raise
     except (ValueError, TypeError) as exc:
         raise _as_usage_error(exc, args) from None
-    runner.run_dir = RunDir.create(args.out, config, runner.history.meta, overwrite=args.overwrite)
     return _finish(runner, args)
 
 

@@ -34,13 +34,13 @@ with_baselines = functools.partial(study_tools.execute, baselines=baselines.BASE
 def _script(study: str, *args: str, as_module: bool = False) -> str:
     """Run a study's script from the repository root, by path or as ``python -m benchmarks.<study>.run``."""
     command = ["-m", f"benchmarks.{study}.run"] if as_module else [str(BENCHMARKS / study / "run.py")]
+    return _python(*command, *args)
+
+
+def _python(*args: str, timeout: float = 120) -> str:
+    """Run ``python ARGS`` from the repository root; its standard output (it must succeed)."""
     result = subprocess.run(
-        [sys.executable, *command, *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-        cwd=REPO,
+        [sys.executable, *args], capture_output=True, text=True, timeout=timeout, check=False, cwd=REPO
     )
     assert result.returncode == 0, result.stderr
     return result.stdout
@@ -570,3 +570,13 @@ def test_ccmaes_cells_count_a_run_that_ended_early_under_a_smaller_budget() -> N
     assert run.group([("c-cma-es-reuse", spec)], [early]) == {("Rosenbrock", 1, "c-cma-es-reuse"): [early]}
     other = dataclasses.replace(spec, options={"restarts": 1})
     assert run.group([("c-cma-es-reuse", other)], [early]) == {}
+
+
+def test_runner_overhead_script_prints_the_ratio_and_the_checkpoint_costs() -> None:
+    lines = _python(str(BENCHMARKS / "runner_overhead.py"), "--quick", timeout=300).splitlines()
+    first = next(i for i, line in enumerate(lines) if "runner ms" in line) + 1
+    ratio = lines[first].split()
+    assert ratio[:3] == ["15", "50", "1"] and float(ratio[-1]) > 0
+    below = next(i for i, line in enumerate(lines) if "checkpoint ms" in line) + 1
+    costs = [line.split() for line in lines[below:]]
+    assert [row[0] for row in costs] == ["10", "100"] and all(float(row[1]) > 0 for row in costs)

@@ -158,5 +158,5 @@ def test_config_json_records_the_resolved_configuration(tmp_path):
     document = json.loads((out / RunDir.CONFIG).read_text())
     config = document["config"]
     assert config["optimizer_options"] == {"epsilon": 0.8} and config["initial_std"] == 0.5
-    assert config["env_kwargs"] == {"dim": 4} and config["retries"] == 2 and config["backend"] == "serial"
+    assert config["env_kwargs"] == {"dim": 4} and config["retries"] == 2 and config["backend"] == "auto"
     assert document["meta"]["n_params"] == 4 and document["meta"]["metric"] == "regret"

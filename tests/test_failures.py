@@ -43,13 +43,15 @@ def test_flaky_steps_and_resets_are_retried_alike_on_every_backend_and_lose_no_s
         assert history.equals(references[seed]), seed
 
 
-def test_a_reset_that_keeps_failing_stops_the_run_with_an_episode_error():
-    pattern = (
-        r"iteration 1, episode 0 \(reset seed \d+\): reset failed 2 time\(s\); "
-        r"last error: RuntimeError: simulated reset failure"
-    )
+@pytest.mark.parametrize(
+    ("draws", "where"),
+    [("reset", r"\(reset seed \d+\): reset"),  # the context is read from the reset
+     ("batch", r"\(reset seed \d+, context \[[-0-9.e, ]+\]\)")],  # drawn first: the episode's reset fails
+)  # fmt: skip
+def test_a_reset_that_keeps_failing_stops_the_run_with_an_episode_error(draws, where):
+    pattern = rf"iteration 1, episode 0 {where} failed 2 time\(s\); last error: RuntimeError: simulated reset"
     with pytest.raises(EpisodeError, match=pattern):
-        run(CREPSCMA(2, 1, seed=0), flaky(reset_rate=1.0), 2, 10, 0, retries=1)
+        run(CREPSCMA(2, 1, seed=0), flaky(reset_rate=1.0), 2, 10, 0, retries=1, context_draws=draws)
 
 
 @pytest.mark.parametrize("backend", BACKENDS.values(), ids=BACKENDS)
@@ -98,10 +100,10 @@ def test_evaluation_goes_through_the_users_reward_wrapper():
     runner = Runner(RunConfig(None, None, 1, 10, 0), env=env, optimizer=CREPSCMA(3, 1, seed=0))
     params = runner.optimizer.recommend(runner.test_contexts)
     by_hand = []
-    for seed, context, theta in zip(runner._eval_seeds, runner.test_contexts, params, strict=True):
+    for seed, context, theta in zip(runner.eval_seeds, runner.test_contexts, params, strict=True):
         assert np.array_equal(env.reset(seed=int(seed))[0], context)
         by_hand.append(env.step(theta)[1])
-    assert runner._evaluate() == (np.mean(by_hand), pytest.approx(math.nan, nan_ok=True))
+    assert runner.evaluate() == (np.mean(by_hand), pytest.approx(math.nan, nan_ok=True))
 
 
 def test_model_preserving_wrappers_keep_the_regret_evaluation():

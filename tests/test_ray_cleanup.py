@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from creps_gym.runner.watchdog import Watchdog, _grow, _stat
+from creps_gym.runner.watchdog import Watchdog, process_stat, process_tree
 
 pytestmark = pytest.mark.skipif(not os.path.isdir("/proc"), reason="the watchdog needs Linux's /proc")
 ROOT = Path(__file__).resolve().parent.parent
@@ -33,7 +33,8 @@ def _driver(tmp_path: Path, body: str) -> subprocess.Popen:
 
 
 def _alive(tracked: dict[int, int]) -> list[int]:
-    return [pid for pid, start in tracked.items() if (stat := _stat(pid)) is not None and stat[1] == start]
+    stats = {pid: process_stat(pid) for pid in tracked}
+    return [pid for pid, start in tracked.items() if stats[pid] is not None and stats[pid][1] == start]
 
 
 def _wait_until_gone(tracked: dict[int, int], seconds: float) -> list[int]:
@@ -73,10 +74,9 @@ def test_the_watchdog_stops_the_watched_tree_when_the_driver_is_killed(tmp_path)
         """,
     )
     shell, watchdog = (int(pid) for pid in driver.stdout.readline().split())
-    tracked = {shell: _stat(shell)[1]}
-    _grow(tracked)
+    tracked = process_tree([shell])
     assert len(tracked) == 2  # the shell and its sleep
-    tracked[watchdog] = _stat(watchdog)[1]
+    tracked[watchdog] = process_stat(watchdog)[1]
     driver.kill()
     driver.wait()
     assert _wait_until_gone(tracked, 10.0) == []
@@ -104,8 +104,7 @@ def test_a_killed_driver_leaves_no_ray_process_behind(tmp_path):
             if line.startswith("iteration 3"):
                 break
         time.sleep(1.0)  # the watchdog polls every 0.5 s
-        tracked = {pid: stat[1] for pid in [driver.pid] if (stat := _stat(pid)) is not None}
-        _grow(tracked)
+        tracked = process_tree([driver.pid])
         del tracked[driver.pid]
         names = [Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ") for pid in tracked]
         assert any(b"raylet" in n for n in names) and any(b"creps_gym/runner/watchdog.py" in n for n in names)

@@ -97,7 +97,7 @@ def test_bad_addresses_are_refused_with_their_name(address):
 
 def test_an_address_needs_the_ray_backend(tmp_path, capsys):
     with pytest.raises(
-        ValueError, match=r"^ray_address: expected None unless backend='ray' \(backend is 'serial'"
+        ValueError, match=r"^ray_address: expected None unless backend='ray' \(backend is 'auto'"
     ):
         RunConfig("creps_gym/Sphere-v0", "creps", 2, 10, 0, ray_address="10.0.0.1:6379")
     base = ["run", "--env", "creps_gym/Sphere-v0", "--optimizer", "creps", "--iterations", "2", "--seed", "0"]

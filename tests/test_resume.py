@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import time
@@ -11,7 +12,7 @@ from pathlib import Path
 import pytest
 from helpers import SPHERE, cli_command, marked
 
-from creps_gym.runner import History, RunDir, run
+from creps_gym.runner import History, RunDir, resume, run
 
 if not hasattr(signal, "SIGKILL"):  # pragma: no cover - Windows
     pytest.skip("needs SIGKILL", allow_module_level=True)
@@ -80,3 +81,18 @@ def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(
     # (the first session may be killed before it logs its start)
     assert len(sessions) in (3, 4) and sessions[-1] == "resume" and events[-1]["event"] == "end"
     assert os.listdir(out) and not [name for name in os.listdir(out) if name.endswith(".tmp")]
+
+
+def test_a_format_2_run_directory_resumes_with_its_own_context_stream(tmp_path):
+    """tests/golden/run2 was written by the code before batched draws (see tests/golden/make_run2.py)."""
+    golden = Path(__file__).parent / "golden" / "run2"
+    out = tmp_path / "run"
+    shutil.copytree(golden / "run", out)
+    directory = RunDir.open(out)
+    assert directory.load_checkpoint()[0]["history"]  # a legacy checkpoint: it holds the history
+    assert directory.config().context_draws == "reset"  # its config.json predates the field
+    expected = History.from_json(golden / "expected_history.json")  # the old code's uninterrupted run
+    assert resume(out).equals(expected) and len(expected) == 9
+    state = directory.load_checkpoint()[0]
+    assert "history" not in state and state["iteration"] == 9  # the final checkpoint has today's format
+    assert RunDir.open(out).read_history().equals(expected)

@@ -224,18 +224,33 @@ def damage_log_line(path: Path, iteration: int) -> None:
     path.write_text("".join(lines))
 
 
-def test_load_history_recovers_damaged_log_lines_from_the_checkpoint_and_says_so(tmp_path):
+def test_a_damaged_log_line_ends_the_history_before_it_and_a_resume_refuses_it(tmp_path):
+    """The checkpoint holds no history (O(1) checkpoints): a log line lost before it cannot be recovered."""
     out = make_run(tmp_path / "run", stop_after=5)  # checkpoint at 4, iterations 5 logged after it
     expected = uninterrupted().records[:5]
+    assert History(load_history(out).records).equals(History(expected))
     damage_log_line(out / RunDir.LOG, 2)
-    with pytest.warns(
-        RunDirWarning, match=r"damaged lines \[3\]; the history has iterations 1 to 5 \(4 from"
-    ):
+    said = r"damaged lines \[3\]; logged iterations 3 to 5 follow a gap and are left out; the history has "
+    with pytest.warns(RunDirWarning, match=said + r"iterations 1 to 1$"):
         history = load_history(out)
-    assert History(history.records).equals(History(expected))
-    damage_log_line(out / RunDir.LOG, 5)
-    with pytest.warns(RunDirWarning, match=r"damaged lines \[3, 6\]; the history has iterations 1 to 4"):
-        assert History(load_history(out).records).equals(History(expected[:4]))
+    assert History(history.records).equals(History(expected[:1]))
+    lost = r"log.jsonl: damaged .*iterations 1 to 4 are not all intact \(damaged lines \[3\]\)\); the"
+    with pytest.raises(RunDirError, match=lost):
+        resume(out)
+
+
+def test_a_resume_refuses_a_log_edited_before_the_checkpoint(tmp_path):
+    """A changed record whose line checksum was recomputed still differs from the checkpoint's checksum."""
+    out = make_run(tmp_path / "run", stop_after=5)
+    lines = (out / RunDir.LOG).read_text().splitlines(keepends=True)
+    index = next(i for i, line in enumerate(lines) if line.startswith('{"iteration": 2,'))
+    entry = json.loads(lines[index])
+    entry.pop("crc32")
+    entry["mean_return"] += 1.0
+    RunDir.open(out).append_log(entry)  # a well-formed line: the last copy of iteration 2 counts
+    edited = r"log.jsonl: damaged .*iterations 1 to 4 differ from those checkpointed"
+    with pytest.raises(RunDirError, match=edited):
+        resume(out)
 
 
 def test_export_of_a_damaged_history_json_rebuilds_it_and_warns(tmp_path, capsys):

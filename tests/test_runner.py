@@ -33,6 +33,7 @@ from creps_gym.runner import (
     split_seed,
     write_iohanalyzer,
 )
+from creps_gym.runner.recovery import history_crc
 
 SMALL = {"env_kwargs": {"dim": 4}}
 
@@ -80,14 +81,14 @@ def test_same_seed_gives_a_bit_identical_history_and_another_seed_does_not():
     ids=["native", "sync", "async"],
 )  # fmt: skip
 def test_every_vector_backend_matches_serial_bit_for_bit(backend):
-    serial = run("creps-cma-old", SPHERE, 4, 7, 1, **SMALL)
+    serial = run("creps-cma-old", SPHERE, 4, 7, 1, backend="serial", **SMALL)
     other = run("creps-cma-old", SPHERE, 4, 7, 1, **SMALL, **backend)
     assert other.equals(serial)
 
 
 @pytest.mark.parametrize("env_id", marked(registered_ids()))
 def test_every_registered_env_runs_and_a_chunked_vector_backend_matches_serial(env_id):
-    serial = run("creps-cma-old", env_id, 2, 8, 0, eval_contexts=2)
+    serial = run("creps-cma-old", env_id, 2, 8, 0, eval_contexts=2, backend="serial")
     vector = {"backend": "vector", "workers": 3}  # chunks of 3 + 3 + 2 (padded)
     chunked = run("creps-cma-old", env_id, 2, 8, 0, eval_contexts=2, **vector)
     assert chunked.equals(serial) and len(serial) == 2
@@ -278,7 +279,8 @@ def test_run_directory_contents(tmp_path):
     assert History(records).equals(History(history.records), include_time=True)
     assert [e["event"] for e in events] == ["start", "end"]
     state, optimizer_state = directory.load_checkpoint()
-    assert state["iteration"] == 7 and History.from_dict(state["history"]).equals(history)
+    assert state["iteration"] == 7 and state["stop_reason"] == "iterations" and "history" not in state
+    assert state["log_crc"] == history_crc(history.records)  # the history itself is in the log
     assert optimizer_state["kind"] == "creps-cma"
     assert History.from_json(directory.file(RunDir.HISTORY_JSON)).equals(history, include_time=True)
     with pytest.raises(FileExistsError, match="holds a run"):
@@ -369,10 +371,13 @@ def test_plot_median_and_band_over_seeds_with_a_log_regret_axis(tmp_path):
         plot_histories(runs, band=(0.9, 0.1))
 
 
+BACKEND_ERROR = r"backend: expected one of \['auto', 'serial', 'vector', 'ray'\], got 'gpu'"
+
+
 @pytest.mark.parametrize(
     ("kwargs", "error", "match"),
     [({"samples": 1}, ValueError, "samples: expected an integer >= 2, got 1"),
-     ({"backend": "gpu"}, ValueError, r"backend: expected one of \['serial', 'vector', 'ray'\], got 'gpu'"),
+     ({"backend": "gpu"}, ValueError, BACKEND_ERROR),
      ({"max_episodes": 5}, ValueError, "max_episodes: expected at least one iteration's samples"),
      ({"initial_std": [1.0, -1.0]}, ValueError, "initial_std: expected a number or a list of positive"),
      ({"target_regret": math.nan}, ValueError, "target_regret: expected a positive finite number"),

@@ -322,3 +322,20 @@ def test_check_env_on_every_wrapped_registered_id(env_id):
     fixed = FixedContexts(make_or_skip(env_id), np.vstack([low, high]), order="random")
     check_env(fixed, skip_render_check=True)
     assert fixed.reset(seed=1)[1]["context_index"] in (0, 1)
+
+
+def test_one_model_lookup_with_one_message_for_every_kind():
+    from creps_gym.envs.evaluation import contextual_model
+
+    env = gym.make("creps_gym/Sphere-v0", dim=3)
+    vec = gym.make_vec("creps_gym/Sphere-v0", 2, vectorization_mode="vector_entry_point", dim=3)
+    assert contextual_model(env) is env.unwrapped and contextual_model(vec) is vec.unwrapped.model
+    assert contextual_model(env, ("env",)) is env.unwrapped
+    scalar = r"env: HideContext expected a creps_gym ContextualEpisodicEnv \(possibly wrapped\)"
+    with pytest.raises(TypeError, match=scalar + ", got SphereVectorEnv$"):
+        contextual_model(vec, ("env",), user="HideContext")
+    native = r"env: expected a native creps_gym ContextualEpisodicVectorEnv \(possibly wrapped\)"
+    with pytest.raises(TypeError, match=native + ", got SphereEnv$"):
+        contextual_model(env, ("vector",))
+    with pytest.raises(ValueError, match=r"accept: expected a non-empty tuple of \('env', 'vector'\)"):
+        contextual_model(env, ("gpu",))

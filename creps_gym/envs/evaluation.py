@@ -22,12 +22,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from gymnasium.vector import VectorEnv
 from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array, check_positive_int
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv, SupportsRegret
 
-__all__ = ["PolicyEvaluation", "contextual_model", "evaluate_policy", "test_contexts"]
+__all__ = ["MODEL_KINDS", "PolicyEvaluation", "contextual_model", "evaluate_policy", "test_contexts"]
 
 Array = NDArray[np.float64]
 Policy = Callable[[Array], Any]
@@ -75,18 +76,46 @@ class PolicyEvaluation:
         return self.mean_return if self.mean_regret is None else self.mean_regret
 
 
-def contextual_model(env: Any) -> ContextualEpisodicEnv:
-    """The :class:`ContextualEpisodicEnv` behind ``env``: itself, the env under Gymnasium wrappers, or the
-    ``model`` of a (possibly wrapped) native vector env. Raises ``TypeError`` for anything else."""
+MODEL_KINDS = ("env", "vector")
+_KIND_TEXT = {
+    "env": "a creps_gym ContextualEpisodicEnv (possibly wrapped)",
+    "vector": "a native creps_gym ContextualEpisodicVectorEnv (possibly wrapped)",
+}
+
+
+def contextual_model(
+    env: Any, accept: tuple[str, ...] = MODEL_KINDS, *, user: str | None = None
+) -> ContextualEpisodicEnv:
+    """The :class:`ContextualEpisodicEnv` model behind ``env``: the one lookup every module uses.
+
+    Parameters
+    ----------
+    env : gymnasium.Env or gymnasium.vector.VectorEnv
+        A creps_gym env under any Gymnasium wrappers (``accept`` holds ``"env"``), or a native vector env
+        under any vector wrappers, whose ``model`` is returned (``accept`` holds ``"vector"``).
+    accept : tuple of {"env", "vector"}
+        The kinds of env accepted.
+    user : str, optional
+        Who asks (e.g. a wrapper's name), named in the error.
+
+    Raises
+    ------
+    TypeError
+        ``env`` is not of an accepted kind; the message names the kinds and what was given.
+    """
+    if not accept or any(kind not in MODEL_KINDS for kind in accept):
+        raise ValueError(f"accept: expected a non-empty tuple of {MODEL_KINDS}, got {accept!r}")
     base = getattr(env, "unwrapped", env)
-    if isinstance(base, ContextualEpisodicVectorEnv):
+    if "vector" in accept and isinstance(base, ContextualEpisodicVectorEnv):
         return base.model
-    if not isinstance(base, ContextualEpisodicEnv):
-        raise TypeError(
-            "env: expected a creps_gym ContextualEpisodicEnv (possibly wrapped) or a native vector env, "
-            f"got {type(env).__name__}"
-        )
-    return base
+    if "env" in accept and isinstance(base, ContextualEpisodicEnv):
+        return base
+    expected = " or ".join(_KIND_TEXT[kind] for kind in accept)
+    hint = ""
+    if accept == ("vector",) and isinstance(base, VectorEnv):
+        hint = "; for Sync/AsyncVectorEnv wrap each sub-env with the scalar wrapper"
+    who = f"{user} " if user else ""
+    raise TypeError(f"env: {who}expected {expected}, got {type(base).__name__}{hint}")
 
 
 def test_contexts(env: Any, n: int, seed: int) -> Array:

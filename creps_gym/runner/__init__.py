@@ -5,16 +5,18 @@ ask, evaluate, tell), evaluates the recommended policy on fixed test contexts, a
 directory (config, JSONL log, versions, atomic ``.npz`` checkpoints) that :func:`resume` continues. See
 ``docs/runner.md``.
 
-Modules: :mod:`.config` (RunConfig), :mod:`.loop` (the Runner), :mod:`.api` (run, resume),
-:mod:`.history` (History), :mod:`.backends` (serial, vector, Ray), :mod:`.callbacks` (callbacks, progress
-bar), :mod:`.rundir` (run directory), :mod:`.session` (lock file, Ctrl-C), :mod:`.trust` (what a run
-directory may name, memory limits), :mod:`.export` (IOHanalyzer CSV), :mod:`.plots` (matplotlib).
+Modules: :mod:`.config` (RunConfig), :mod:`.loop` (the Runner), :mod:`.build` (what a new run builds),
+:mod:`.contexts` (how contexts are drawn), :mod:`.api` (run, resume), :mod:`.history` (History),
+:mod:`.backends` (failure policy, serial; :mod:`.vector_backend`, :mod:`.ray_backend`), :mod:`.callbacks`
+(callbacks, progress bar), :mod:`.rundir` (run directory), :mod:`.recovery` (the history from the log),
+:mod:`.session` (lock file, Ctrl-C), :mod:`.trust` (what a run directory may name, memory limits),
+:mod:`.export` (IOHanalyzer CSV), :mod:`.plots` (matplotlib).
 """
 
 from creps_gym.runner.api import resume, run
 from creps_gym.runner.backends import EnvSource, EpisodeError, make_backend
 from creps_gym.runner.callbacks import Callback, ProgressBar
-from creps_gym.runner.config import BACKENDS, VECTOR_MODES, RunConfig
+from creps_gym.runner.config import BACKENDS, CONTEXT_DRAWS, VECTOR_MODES, RunConfig
 from creps_gym.runner.export import write_iohanalyzer
 from creps_gym.runner.history import History, IterationRecord
 from creps_gym.runner.loop import Runner, default_initial_distribution, split_seed
@@ -24,6 +26,7 @@ from creps_gym.runner.session import RunDirError, RunDirWarning
 
 __all__ = [
     "BACKENDS",
+    "CONTEXT_DRAWS",
     "VECTOR_MODES",
     "Callback",
     "EnvSource",

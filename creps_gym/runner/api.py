@@ -55,8 +55,9 @@ def run(
         Keyword arguments of ``gymnasium.make`` (id envs) and of the optimiser (name optimisers).
     **options
         The other :class:`~creps_gym.runner.config.RunConfig` fields: ``eval_every``, ``eval_contexts``,
-        ``backend``, ``workers``, ``vector_mode``, ``retries``, ``max_episodes``, ``target_regret``,
-        ``max_time``, ``checkpoint_every``, ``initial_mean``, ``initial_std``, ``ray_address``.
+        ``context_draws``, ``backend``, ``workers``, ``vector_mode``, ``retries``, ``max_episodes``,
+        ``target_regret``, ``max_time``, ``checkpoint_every``, ``initial_mean``, ``initial_std``,
+        ``ray_address``.
 
     Returns
     -------
@@ -74,10 +75,7 @@ def run(
     kwargs = {"env_kwargs": env_kwargs or {}, "optimizer_options": optimizer_options or {}}
     config = RunConfig(**names, **sizes, **kwargs, **options)
     objects = {"env": None if by_id else env, "optimizer": None if by_name else optimizer}
-    runner = Runner(config, **objects, callbacks=callbacks)
-    if run_dir is not None:
-        runner.run_dir = RunDir.create(run_dir, runner.config, runner.history.meta, overwrite=overwrite)
-    return runner.run()
+    return Runner(config, **objects, callbacks=callbacks, run_dir=run_dir, overwrite=overwrite).run()
 
 
 def resume(
@@ -111,11 +109,8 @@ def resume(
     config = directory.config()
     if config.env is None and env is None:
         raise ValueError("env: expected the env object this run was started with (its config has no env id)")
-    if config.optimizer is None:
-        if optimizer_class is None:
-            raise ValueError("optimizer_class: expected the class of the run's optimiser object, got None")
-        if directory.load_checkpoint() is None:
-            raise ValueError(f"run_dir: expected a checkpoint in {directory.path}, got none")
+    if config.optimizer is None and optimizer_class is None:
+        raise ValueError("optimizer_class: expected the class of the run's optimiser object, got None")
     runner = Runner(
         config,
         env=env if config.env is None else None,

@@ -1,14 +1,17 @@
 """Evaluation backends: where an iteration's episodes run.
 
-An episode is identified by its reset seed and its parameters. The runner draws one seed per episode from
-its env stream and reads the context from ``env.reset(seed=seed)`` in the main process; a backend's worker
-replays ``reset(seed=seed)`` (and checks it gives the same context) then ``step(params)``. Every backend
-therefore computes the same returns, bit for bit, in the same order:
+An episode is identified by its reset seed, its context and its parameters (the runner draws them, see
+:mod:`creps_gym.runner.contexts`). A backend's worker resets with the seed (and, for batched context
+draws, ``options={"context": context}``), checks the reset gives the recorded context, then steps with the
+parameters. Every backend therefore computes the same returns, bit for bit, in the same order:
 
+* ``auto`` (the default): ``vector`` with the native vector env for a registered id that has one, else
+  ``serial``.
 * ``serial``: one env in the main process.
 * ``vector``: a Gymnasium vector env. The native one (``vector_entry_point``, one batched ``evaluate`` call,
   contexts set through ``reset(options={"context": ...})``) where registered, else ``AsyncVectorEnv`` (or
-  ``SyncVectorEnv`` with ``vector_mode="sync"``) reset with the per-episode seeds.
+  ``SyncVectorEnv`` with ``vector_mode="sync"``) reset with the per-episode seeds (and contexts), see
+  :mod:`.vector_backend`.
 * ``ray``: Ray tasks (``pip install creps-gym[ray]``), one chunk of episodes per cluster CPU; Ray is imported
   only when this backend is built. An already initialised Ray is used as is; a running cluster at
   ``ray_address`` (or ``RAY_ADDRESS``) is joined and left running; otherwise a local instance is started
@@ -35,7 +38,6 @@ from __future__ import annotations
 
 import math
 import numbers
-import os
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -50,8 +52,9 @@ __all__ = [
     "EnvSource",
     "EpisodeError",
     "SerialBackend",
-    "VectorBackend",
+    "check_context",
     "episode_return",
+    "has_native_vector",
     "make_backend",
     "reset_context",
     "retry",
@@ -72,6 +75,8 @@ class EnvSource:
     env_id: str | None = None
     kwargs: dict[str, Any] = field(default_factory=dict)
     env: Any = None
+    #: Episodes reset with ``options={"context": ...}`` as well as their seed (batched context draws).
+    set_context: bool = False
 
     def make(self) -> gym.Env:
         """A fresh env (the object itself for object sources)."""
@@ -93,7 +98,8 @@ def _episode_text(label: str, index: int, seed: int, context: Array) -> str:
     return f"{label}, episode {index} (reset seed {seed}, context {np.asarray(context).tolist()})"
 
 
-def _check_context(obs: Any, context: Array, where: str) -> None:
+def check_context(obs: Any, context: Array, where: str) -> None:
+    """Raise :class:`EpisodeError` unless a reset's observation ``obs`` is the recorded ``context``."""
     got = np.asarray(obs, dtype=np.float64).reshape(-1)
     if not np.array_equal(got, np.asarray(context).reshape(-1)):
         raise EpisodeError(
@@ -141,16 +147,6 @@ def episode_return(reward: Any) -> float:
     return value
 
 
-class CheckedReward(gym.Wrapper):
-    """Checks each reward with :func:`episode_return` inside a vector env's sub-env (where the vector env
-    would otherwise store a str or bool reward as a float)."""
-
-    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
-        """Step the env and check its reward."""
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        return obs, episode_return(reward), terminated, truncated, info
-
-
 def reset_context(env: gym.Env, seed: int, retries: int, where: str) -> Any:
     """``env.reset(seed=seed)``'s observation, the reset retried like an episode (EpisodeError at the end).
 
@@ -165,9 +161,9 @@ def reset_context(env: gym.Env, seed: int, retries: int, where: str) -> Any:
     return obs
 
 
-def _one_episode(env: gym.Env, seed: int, context: Array, params: Array) -> float:
-    obs, _ = env.reset(seed=int(seed))
-    _check_context(obs, context, "reset")
+def _one_episode(env: gym.Env, seed: int, context: Array, params: Array, set_context: bool) -> float:
+    obs, _ = env.reset(seed=int(seed), options={"context": context} if set_context else None)
+    check_context(obs, context, "reset")
     _, reward, terminated, truncated, _ = env.step(params)
     if not (terminated or truncated):
         raise RuntimeError("expected a one-step episode (terminated or truncated after the first step)")
@@ -175,7 +171,15 @@ def _one_episode(env: gym.Env, seed: int, context: Array, params: Array) -> floa
 
 
 def run_episodes(
-    env: gym.Env, seeds: Any, contexts: Array, params: Array, *, first: int, label: str, retries: int
+    env: gym.Env,
+    seeds: Any,
+    contexts: Array,
+    params: Array,
+    *,
+    first: int,
+    label: str,
+    retries: int,
+    set_context: bool = False,
 ) -> Array:
     """Run episodes one by one with the retry policy of the module docstring.
 
@@ -191,6 +195,8 @@ def run_episodes(
     label : str
         E.g. ``"iteration 3"``.
     retries : int
+    set_context : bool
+        Reset with ``options={"context": ...}`` too (the contexts came from a batched draw).
 
     Returns
     -------
@@ -201,7 +207,8 @@ def run_episodes(
         where = _episode_text(label, first + k, int(seed), contexts[k])
         try:
             ok, value, last = retry(
-                lambda k=k, seed=seed: _one_episode(env, int(seed), contexts[k], params[k]), retries + 1
+                lambda k=k, seed=seed: _one_episode(env, int(seed), contexts[k], params[k], set_context),
+                retries + 1,
             )
         except EpisodeError as exc:
             raise EpisodeError(f"{where}: {exc}") from None
@@ -244,118 +251,24 @@ class SerialBackend(Backend):
         self.env = env if env is not None else source.make()
 
     def evaluate(self, seeds: NDArray[np.int64], contexts: Array, params: Array, label: str) -> Array:
-        return run_episodes(self.env, seeds, contexts, params, first=0, label=label, retries=self.retries)
-
-
-class VectorBackend(Backend):
-    """A Gymnasium vector env; batches larger than ``num_envs`` run in chunks (the last one padded).
-
-    The vector env is built when the backend is: an env it cannot replicate (a wrapper that Gymnasium
-    cannot re-create from the spec, or copies whose spaces differ from the env's) raises TypeError then,
-    not as an episode failure.
-    """
-
-    name = "vector"
-
-    def __init__(self, source: EnvSource, retries: int, workers: int | None, mode: str, samples: int) -> None:
-        super().__init__(source, retries)
-        spec = source.spec()
-        registered = gym.spec(spec) if isinstance(spec, str) else spec
-        wrapped = bool(registered.additional_wrappers)  # a native vector env cannot apply them
-        native = registered.vector_entry_point is not None and not wrapped
-        if mode == "native" and not native:
-            why = "its spec adds wrappers" if wrapped else "not native"
-            raise ValueError(
-                f"vector_mode: expected 'auto', 'sync' or 'async' for {registered.id} ({why}), got 'native'"
-            )
-        self.mode = ("native" if native else "async") if mode == "auto" else mode
-        default = samples if self.mode == "native" else min(samples, os.cpu_count() or 1)
-        self.num_envs = workers or default
-        self._single: gym.Env | None = None
-        self._vec: Any = self._build(registered.id)
-
-    def _make_vec(self) -> Any:
-        modes = {"native": "vector_entry_point", "sync": "sync", "async": "async"}
-        wrappers = None if self.mode == "native" else [CheckedReward]
-        return gym.make_vec(
-            self.source.spec(),
-            self.num_envs,
-            vectorization_mode=modes[self.mode],
-            wrappers=wrappers,
-            **self.source.kwargs,
-        )
-
-    def _build(self, env_name: str) -> Any:
-        """The first vector env, with set-up errors named as such."""
-        try:
-            vec = self._make_vec()
-        except Exception as exc:  # a wrapper Gymnasium cannot re-create, an entry point that fails, ...
-            raise TypeError(
-                f"env: the vector backend ({self.mode}) could not build copies of {env_name}: "
-                f"{type(exc).__name__}: {exc}. Register the env, make its wrappers inherit "
-                "gymnasium.utils.RecordConstructorArgs, or use backend='serial' or 'ray'"
-            ) from exc
-        env = self.source.env
-        for name in ("observation_space", "action_space"):
-            if env is not None and getattr(vec, "single_" + name) != getattr(env, name):
-                vec.close()
-                raise TypeError(
-                    f"env: the vector backend's copies of {env_name} have {name} "
-                    f"{getattr(vec, 'single_' + name)}, expected the env object's {getattr(env, name)}; "
-                    "use backend='serial' or 'ray'"
-                )
-        return vec
-
-    def _chunk(self, seeds: NDArray[np.int64], contexts: Array, params: Array) -> Array:
-        if self._vec is None:
-            self._vec = self._make_vec()
-        if self.mode == "native":
-            obs, _ = self._vec.reset(options={"context": contexts})
-        else:
-            obs, _ = self._vec.reset(seed=[int(s) for s in seeds])
-        got = np.asarray(obs, dtype=np.float64).reshape(len(seeds), -1)
-        if got.shape != contexts.shape or not np.array_equal(got, contexts):
-            for k in range(len(seeds)):  # find and name the first sub-env that differs
-                _check_context(obs[k], contexts[k], f"sub-env {k}")
-        _, rewards, terminated, truncated, _ = self._vec.step(params)
-        rewards = np.asarray(rewards, dtype=np.float64)
-        if not np.all(terminated | truncated) or not np.isfinite(rewards).all():
-            raise RuntimeError(f"expected one-step episodes with finite returns, got {rewards.tolist()}")
-        return rewards
-
-    def evaluate(self, seeds: NDArray[np.int64], contexts: Array, params: Array, label: str) -> Array:
-        n, m = len(seeds), self.num_envs
-        returns = np.empty(n)
-        for start in range(0, n, m):
-            stop = min(start + m, n)
-            rows = np.minimum(np.arange(start, start + m), n - 1)  # pad by repeating the last episode
-            ok, chunk, _ = retry(  # a failed async env is unusable: rebuild it before the next try
-                lambda rows=rows: self._chunk(seeds[rows], contexts[rows], params[rows]),
-                self.retries + 1,
-                on_failure=self.close,
-                reraise=(),  # even a named failure is retried, then re-run episode by episode
-            )
-            if ok:
-                returns[start:stop] = chunk[: stop - start]
-            else:  # not charged to the chunk's episodes: each runs alone with the serial budget
-                returns[start:stop] = self._one_by_one(seeds, contexts, params, label, start, stop)
-        return returns
-
-    def _one_by_one(self, seeds: Any, contexts: Array, params: Array, label: str, a: int, b: int) -> Array:
-        """Episodes a..b-1 one by one in the main process, with the serial backend's retry policy."""
-        if self._single is None:
-            self._single = self.source.make()
         return run_episodes(
-            self._single, seeds[a:b], contexts[a:b], params[a:b], first=a, label=label, retries=self.retries
+            self.env,
+            seeds,
+            contexts,
+            params,
+            first=0,
+            label=label,
+            retries=self.retries,
+            set_context=self.source.set_context,
         )
 
-    def close(self) -> None:
-        if self._vec is not None:
-            vec, self._vec = self._vec, None
-            try:
-                vec.close()
-            except Exception:  # a broken async env may fail to close; it is discarded either way
-                pass
+
+def has_native_vector(source: EnvSource) -> bool:
+    """Whether ``source`` is a registered id with a native vector entry point and no added wrappers."""
+    if source.env_id is None:
+        return False
+    spec = gym.spec(source.env_id)
+    return spec.vector_entry_point is not None and not spec.additional_wrappers
 
 
 def make_backend(
@@ -369,13 +282,21 @@ def make_backend(
     env: gym.Env | None = None,
     ray_address: str | None = None,
 ) -> Backend:
-    """Build a backend by name (``"serial"``, ``"vector"`` or ``"ray"``; ``ray_address`` for Ray only)."""
+    """Build a backend by name (``"auto"``, ``"serial"``, ``"vector"`` or ``"ray"``).
+
+    ``"auto"`` is the fastest correct backend: the native vector env of a registered id that has one
+    (:func:`has_native_vector`), else ``"serial"``. ``ray_address`` is for ``"ray"`` only.
+    """
+    if name == "auto":
+        name = "vector" if has_native_vector(source) else "serial"
     if name == "serial":
         return SerialBackend(source, retries, env)
     if name == "vector":
+        from creps_gym.runner.vector_backend import VectorBackend
+
         return VectorBackend(source, retries, workers, vector_mode, samples)
     if name == "ray":
         from creps_gym.runner.ray_backend import RayBackend  # imports Ray only when asked for
 
         return RayBackend(source, retries, workers, ray_address)
-    raise ValueError(f"backend: expected one of ['serial', 'vector', 'ray'], got {name!r}")
+    raise ValueError(f"backend: expected one of ['auto', 'serial', 'vector', 'ray'], got {name!r}")

@@ -10,9 +10,10 @@ from typing import Any
 
 from creps_gym._validation import check_positive_int
 
-__all__ = ["BACKENDS", "VECTOR_MODES", "RunConfig", "check_ray_address"]
+__all__ = ["BACKENDS", "CONTEXT_DRAWS", "VECTOR_MODES", "RunConfig", "check_ray_address"]
 
-BACKENDS = ("serial", "vector", "ray")
+BACKENDS = ("auto", "serial", "vector", "ray")
+CONTEXT_DRAWS = ("batch", "reset")
 VECTOR_MODES = ("auto", "native", "sync", "async")
 
 
@@ -80,8 +81,13 @@ class RunConfig:
         Evaluate the recommended policy every this many iterations (and at the last one).
     eval_contexts : int
         Size of the fixed, seeded set of test contexts.
-    backend : {"serial", "vector", "ray"}
-        Where episodes run (see :mod:`creps_gym.runner.backends`).
+    context_draws : {"batch", "reset"}
+        How an iteration's contexts are drawn (see :mod:`creps_gym.runner.contexts`): one batched draw
+        where the env allows it, or one seeded ``env.reset`` per episode (the stream of run directories of
+        format ``creps_gym.run/2``, whose ``config.json`` has no such field and which resume with it).
+    backend : {"auto", "serial", "vector", "ray"}
+        Where episodes run (see :mod:`creps_gym.runner.backends`); ``"auto"`` is the native vector env of
+        a registered id that has one, else ``"serial"``.
     workers : int or None
         Vector: sub-envs (default: samples for the native vector env, else the CPU count); Ray: tasks per
         iteration (default: the cluster's CPUs).
@@ -118,7 +124,8 @@ class RunConfig:
     optimizer_options: dict[str, Any] = field(default_factory=dict)
     eval_every: int = 1
     eval_contexts: int = 16
-    backend: str = "serial"
+    context_draws: str = "batch"
+    backend: str = "auto"
     workers: int | None = None
     vector_mode: str = "auto"
     retries: int = 2
@@ -149,6 +156,10 @@ class RunConfig:
             object.__setattr__(self, name, dict(getattr(self, name)))
         if self.backend not in BACKENDS:
             raise ValueError(f"backend: expected one of {list(BACKENDS)}, got {self.backend!r}")
+        if self.context_draws not in CONTEXT_DRAWS:
+            raise ValueError(
+                f"context_draws: expected one of {list(CONTEXT_DRAWS)}, got {self.context_draws!r}"
+            )
         if self.vector_mode not in VECTOR_MODES:
             raise ValueError(f"vector_mode: expected one of {list(VECTOR_MODES)}, got {self.vector_mode!r}")
         if self.ray_address is not None:

@@ -112,7 +112,10 @@ def _ray_chunk(
     """Body of a Ray task: the worker keeps one env per source."""
     if key not in _RAY_ENVS:
         _RAY_ENVS[key] = source.make()
-    return run_episodes(_RAY_ENVS[key], seeds, contexts, params, first=first, label=label, retries=n)
+    env, batched = _RAY_ENVS[key], source.set_context
+    return run_episodes(
+        env, seeds, contexts, params, first=first, label=label, retries=n, set_context=batched
+    )
 
 
 class RayBackend(Backend):

@@ -10,9 +10,11 @@ file                      content
                           (:meth:`IterationRecord.to_dict`) or an event (``{"event": "start" | "resume" |
                           "end", ...}``). After a resume, iterations done after the last checkpoint appear
                           again; :meth:`RunDir.read_log` keeps the last copy of each iteration.
-``checkpoint.npz``        the last checkpoint (``.npz`` arrays + one embedded JSON document, never pickle),
-                          replaced atomically (temporary file + rename; the run's own temporaries left by
-                          a killed process are removed when the run resumes). It records the run's
+``checkpoint.npz``        the last checkpoint (format ``creps_gym.run/3``: ``.npz`` arrays + one embedded
+                          JSON document, never pickle), replaced atomically (temporary file + rename; the
+                          run's own temporaries left by a killed process are removed when the run
+                          resumes). It holds the optimiser's and the loop's state, not the history (that
+                          is in the log: :mod:`creps_gym.runner.recovery`), and records the run's
                           :func:`~creps_gym.runner.trust.config_fingerprint`: another run's is refused
 ``run.lock``              the live writer's process id (see :mod:`creps_gym.runner.session`)
 ``history.json`` / .csv   the final :class:`~creps_gym.runner.history.History` (written at the end)
@@ -50,7 +52,7 @@ from creps_gym.runner.trust import (
     config_fingerprint,
 )
 
-__all__ = ["RunDir", "RunDirError", "RunDirWarning", "package_versions"]
+__all__ = ["RESTART", "RunDir", "RunDirError", "RunDirWarning", "package_versions"]
 
 RESTART = "delete it to restart the run from its first iteration, or restore it from a backup"
 
@@ -67,8 +69,11 @@ def package_versions() -> dict[str, str]:
     return found
 
 
-def _crc(entry: dict[str, Any]) -> int:
-    return zlib.crc32(json.dumps(entry, allow_nan=False).encode())
+_CHECKPOINT_KEYS = ("format", "fingerprint", "state_crc")
+
+
+def _crc(entry: dict[str, Any], *, sort_keys: bool = False) -> int:
+    return zlib.crc32(json.dumps(entry, allow_nan=False, sort_keys=sort_keys).encode())
 
 
 class RunDir:
@@ -186,8 +191,10 @@ class RunDir:
         code in this process, and clusters come and go). A resume joins ``RAY_ADDRESS``'s cluster, or an
         initialised Ray, else starts a local one; the history is the same on any of them.
         """
+        data = dict(self.document()["config"])
+        data.setdefault("context_draws", "reset")  # written before batched draws (format 2): its stream
         try:
-            config = RunConfig.from_dict(self.document()["config"])
+            config = RunConfig.from_dict(data)
         except (TypeError, ValueError) as exc:
             if isinstance(exc, RunDirError):
                 raise
@@ -258,6 +265,7 @@ class RunDir:
     ) -> Path:
         """Write the runner's state, the optimiser's ``state_dict()`` and ``config``'s fingerprint."""
         flat = {"format": CHECKPOINT_FORMAT, "fingerprint": config_fingerprint(config), **state}
+        flat["state_crc"] = _crc(state, sort_keys=True)  # the loop's state is checked as a whole
         flat.update({f"optimizer.{key}": value for key, value in optimizer_state.items()})
         path = save_state(flat, self.file(self.CHECKPOINT))
         os.chmod(path, self.file(self.CONFIG).stat().st_mode & 0o777)  # one mode for all the run's files
@@ -281,14 +289,26 @@ class RunDir:
         if flat.get("format") not in (CHECKPOINT_FORMAT, *LEGACY_FORMATS):
             found = f"format {flat.get('format')!r}, expected {CHECKPOINT_FORMAT!r}"
             raise self.damaged(self.CHECKPOINT, found, RESTART)
+        if flat["format"] == CHECKPOINT_FORMAT:
+            self._check_state_crc(flat)
         if config is not None:
             check_checkpoint(flat, config, str(path), RESTART)
         prefix = "optimizer."
         optimizer_state = {k[len(prefix) :]: v for k, v in flat.items() if k.startswith(prefix)}
-        state = {
-            k: v for k, v in flat.items() if not k.startswith(prefix) and k not in ("format", "fingerprint")
-        }
+        state = {k: v for k, v in flat.items() if not k.startswith(prefix) and k not in _CHECKPOINT_KEYS}
         return state, optimizer_state
+
+    def _check_state_crc(self, flat: dict[str, Any]) -> None:
+        """Refuse a checkpoint whose loop state is not the one it was written with."""
+        state = {
+            k: v for k, v in flat.items() if not k.startswith("optimizer.") and k not in _CHECKPOINT_KEYS
+        }
+        try:
+            intact = flat.get("state_crc") == _crc(state, sort_keys=True)
+        except (TypeError, ValueError):
+            intact = False
+        if not intact:
+            raise self.damaged(self.CHECKPOINT, "the loop state does not match its checksum", RESTART)
 
     # -- results ---------------------------------------------------------------------------------------------
     def write_results(self, history: History, *, only_changed: bool = False) -> list[str]:
@@ -322,49 +342,7 @@ class RunDir:
             return False
 
     def read_history(self) -> History:
-        """``history.json`` if the run finished, else the checkpoint's history and the iterations after it.
+        """The run's history: see :func:`creps_gym.runner.recovery.read_history`."""
+        from creps_gym.runner.recovery import read_history
 
-        Nothing is skipped silently: a damaged ``history.json`` (or one that differs from the final
-        checkpoint's) is rebuilt from the checkpoint and the log, and damaged log lines are named, with a
-        :class:`RunDirWarning`; the history then stops before the first missing iteration. A damaged
-        checkpoint raises :class:`RunDirError`.
-        """
-        loaded = self.load_checkpoint()
-        try:
-            saved = None if loaded is None else History.from_dict(loaded[0]["history"])
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise self.damaged(self.CHECKPOINT, exc, RESTART) from None
-        path = self.file(self.HISTORY_JSON)
-        if path.exists():
-            try:
-                final = History.from_json(path)
-                if saved is None or (final.equals(saved, include_time=True) and final.meta == saved.meta):
-                    return final
-                problem = f"differs from the final history in {self.CHECKPOINT}"
-            except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-                problem = f"damaged ({type(exc).__name__}: {exc})"
-            message = f"{path}: {problem}; rebuilt from {self.CHECKPOINT} and {self.LOG}"
-            warnings.warn(message + " (`creps-gym resume` rewrites it)", RunDirWarning, stacklevel=2)
-        history = saved if saved is not None else History(meta=dict(self.document().get("meta", {})))
-        damaged: list[int] = []
-        records, _ = self.read_log(damaged)
-        from_checkpoint = len(history)
-        for record in records:
-            if record.iteration == len(history) + 1 and history.stop_reason is None:
-                history.append(record)
-        lost = [record.iteration for record in records if record.iteration > len(history)]
-        kept = {record.iteration for record in records}
-        missing = [i for i in range(1, from_checkpoint + 1) if i not in kept]
-        problems = [f"damaged lines {damaged}"] if damaged else []
-        if missing and not damaged:
-            problems.append(f"iterations {missing[0]} to {missing[-1]} are missing (a truncated log?)")
-        if lost:
-            problems.append(f"logged iterations {lost[0]} to {lost[-1]} follow a gap and are left out")
-        if problems:
-            warnings.warn(
-                f"{self.file(self.LOG)}: {'; '.join(problems)}; the history has iterations 1 to "
-                f"{len(history)} ({from_checkpoint} from {self.CHECKPOINT}, the rest from the log)",
-                RunDirWarning,
-                stacklevel=2,
-            )
-        return history
+        return read_history(self)

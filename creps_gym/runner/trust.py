@@ -47,13 +47,16 @@ __all__ = [
     "registered_env_id",
 ]
 
-CHECKPOINT_FORMAT = "creps_gym.run/2"
-LEGACY_FORMATS = ("creps_gym.run/1",)  # no fingerprint: matched on the history's seed, samples and env
+CHECKPOINT_FORMAT = "creps_gym.run/3"
+#: Formats still read: ``/2`` holds the whole history (and drew contexts by seeded resets), ``/1`` also has
+#: no fingerprint (matched on the history's seed, samples and env).
+LEGACY_FORMATS = ("creps_gym.run/2", "creps_gym.run/1")
 #: The configuration fields that define a run's results (the others only say where and how it runs).
 FINGERPRINT_FIELDS = ("env", "env_kwargs", "optimizer", "optimizer_options", "seed", "samples", "iterations",
-                      "eval_every", "eval_contexts", "initial_mean", "initial_std", "max_episodes",
-                      "target_regret", "max_time")  # fmt: skip
-
+                      "eval_every", "eval_contexts", "context_draws", "initial_mean", "initial_std",
+                      "max_episodes", "target_regret", "max_time")  # fmt: skip
+#: The fields format ``creps_gym.run/2`` fingerprinted (it had no ``context_draws``: always ``"reset"``).
+FINGERPRINT_FIELDS_2 = tuple(name for name in FINGERPRINT_FIELDS if name != "context_draws")
 _MODULE_PREFIX = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*:")
 
 
@@ -140,16 +143,19 @@ def check_run_memory(config: RunConfig, n_params: int, n_context_dims: int, *, c
     check_fits_in_memory(8.0 * (square + batch), name, value, what)
 
 
-def config_fingerprint(config: RunConfig) -> str:
-    """SHA-256 (hex) of the checkpoint format and the :data:`FINGERPRINT_FIELDS` of ``config``."""
+def config_fingerprint(config: RunConfig, checkpoint_format: str = CHECKPOINT_FORMAT) -> str:
+    """SHA-256 (hex) of a checkpoint format and the fields it fingerprints of ``config``."""
     data = config.to_dict()
-    document = {"format": CHECKPOINT_FORMAT, **{name: data[name] for name in FINGERPRINT_FIELDS}}
+    names = FINGERPRINT_FIELDS if checkpoint_format == CHECKPOINT_FORMAT else FINGERPRINT_FIELDS_2
+    document = {"format": checkpoint_format, **{name: data[name] for name in names}}
     return hashlib.sha256(json.dumps(document, sort_keys=True, allow_nan=False).encode()).hexdigest()
 
 
 def _same_run(flat: dict[str, Any], config: RunConfig) -> bool:
-    if flat["format"] == CHECKPOINT_FORMAT:
-        return flat.get("fingerprint") == config_fingerprint(config)
+    if flat["format"] in LEGACY_FORMATS and config.context_draws != "reset":
+        return False  # an old checkpoint with a new config.json (the old stream is "reset")
+    if flat["format"] != LEGACY_FORMATS[-1]:
+        return flat.get("fingerprint") == config_fingerprint(config, flat["format"])
     meta = flat["history"]["meta"]  # a legacy checkpoint: its history's metadata
     expected = {"seed": config.seed, "samples": config.samples, "env": config.env or meta.get("env")}
     return all(meta.get(key) == value for key, value in expected.items())
@@ -158,10 +164,14 @@ def _same_run(flat: dict[str, Any], config: RunConfig) -> bool:
 def _consistent(flat: dict[str, Any], config: RunConfig) -> bool:
     """Counts, types and records that a run of ``config`` can have written."""
     iteration, episodes, elapsed = flat["iteration"], flat["episodes"], flat["elapsed"]
-    records = flat["history"]["records"]
     ok = all(type(v) is int for v in (iteration, episodes)) and 0 <= iteration <= config.iterations
     ok = ok and episodes == iteration * config.samples and isinstance(flat["env_rng"], dict)
-    ok = ok and type(elapsed) in (int, float) and 0 <= elapsed < float("inf") and len(records) == iteration
+    ok = ok and type(elapsed) in (int, float) and 0 <= elapsed < float("inf")
+    if flat["format"] == CHECKPOINT_FORMAT:  # the history is in the log: its checksum and stop reason
+        stop = flat["stop_reason"]
+        return ok and type(flat["log_crc"]) is int and (stop is None or isinstance(stop, str))
+    records = flat["history"]["records"]
+    ok = ok and len(records) == iteration
     for number, record in enumerate(records, 1):
         counts = record["iteration"], record["episodes"]
         ok = ok and all(type(v) is int for v in counts) and counts == (number, number * config.samples)

@@ -22,13 +22,13 @@ import sys
 import time
 from collections.abc import Sequence
 
-__all__ = ["Watchdog", "child_pids", "process_tree", "terminate"]
+__all__ = ["Watchdog", "add_descendants", "child_pids", "process_stat", "process_tree", "terminate"]
 
 POLL_SECONDS = 0.5
 GRACE_SECONDS = 2.0
 
 
-def _stat(pid: int) -> tuple[int, int] | None:
+def process_stat(pid: int) -> tuple[int, int] | None:
     """(parent id, start time) of a live process, from ``/proc/<pid>/stat``; None if gone or a zombie."""
     try:
         with open(f"/proc/{pid}/stat", "rb") as file:
@@ -43,7 +43,7 @@ def _table() -> dict[int, tuple[int, int]]:
     """Every live process: id -> (parent id, start time)."""
     table = {}
     for name in os.listdir("/proc"):
-        if name.isdigit() and (stat := _stat(int(name))) is not None:
+        if name.isdigit() and (stat := process_stat(int(name))) is not None:
             table[int(name)] = stat
     return table
 
@@ -55,7 +55,7 @@ def child_pids(pid: int) -> set[int]:
     return {child for child, (parent, _) in _table().items() if parent == pid}
 
 
-def _grow(tracked: dict[int, int]) -> None:
+def add_descendants(tracked: dict[int, int]) -> None:
     """Add the live descendants of the tracked processes to ``tracked`` (id -> start time)."""
     table = _table()
     frontier = [pid for pid, start in tracked.items() if table.get(pid, (0, -1))[1] == start]
@@ -69,7 +69,7 @@ def _signal_alive(tracked: dict[int, int], signum: int) -> int:
     """Send ``signum`` to the tracked processes that still run; returns how many got it."""
     sent = 0
     for pid, start in tracked.items():
-        stat = _stat(pid)
+        stat = process_stat(pid)
         if stat is not None and stat[1] == start:
             try:
                 os.kill(pid, signum)
@@ -83,8 +83,8 @@ def process_tree(roots: Sequence[int]) -> dict[int, int]:
     """The live processes ``roots`` and all their descendants: id -> start time (empty without /proc)."""
     if not os.path.isdir("/proc"):
         return {}
-    tracked = {pid: stat[1] for pid in roots if (stat := _stat(pid)) is not None}
-    _grow(tracked)
+    tracked = {pid: stat[1] for pid in roots if (stat := process_stat(pid)) is not None}
+    add_descendants(tracked)
     return tracked
 
 
@@ -102,9 +102,9 @@ def terminate(tracked: dict[int, int], grace: float = GRACE_SECONDS) -> None:
 
 def _watch(read_fd: int, parent: int, roots: Sequence[int]) -> None:
     """The watchdog's loop (runs in its own process)."""
-    tracked = {pid: stat[1] for pid in roots if (stat := _stat(pid)) is not None}
+    tracked = process_tree(roots)
     while True:
-        _grow(tracked)
+        add_descendants(tracked)
         ready, _, _ = select.select([read_fd], [], [], POLL_SECONDS)
         if ready:
             if os.read(read_fd, 16).startswith(b"done"):
@@ -112,7 +112,7 @@ def _watch(read_fd: int, parent: int, roots: Sequence[int]) -> None:
             break  # end of file: the run's process is gone
         if os.getppid() != parent:
             break
-    _grow(tracked)
+    add_descendants(tracked)
     terminate(tracked)
 
 

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from creps_gym._validation import as_float_array
 from creps_gym.wrappers.samplers import UniformContexts
 
-__all__ = ["ContextAccess", "GoalContext", "QposContext", "make_context_access"]
+__all__ = ["ContextAccess", "GoalContext", "QposContext", "context_box", "make_context_access"]
 
 Array = NDArray[np.float64]
 
@@ -185,7 +185,7 @@ def make_context_access(spec: Mapping[str, Any]) -> ContextAccess:
     raise ValueError(f"context['type']: expected 'goal' or 'qpos', got {spec['type']!r}")
 
 
-def _context_box_check(access: Any) -> tuple[Array, Array]:
+def context_box(access: Any) -> tuple[Array, Array]:
     """The validated ``(low, high)`` (z,) of a user accessor."""
     low = as_float_array(getattr(access, "low", None), "context.low", (None,))
     high = as_float_array(getattr(access, "high", None), "context.high", (low.shape[0],))

@@ -36,62 +36,12 @@ from gymnasium.utils import seeding
 from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array
-from creps_gym.envs.base import ContextualEpisodicEnv
+from creps_gym.envs.evaluation import contextual_model
+from creps_gym.wrappers.sources import FixedSource, checked_samples, param_bounds
 
 __all__ = ["FixedContexts", "HideContext", "NormalizeParams", "SampleContexts"]
 
 Array = NDArray[np.float64]
-ORDERS = ("cycle", "random")
-
-
-class _FixedSource:
-    """A finite context set read in a cycle or at random; shared by the scalar and vector wrappers.
-
-    Parameters
-    ----------
-    contexts : ndarray, shape (m, z)
-        Already validated contexts.
-    order : {"cycle", "random"}
-    """
-
-    def __init__(self, contexts: Array, order: str) -> None:
-        if order not in ORDERS:
-            raise ValueError(f"order: expected one of {ORDERS}, got {order!r}")
-        if contexts.shape[0] == 0:
-            raise ValueError("contexts: expected at least one context, got an empty set of shape (0, z)")
-        self.contexts, self.order, self.position = contexts, order, 0
-
-    def restart(self) -> None:
-        """Start the cycle again at the first context."""
-        self.position = 0
-
-    def draw(self, rng: np.random.Generator, n: int) -> tuple[Array, NDArray[np.int64]]:
-        """Return ``n`` contexts (n, z) and their indices in the set (n,)."""
-        m = self.contexts.shape[0]
-        if self.order == "random":
-            index = rng.integers(0, m, size=n)
-        else:
-            index = (self.position + np.arange(n)) % m
-            self.position = int((self.position + n) % m)
-        return self.contexts[index].copy(), index.astype(np.int64)
-
-
-def _checked_samples(sampler: Any, rng: np.random.Generator, n: int, model: ContextualEpisodicEnv) -> Array:
-    """Call ``sampler(rng, n)`` and check its output against the env's context box: shape (n, z)."""
-    samples = sampler(rng, n)
-    samples = as_float_array(samples, f"sampler {sampler!r} output", (n, model.context_dim))
-    return model.check_contexts(samples, f"sampler {sampler!r} output")
-
-
-def _contextual_model(env: Any, wrapper: str) -> ContextualEpisodicEnv:
-    """The :class:`ContextualEpisodicEnv` under ``env``, or a ``TypeError`` naming ``wrapper``."""
-    model = getattr(env, "unwrapped", None)
-    if not isinstance(model, ContextualEpisodicEnv):
-        raise TypeError(
-            f"env: {wrapper} expected a creps_gym ContextualEpisodicEnv (possibly wrapped), "
-            f"got {type(model if model is not None else env).__name__}"
-        )
-    return model
 
 
 class _ContextChoice(gym.Wrapper):
@@ -99,7 +49,7 @@ class _ContextChoice(gym.Wrapper):
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
-        self.model = _contextual_model(env, type(self).__name__)
+        self.model = contextual_model(env, ("env",), user=type(self).__name__)
 
     def _choose(self) -> tuple[Array, dict[str, Any]]:
         raise NotImplementedError
@@ -146,7 +96,7 @@ class FixedContexts(_ContextChoice, gym.utils.RecordConstructorArgs):
         gym.utils.RecordConstructorArgs.__init__(self, contexts=contexts, order=order, name=name)
         _ContextChoice.__init__(self, env)
         checked = self.model.check_contexts(as_float_array(contexts, "contexts", (None, None)), "contexts")
-        self.source = _FixedSource(checked, order)
+        self.source = FixedSource(checked, order)
         self.name = name
 
     @property
@@ -160,6 +110,16 @@ class FixedContexts(_ContextChoice, gym.utils.RecordConstructorArgs):
     def _choose(self) -> tuple[Array, dict[str, Any]]:
         contexts, index = self.source.draw(self.np_random, 1)
         return contexts[0], {"context_index": int(index[0])}
+
+    def sample_contexts(self, rng: np.random.Generator, n: int) -> Array:
+        """``n`` contexts (n, z) as ``n`` resets after a seeded one choose them, drawn with ``rng``.
+
+        A cycle starts at the first context; ``"random"`` draws the indices from ``rng``. The wrapper's
+        own state is untouched (the runner draws an iteration's contexts with one call).
+        """
+        m = self.source.contexts.shape[0]
+        index = rng.integers(0, m, size=n) if self.source.order == "random" else np.arange(n) % m
+        return self.source.contexts[index]
 
 
 class SampleContexts(_ContextChoice, gym.utils.RecordConstructorArgs):
@@ -182,7 +142,11 @@ class SampleContexts(_ContextChoice, gym.utils.RecordConstructorArgs):
         self.sampler = sampler
 
     def _choose(self) -> tuple[Array, dict[str, Any]]:
-        return _checked_samples(self.sampler, self.np_random, 1, self.model)[0], {}
+        return checked_samples(self.sampler, self.np_random, 1, self.model)[0], {}
+
+    def sample_contexts(self, rng: np.random.Generator, n: int) -> Array:
+        """``n`` contexts (n, z) from ``sampler(rng, n)``, checked against the env's context box."""
+        return checked_samples(self.sampler, rng, n, self.model)
 
 
 class HideContext(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
@@ -191,22 +155,12 @@ class HideContext(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)
         gym.ObservationWrapper.__init__(self, env)
-        _contextual_model(env, "HideContext")
+        contextual_model(env, ("env",), user="HideContext")
         self.observation_space = spaces.Box(np.zeros(0), np.zeros(0), dtype=np.float64)
 
     def observation(self, observation: Any) -> Array:
         """Return ``np.zeros(0)``."""
         return np.zeros(0)
-
-
-def _param_bounds(space: Any, wrapper: str) -> tuple[Array, Array]:
-    """Finite ``(low, high)`` of a 1-D Box parameter space with ``low < high``, else a clear error."""
-    if not isinstance(space, spaces.Box) or len(space.shape) != 1:
-        raise TypeError(f"env.action_space: {wrapper} expected a 1-D Box, got {space}")
-    low, high = space.low.astype(np.float64), space.high.astype(np.float64)
-    if not (np.isfinite(low).all() and np.isfinite(high).all() and (low < high).all()):
-        raise ValueError(f"env.action_space: {wrapper} expected finite bounds with low < high, got {space}")
-    return low, high
 
 
 class NormalizeParams(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
@@ -224,7 +178,7 @@ class NormalizeParams(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)
         gym.ActionWrapper.__init__(self, env)
-        self.low, self.high = _param_bounds(env.action_space, "NormalizeParams")
+        self.low, self.high = param_bounds(env.action_space, "NormalizeParams")
         dim = self.low.shape[0]
         self.action_space = spaces.Box(-np.ones(dim), np.ones(dim), dtype=np.float64)
 

@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array, check_positive_int
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
-from creps_gym.wrappers.access import ContextAccess, _context_box_check, make_context_access
+from creps_gym.wrappers.access import ContextAccess, context_box, make_context_access
 from creps_gym.wrappers.controllers import Controller, make_controller
 
 __all__ = ["EpisodicEnv", "EpisodicVectorEnv"]
@@ -167,7 +167,7 @@ class EpisodicEnv(ContextualEpisodicEnv):
         if reset_options is not None and not isinstance(reset_options, Mapping):
             raise TypeError(f"reset_options: expected a mapping or None, got {type(reset_options).__name__}")
         self.reset_options = None if reset_options is None else dict(reset_options)
-        low, high = _context_box_check(self.access)
+        low, high = context_box(self.access)
         super().__init__(low, high, self.controller.param_low, self.controller.param_high, render_mode)
 
     # -- contexts from the inner env -------------------------------------------------------------------

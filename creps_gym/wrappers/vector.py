@@ -33,24 +33,12 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array
-from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
-from creps_gym.wrappers.contexts import _checked_samples, _FixedSource, _param_bounds
+from creps_gym.envs.evaluation import contextual_model
+from creps_gym.wrappers.sources import FixedSource, checked_samples, param_bounds
 
 __all__ = ["FixedContextsVector", "HideContextVector", "NormalizeParamsVector", "SampleContextsVector"]
 
 Array = NDArray[np.float64]
-
-
-def _vector_model(env: Any, wrapper: str) -> ContextualEpisodicEnv:
-    """The single-env model of the native vector env under ``env``, or a ``TypeError`` naming ``wrapper``."""
-    base = getattr(env, "unwrapped", None)
-    if not isinstance(base, ContextualEpisodicVectorEnv):
-        raise TypeError(
-            f"env: {wrapper} expected a creps_gym ContextualEpisodicVectorEnv (possibly wrapped), got "
-            f"{type(base if base is not None else env).__name__}; for Sync/AsyncVectorEnv wrap each sub-env "
-            "with the scalar wrapper"
-        )
-    return base.model
 
 
 class _ContextChoiceVector(VectorWrapper):
@@ -58,7 +46,7 @@ class _ContextChoiceVector(VectorWrapper):
 
     def __init__(self, env: VectorEnv) -> None:
         super().__init__(env)
-        self.model = _vector_model(env, type(self).__name__)
+        self.model = contextual_model(env, ("vector",), user=type(self).__name__)
 
     def _choose(self, n: int) -> tuple[Array, dict[str, Any]]:
         raise NotImplementedError
@@ -123,7 +111,7 @@ class FixedContextsVector(_ContextChoiceVector):
     def __init__(self, env: VectorEnv, contexts: Any, order: str = "cycle", name: str | None = None) -> None:
         super().__init__(env)
         checked = self.model.check_contexts(as_float_array(contexts, "contexts", (None, None)), "contexts")
-        self.source = _FixedSource(checked, order)
+        self.source = FixedSource(checked, order)
         self.name = name
 
     @property
@@ -157,7 +145,7 @@ class SampleContextsVector(_ContextChoiceVector):
         self.sampler = sampler
 
     def _choose(self, n: int) -> tuple[Array, dict[str, Any]]:
-        return _checked_samples(self.sampler, self.np_random, n, self.model), {}
+        return checked_samples(self.sampler, self.np_random, n, self.model), {}
 
 
 class HideContextVector(VectorWrapper):
@@ -165,7 +153,7 @@ class HideContextVector(VectorWrapper):
 
     def __init__(self, env: VectorEnv) -> None:
         super().__init__(env)
-        _vector_model(env, "HideContextVector")
+        contextual_model(env, ("vector",), user="HideContextVector")
         self.single_observation_space = spaces.Box(np.zeros(0), np.zeros(0), dtype=np.float64)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)
 
@@ -190,7 +178,7 @@ class NormalizeParamsVector(gym.vector.VectorActionWrapper):
 
     def __init__(self, env: VectorEnv) -> None:
         super().__init__(env)
-        self.low, self.high = _param_bounds(env.single_action_space, "NormalizeParamsVector")
+        self.low, self.high = param_bounds(env.single_action_space, "NormalizeParamsVector")
         dim = self.low.shape[0]
         self.single_action_space = spaces.Box(-np.ones(dim), np.ones(dim), dtype=np.float64)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, self.num_envs)

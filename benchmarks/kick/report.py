@@ -1,0 +1,233 @@
+"""The kick study's data and rendering: ``results.json`` from the finished runs, then ``summary.md`` and the
+figures from ``results.json`` alone (a test checks the committed summary against it).
+
+``results.json``::
+
+    {"mode": ..., "budgets": {...},
+     "precision": {"<registry name>": {"trial_errors": [...], "target_errors": [[10 per trial]], ...},
+                   "oracle": {"target_errors": [...]}},
+     "flexibility": {"<registry name>": {"trial_distances": [...],
+                                         "position_distances": [[28 per trial]], ...},
+                     "oracle": {"position_distances": [...]}},
+     "in_progress": {"<experiment>/<name>-trial<k>": iterations done}}
+
+A "±" in the summary is the standard deviation across trials (population, ddof = 0) unless it says otherwise.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.kick.study import GRID_X, GRID_Y, TARGETS, grid_contexts
+
+__all__ = ["collect", "render", "summary_text"]
+
+PAPER = {
+    "precision": "0.34 ± 0.11 m (CREPS-CMA, old mean, RBF features; the ± is not defined in the paper)",
+    "flexibility": "CREPS-CMA 6.50 ± 2.95 m against CREPS 2.67 ± 2.69 m (10 trials)",
+}
+METRIC = {
+    "precision": ("trial_errors", "target_errors"),
+    "flexibility": ("trial_distances", "position_distances"),
+}
+
+
+def _runs(folder: Path) -> list[dict[str, Any]]:
+    paths = [p for p in sorted(folder.glob("*-trial*.json")) if not p.name.endswith(".history.json")]
+    return [json.loads(p.read_text()) for p in paths]
+
+
+def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
+    """The results document from the finished run files under ``out/runs`` (trials in order)."""
+    document: dict[str, Any] = {"mode": mode, "budgets": budgets, "precision": {}, "flexibility": {}}
+    for experiment, (per_trial, per_point) in METRIC.items():
+        for run in sorted(_runs(out / "runs" / experiment), key=lambda r: (r["name"], r["trial"])):
+            entry = document[experiment].setdefault(run["name"], {
+                per_trial: [], per_point: [], "trials": [], "iterations": [], "stopped": [], "curves": [],
+                "features": run["features"], "options": run["options"], "samples": run["samples"],
+                "budget_iterations": run["budget_iterations"],
+            })  # fmt: skip
+            entry[per_trial].append(float(np.mean(run["values"])))
+            entry[per_point].append(run["values"])
+            entry["trials"].append(run["trial"])
+            entry["iterations"].append(run["iterations"])
+            entry["stopped"].append(run["stopped"])
+            entry["curves"].append([[i, float(np.mean(v))] for i, v in run["history"]["evaluations"]])
+        points = [
+            json.loads(p.read_text()) for p in sorted((out / "runs" / experiment).glob("oracle-*.json"))
+        ]
+        if points:
+            document[experiment]["oracle"] = {
+                per_point: [r["value"] for r in points],
+                "best": [r["best"] for r in points],
+                "contexts": [r["context"] for r in points],
+                "episodes": [r["episodes"] for r in points],
+                "optimizer": points[0]["optimizer"],
+            }
+    document["in_progress"] = _in_progress(out)
+    return document
+
+
+def _in_progress(out: Path) -> dict[str, int]:
+    """Iterations done by every started but unfinished run (from its last checkpointed history)."""
+    progress = {}
+    for history in sorted((out / "runs").glob("*/*.history.json")):
+        stem = history.name.removesuffix(".history.json")
+        if not (history.parent / f"{stem}.json").exists():
+            progress[f"{history.parent.name}/{stem}"] = len(json.loads(history.read_text())["batch"])
+    return progress
+
+
+def _spread(values: list[float]) -> str:
+    values_array = np.asarray(values, dtype=float)
+    return f"{values_array.mean():.2f} ± {values_array.std():.2f} m"
+
+
+def _method_rows(experiment: str, document: dict[str, Any]) -> list[str]:
+    per_trial, _ = METRIC[experiment]
+    oracle = document["flexibility"].get("oracle")
+    rows = []
+    for name, entry in document[experiment].items():
+        if name == "oracle":
+            continue
+        values = entry[per_trial]
+        trials = ", ".join(f"{v:.2f}" for v in values)
+        stopped = sorted({k for s in entry["stopped"] for k in s}) or ["—"]
+        cells = [name, f"{entry['budget_iterations']} × {entry['samples']}", str(len(values)),
+                 _spread(values), trials, f"{min(entry['iterations'])}–{max(entry['iterations'])}",
+                 ", ".join(stopped)]  # fmt: skip
+        if experiment == "flexibility":
+            ratio = np.mean(values) / np.mean(oracle["position_distances"]) if oracle else float("nan")
+            at_far = np.asarray(entry["position_distances"])[:, -len(GRID_Y) :]
+            cells += [f"{ratio:.2f}" if oracle else "—", f"{np.mean(at_far > 0.5):.0%}"]
+        rows.append("| " + " | ".join(cells) + " |")
+    return rows
+
+
+def summary_text(document: dict[str, Any]) -> str:
+    """The whole ``summary.md``, drawn from the results document only."""
+    lines = [f"# Kick study ({document['mode']} mode): rendered from `results.json`", ""]
+    lines += [f"Budgets: {json.dumps(document['budgets'])}. A ± is the standard deviation across trials.", ""]
+    lines += _precision_section(document) + _flexibility_section(document)
+    if document["in_progress"]:
+        lines += ["## Runs in progress (iterations done at the last checkpoint)", ""]
+        lines += [f"- {run}: {done}" for run, done in document["in_progress"].items()] + [""]
+    return "\n".join(lines)
+
+
+def _precision_section(document: dict[str, Any]) -> list[str]:
+    lines = ["## Precision (Fig. 5c)", "", f"Paper: {PAPER['precision']}.", ""]
+    header = "| method | budget (it. × N) | trials | mean error | per trial | iterations | stopped by |"
+    lines += [header, "|---|---|---|---|---|---|---|", *_method_rows("precision", document), ""]
+    columns = {  # the oracle once it has every target
+        name: np.asarray(entry["target_errors"]).reshape(-1, len(TARGETS))
+        for name, entry in document["precision"].items()
+        if name != "oracle" or len(entry["target_errors"]) == len(TARGETS)
+    }
+    if columns:
+        lines += ["Error (m) per target, mean over trials (oracle: pycma on that target alone):", ""]
+        lines += ["| target (m) | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
+        for i, target in enumerate(TARGETS):
+            cells = [f"{errors[:, i].mean():.2f}" for errors in columns.values()]
+            lines.append(f"| {target:.0f} | " + " | ".join(cells) + " |")
+        lines.append("")
+    oracle = document["precision"].get("oracle")
+    if oracle:
+        errors = np.asarray(oracle["target_errors"])
+        lines += [
+            f"Oracle ({oracle['optimizer']} per target, {max(oracle['episodes'])} episodes each, "
+            f"{len(errors)} of 10 targets): {errors.mean():.2f} m mean error; reachable within 0.34 m: "
+            + (", ".join(f"{TARGETS[i]:.0f}" for i in np.flatnonzero(errors <= 0.34)) or "none")
+            + " m.",
+            "",
+        ]
+    return lines
+
+
+def _flexibility_section(document: dict[str, Any]) -> list[str]:
+    lines = ["## Flexibility (Fig. 7), `KickFlexibility-v1`", "", f"Paper: {PAPER['flexibility']}.", ""]
+    header = (
+        "| method | budget (it. × N) | trials | mean forward distance | per trial | iterations | stopped by "
+        "| fraction of the oracle | balls at x_B = 0.30 m kicked > 0.5 m |"
+    )
+    lines += [header, "|---" * 9 + "|", *_method_rows("flexibility", document), ""]
+    oracle = document["flexibility"].get("oracle")
+    if oracle:
+        distances = np.asarray(oracle["position_distances"])
+        lines += [
+            f"Oracle ({oracle['optimizer']} per ball position, {max(oracle['episodes'])} episodes each, "
+            f"{len(distances)} of 28 positions): {distances.mean():.2f} ± {distances.std():.2f} m "
+            "(± over positions); farthest sample kick per position "
+            f"{np.mean([b or 0.0 for b in oracle['best']]):.2f} m on average.",
+            "",
+        ]
+    return lines
+
+
+def plot(document: dict[str, Any], out: Path) -> None:
+    """Fig. 5c (error per target), Fig. 7 (mean distance per ball position) and learning curves as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    for name, entry in document["precision"].items():
+        if name == "oracle" and len(entry["target_errors"]) != len(TARGETS):
+            continue
+        errors = np.asarray(entry["target_errors"]).reshape(-1, len(TARGETS))
+        axes[0].errorbar(TARGETS, errors.mean(0), errors.std(0), marker="o", capsize=3, label=name)
+    axes[0].set(xlabel="target distance s [m]", ylabel="distance to target [m]", title="Kick precision")
+    for experiment, ax in zip(("precision", "flexibility"), (axes[1], axes[1].twinx()), strict=True):
+        for name, entry in document[experiment].items():
+            for k, curve in enumerate(entry.get("curves", [])):
+                if curve:
+                    it, value = np.asarray(curve).T
+                    ax.plot(it, value, ls="-" if experiment == "precision" else "--",
+                            label=f"{experiment[:4]} {name}" if k == 0 else None)  # fmt: skip
+    axes[1].set(xlabel="iteration", ylabel="precision error [m] (solid)", title="Mean policy while learning")
+    fig.legend(fontsize=7, loc="lower center", ncol=4)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    fig.savefig(out / "precision.png", dpi=110)
+    plt.close(fig)
+    _plot_heatmaps(plt, document, out)
+
+
+def _plot_heatmaps(plt: Any, document: dict[str, Any], out: Path) -> None:
+    flexibility = document["flexibility"]
+    maps = {n: np.mean(e["position_distances"], axis=0) for n, e in flexibility.items() if n != "oracle"}
+    oracle = flexibility.get("oracle", {}).get("position_distances", [])
+    if len(oracle) == len(GRID_X) * len(GRID_Y):
+        maps["oracle"] = np.asarray(oracle)
+    if not maps:
+        return
+    dx, dy = (GRID_X[1] - GRID_X[0]) / 2, (GRID_Y[1] - GRID_Y[0]) / 2
+    extent = [GRID_X[0] - dx, GRID_X[-1] + dx, GRID_Y[0] - dy, GRID_Y[-1] + dy]
+    fig, axes = plt.subplots(1, len(maps), figsize=(3.6 * len(maps), 3.2), squeeze=False)
+    for ax, (name, values) in zip(axes[0], maps.items(), strict=True):
+        grid = np.asarray(values).reshape(len(GRID_X), len(GRID_Y))
+        image = ax.imshow(grid.T, origin="lower", aspect="auto", cmap="jet", vmin=0, vmax=14, extent=extent)
+        ax.set(xlabel="x_B [m]", ylabel="y_B [m]", title=f"{name}: forward distance")
+        fig.colorbar(image, ax=ax, label="m")
+    fig.tight_layout()
+    fig.savefig(out / "flexibility.png", dpi=110)
+    plt.close(fig)
+
+
+def render(out: Path, mode: str, budgets: dict[str, Any]) -> str:
+    """Rebuild ``results.json`` from the finished runs, then ``summary.md`` and the figures from it."""
+    out.mkdir(parents=True, exist_ok=True)
+    document = collect(out, mode, budgets)
+    tmp = out / "results.json.tmp"
+    tmp.write_text(json.dumps(document, indent=1) + "\n")
+    os.replace(tmp, out / "results.json")
+    text = summary_text(json.loads((out / "results.json").read_text()))
+    (out / "summary.md").write_text(text)
+    plot(document, out)
+    assert grid_contexts().shape == (len(GRID_X) * len(GRID_Y), 2)
+    return text

@@ -1,0 +1,246 @@
+"""One run of the kick study: a registry optimiser trained through the generic path, resumable.
+
+Every run searches the kick through :class:`~creps_gym.wrappers.OffsetParams` with its defaults: the agent's
+θ is the offset from the env's declared initial mean (the reference kick) in units of its declared standard
+deviation (0.02 of the normalised range), so every optimiser starts from the env-declared distribution N(0, I)
+exactly as ``creps-gym run`` does. The ridge of a contextual mean fit then pulls the policy towards the
+reference kick (see ``docs/wrappers.md``).
+
+A run is (experiment, optimiser, trial). Its contexts at iteration ``t`` come from
+``default_rng([seed, key, trial, t])`` and its optimiser's seed from ``SeedSequence([seed, key, trial])``,
+where ``key`` is a CRC-32 of ``"<experiment>/<name>"``, so adding a method never changes another one's
+numbers. The optimiser's checkpoint (``.npz``) holds its own generator, and the history (``.history.json``) is
+written with it, so a resumed run is bit-identical to an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import creps_gym  # noqa: F401  (registers the ids)
+from creps_gym.envs.base import initial_distribution
+from creps_gym.optimizers.features import RBFFeatures
+from creps_gym.optimizers.registry import make_optimizer, optimizer_class, recommended_samples
+from creps_gym.wrappers import OffsetParams
+
+__all__ = [
+    "GRID_X",
+    "GRID_Y",
+    "TARGETS",
+    "RunSpec",
+    "evaluation_contexts",
+    "grid_contexts",
+    "make_env",
+    "mean_policy_metric",
+    "oracle_point",
+    "train_run",
+]
+
+TARGETS = np.linspace(3.0, 12.0, 10)  # precision: the 10 evaluation targets (m)
+GRID_X, GRID_Y = np.linspace(0.15, 0.30, 4), np.linspace(-0.15, 0.15, 7)  # flexibility: the ball grid (m)
+ENV_IDS = {"precision": "creps_gym/KickPrecision-v0", "flexibility": "creps_gym/KickFlexibility-v1"}
+EVAL_EVERY = 50  # iterations between evaluations of the mean policy (the learning curves)
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One optimiser on one experiment: registry name, mean features, options, budget."""
+
+    experiment: str
+    name: str
+    samples: int
+    iterations: int
+    features: str = "rbf"
+    options: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def key(self) -> int:
+        """Stable seed component of this (experiment, name) pair."""
+        return zlib.crc32(f"{self.experiment}/{self.name}".encode())
+
+    def mean_features(self) -> Any:
+        """Affine [1, s], or normalised RBFs: 5 centres over [3, 12] m (precision), 3 × 3 over the grid."""
+        if self.features == "affine":
+            return "affine"
+        if self.experiment == "precision":
+            return RBFFeatures.grid([3.0], [12.0], 5)
+        return RBFFeatures.grid([GRID_X[0], GRID_Y[0]], [GRID_X[-1], GRID_Y[-1]], 3)
+
+
+def make_env(experiment: str, threads: int) -> OffsetParams:
+    """The experiment's env behind :class:`OffsetParams` (centre and scale: the env-declared distribution)."""
+    return OffsetParams(gym.make(ENV_IDS[experiment], num_threads=threads))
+
+
+def evaluate(env: OffsetParams, contexts: np.ndarray, offsets: np.ndarray) -> tuple[Any, Any]:
+    """The unwrapped env's batched ``evaluate`` at the env parameters of the agent's ``offsets``."""
+    return env.unwrapped.evaluate(contexts, env.to_env(offsets))
+
+
+def grid_contexts() -> np.ndarray:
+    """The 4 × 7 ball positions (x_B, y_B), shape (28, 2), x-major."""
+    xs, ys = np.meshgrid(GRID_X, GRID_Y, indexing="ij")
+    return np.stack([xs.ravel(), ys.ravel()], axis=1)
+
+
+def _metric(experiment: str, contexts: np.ndarray, info: dict[str, Any]) -> np.ndarray:
+    """Per episode (n,): the distance (m) from the ball's rest point to the target ``s`` straight ahead
+    (precision), or the ball's forward distance (m), 0 when the robot falls (flexibility)."""
+    x, y = info["ball_displacement"].T
+    if experiment == "precision":
+        return np.hypot(x - contexts[:, 0], y)
+    return np.where(info["fell"], 0.0, x)
+
+
+def evaluation_contexts(experiment: str) -> np.ndarray:
+    """The precision task's 10 targets (10, 1), or the flexibility task's 28 ball positions (28, 2)."""
+    return TARGETS[:, None] if experiment == "precision" else grid_contexts()
+
+
+def mean_policy_metric(env: OffsetParams, experiment: str, opt: Any) -> list[float]:
+    """The mean policy's per-target errors (precision) or per-position distances (flexibility)."""
+    contexts = evaluation_contexts(experiment)
+    _, info = evaluate(env, contexts, opt.recommend(contexts))
+    return _metric(experiment, contexts, info).tolist()
+
+
+def _new_optimizer(spec: RunSpec, env: OffsetParams, seed: int) -> Any:
+    mean, std = initial_distribution(env)  # N(0, I) through OffsetParams' defaults
+    z = env.unwrapped.context_dim
+    return make_optimizer(
+        spec.name,
+        env.action_space.shape[0],
+        z,
+        seed,
+        initial_mean=mean,
+        initial_cov=std**2,
+        mean_features=spec.mean_features(),
+        **spec.options,
+    )
+
+
+def _write_json(path: Path, document: Any) -> None:
+    """Atomic JSON write (a kill never leaves half a file)."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(document))
+    os.replace(tmp, path)
+
+
+def train_run(
+    spec: RunSpec, env: OffsetParams, trial: int, seed: int, folder: Path, checkpoint_every: int = 10
+) -> dict[str, Any]:
+    """Train (or resume, or read back) one run and evaluate its mean policy; returns its result document.
+
+    Files under ``folder``: ``<name>-trial<k>.npz`` (optimiser), ``.history.json`` (the setting; per
+    iteration, mean return and fall rate of the batch; every ``EVAL_EVERY`` iterations the mean policy's
+    metric) and, when finished, ``.json`` (the result). A result or checkpoint of another setting (features,
+    options, batch size) is computed again. The run ends at ``spec.iterations`` or when the optimiser's own
+    stop criteria are met.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    stem = folder / f"{spec.name}-trial{trial}"
+    result_path, ckpt, history_path = (stem.with_suffix(s) for s in (".json", ".npz", ".history.json"))
+    setting = {"features": spec.features, "options": spec.options, "samples": spec.samples}
+    if result_path.exists():
+        done = json.loads(result_path.read_text())
+        if done["budget_iterations"] == spec.iterations and done.get("setting") == setting:
+            return done
+    base_seed = [seed, spec.key, trial]
+    history = json.loads(history_path.read_text()) if ckpt.exists() else {}
+    if history.get("setting") == setting:  # a checkpoint of another setting is started over
+        opt = optimizer_class(spec.name).load(ckpt)
+    else:
+        opt = _new_optimizer(spec, env, int(np.random.SeedSequence(base_seed).generate_state(1)[0]))
+        history = {"setting": setting, "batch": [], "evaluations": []}
+    history["batch"] = history["batch"][: opt.iteration]
+    start = time.perf_counter()
+    while opt.iteration < spec.iterations and not opt.stop():
+        rng = np.random.default_rng([*base_seed, opt.iteration])
+        contexts = env.unwrapped.sample_contexts(rng, spec.samples)
+        offsets = opt.ask(contexts)
+        returns, info = evaluate(env, contexts, offsets)
+        opt.tell(contexts, offsets, returns)
+        history["batch"].append([float(returns.mean()), float(info["fell"].mean())])
+        if opt.iteration % EVAL_EVERY == 0:
+            history["evaluations"].append([opt.iteration, mean_policy_metric(env, spec.experiment, opt)])
+        if opt.iteration % checkpoint_every == 0 or opt.iteration == spec.iterations or opt.stop():
+            opt.save(ckpt)
+            _write_json(history_path, history)
+    result = {
+        "experiment": spec.experiment,
+        "name": spec.name,
+        "setting": setting,
+        "features": spec.features,
+        "options": spec.options,
+        "trial": trial,
+        "samples": spec.samples,
+        "budget_iterations": spec.iterations,
+        "iterations": opt.iteration,
+        "episodes": opt.iteration * spec.samples,
+        "stopped": sorted(opt.stop()),
+        "values": mean_policy_metric(env, spec.experiment, opt),
+        "history": history,
+        "seconds_last_session": time.perf_counter() - start,
+    }
+    _write_json(result_path, result)
+    return result
+
+
+def oracle_point(
+    env: OffsetParams, experiment: str, index: int, episodes: int, seed: int, folder: Path, name: str = "cma"
+) -> dict[str, Any]:
+    """The oracle at one evaluation point: ``name`` (pycma by default) learning that one context alone
+    (target ``TARGETS[index]`` or ball position ``grid_contexts()[index]``) from the env-declared start, at
+    its default population, for ``episodes`` episodes.
+
+    Cached as ``oracle-<index>.json`` under ``folder``. ``value`` is the final mean's metric (error to the
+    target, or forward distance with 0 for a fall) and ``best`` the best metric of any sample that did not
+    fall.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"oracle-{index:02d}.json"
+    if path.exists():
+        done = json.loads(path.read_text())
+        if done["budget_episodes"] == episodes:
+            return done
+    context = TARGETS[index : index + 1] if experiment == "precision" else grid_contexts()[index]
+    p, z = env.action_space.shape[0], env.unwrapped.context_dim
+    population = recommended_samples(name, p, 0)
+    mean, std = initial_distribution(env)
+    sequence = np.random.SeedSequence([seed, zlib.crc32(experiment.encode()), index])
+    sub_seed = int(sequence.generate_state(1)[0])
+    opt = make_optimizer(name, p, z, sub_seed, initial_mean=mean, initial_cov=std**2)
+    contexts = np.tile(context, (population, 1))
+    sign = -1.0 if experiment == "precision" else 1.0  # the best sample: smallest error, farthest kick
+    best, start = -np.inf, time.perf_counter()
+    for _ in range(episodes // population):
+        offsets = opt.ask(contexts)
+        returns, info = evaluate(env, contexts, offsets)
+        opt.tell(contexts, offsets, returns)
+        metric = _metric(experiment, contexts, info)
+        best = max(best, float(np.max(np.where(info["fell"], -np.inf, sign * metric))))
+        if opt.stop():
+            break
+    _, info = evaluate(env, context[None], opt.recommend(context[None]))
+    result = {
+        "index": index,
+        "context": context.tolist(),
+        "optimizer": name,
+        "population": population,
+        "budget_episodes": episodes,
+        "episodes": opt.evaluations,
+        "value": float(_metric(experiment, context[None], info)[0]),
+        "best": sign * best if np.isfinite(best) else None,
+        "seconds": time.perf_counter() - start,
+    }
+    _write_json(path, result)
+    return result

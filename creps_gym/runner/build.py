@@ -1,0 +1,109 @@
+"""What a run builds from its configuration: the optimiser, its initial search distribution, the backend.
+
+Used by :class:`~creps_gym.runner.loop.Runner`; a resumed run restores its optimiser from the checkpoint
+instead and builds only the backend.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym.envs.base import box_initial_distribution, initial_distribution
+from creps_gym.optimizers.registry import make_optimizer
+from creps_gym.optimizers.registry import optimizer_class as registered_class
+from creps_gym.runner.backends import Backend, EnvSource, make_backend
+from creps_gym.runner.config import RunConfig
+
+__all__ = [
+    "build_backend",
+    "build_optimizer",
+    "default_initial_distribution",
+    "per_parameter",
+    "split_seed",
+    "uniform_mean",
+]
+
+Array = NDArray[np.float64]
+
+
+def split_seed(seed: int) -> tuple[np.random.Generator, int, int]:
+    """The env stream (a Generator), the optimiser's seed and the test contexts' seed from a master seed."""
+    env_seq, optimizer_seq, eval_seq = np.random.SeedSequence(seed).spawn(3)
+    return (
+        np.random.default_rng(env_seq),
+        int(optimizer_seq.generate_state(1)[0]),
+        int(eval_seq.generate_state(1)[0]),
+    )
+
+
+def default_initial_distribution(action_space: gym.spaces.Box) -> tuple[Array, Array]:
+    """Mean and standard deviations (p,) of the default initial search distribution.
+
+    The centre of the action box and a quarter of its width per coordinate (so mean ± 2 std spans the box);
+    coordinates with an infinite bound get mean 0 and standard deviation 1.
+    """
+    return box_initial_distribution(action_space)
+
+
+def uniform_mean(action_space: gym.spaces.Box, seed: int) -> Array:
+    """The paper's initialisation: a mean drawn uniformly in the action box from the master ``seed``."""
+    low, high = action_space.low, action_space.high
+    if not (np.isfinite(low).all() and np.isfinite(high).all()):
+        raise ValueError("initial_mean: expected a number for an unbounded action box, got 'uniform'")
+    init_seq = np.random.SeedSequence(seed).spawn(4)[3]  # children 0-2: split_seed
+    return np.random.default_rng(init_seq).uniform(low, high)
+
+
+def per_parameter(given: Any, name: str, default: Array, n_params: int) -> Array:
+    """``given`` (a number or one per parameter) as shape (p,), or ``default`` if None or a string."""
+    if given is None or isinstance(given, str):
+        return default
+    values = np.atleast_1d(np.asarray(given, np.float64))
+    if values.shape not in ((1,), (n_params,)):
+        raise ValueError(
+            f"{name}: expected a number or {n_params} numbers (one per parameter), got {values.shape[0]}"
+        )
+    return np.broadcast_to(values, (n_params,)).copy()
+
+
+def build_optimizer(config: RunConfig, env: gym.Env, n_context_dims: int, seed: int) -> Any:
+    """The registered optimiser ``config.optimizer`` with the run's initial distribution and ``seed``.
+
+    The initial distribution is the env-declared one (:func:`creps_gym.envs.base.initial_distribution`)
+    unless the config sets ``initial_mean`` (a number, one per parameter, or ``"uniform"``) or
+    ``initial_std``. A budget option the optimiser's class names (``budget_option``) is set to the run's
+    episode budget unless given.
+    """
+    n_params = int(np.prod(env.action_space.shape))
+    mean, std = initial_distribution(env)  # the env-declared start (box rule for foreign envs)
+    if isinstance(config.initial_mean, str) and config.initial_mean == "uniform":
+        mean = uniform_mean(env.action_space, config.seed)
+    else:
+        mean = per_parameter(config.initial_mean, "initial_mean", mean, n_params)
+    std = per_parameter(config.initial_std, "initial_std", std, n_params)
+    options = dict(config.optimizer_options)
+    budget_option = getattr(registered_class(config.optimizer), "budget_option", None)
+    if budget_option is not None and budget_option not in options:  # e.g. nevergrad's NGOpt needs it
+        options[budget_option] = min(config.iterations * config.samples, config.max_episodes or math.inf)
+    return make_optimizer(
+        config.optimizer, n_params, n_context_dims, seed, initial_mean=mean, initial_cov=std**2, **options
+    )
+
+
+def build_backend(config: RunConfig, source: EnvSource, env: gym.Env | None = None) -> Backend:
+    """The backend ``config`` names, running episodes of ``source`` (``env``: the env object, if any)."""
+    return make_backend(
+        config.backend,
+        source,
+        retries=config.retries,
+        workers=config.workers,
+        vector_mode=config.vector_mode,
+        samples=config.samples,
+        env=env,
+        ray_address=config.ray_address,
+    )

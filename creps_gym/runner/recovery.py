@@ -1,0 +1,142 @@
+"""The history of a run directory, rebuilt from its append-only log.
+
+Checkpoints (format ``creps_gym.run/3``) hold no history: the records are in ``log.jsonl``, and a
+checkpoint keeps the checksum :func:`history_crc` of records 1..k, so the history at a checkpoint is
+rebuilt from the log and checked (:func:`checkpoint_history`). Legacy checkpoints (``/2``, ``/1``) hold the
+whole history. :func:`read_history` serves plots and exports, also of unfinished or damaged runs.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+import zlib
+from typing import Any
+
+from creps_gym.runner.history import History, IterationRecord
+from creps_gym.runner.rundir import RESTART, RunDir
+from creps_gym.runner.session import RunDirWarning
+
+__all__ = ["REBUILD", "chain_crc", "checkpoint_history", "history_crc", "read_history"]
+
+REBUILD = (
+    "the history up to the checkpoint cannot be rebuilt: restore it from a backup, or delete "
+    "checkpoint.npz to restart the run from its first iteration"
+)
+
+
+def chain_crc(crc: int, entry: dict[str, Any]) -> int:
+    """``crc`` (the checksum of a history's records so far) extended by one record's ``to_dict()``."""
+    return zlib.crc32(json.dumps(entry, allow_nan=False).encode(), crc)
+
+
+def history_crc(records: list[IterationRecord]) -> int:
+    """The checksum a checkpoint keeps of the records 1..k of its history (see :func:`chain_crc`)."""
+    crc = 0
+    for record in records:
+        crc = chain_crc(crc, record.to_dict())
+    return crc
+
+
+def _is_final(run_dir: RunDir, final: History, state: dict[str, Any]) -> bool:
+    """Whether ``final`` is the history the final checkpoint ``state`` closed."""
+    if "history" in state:  # a legacy checkpoint holds its history
+        saved = History.from_dict(state["history"])
+        return final.equals(saved, include_time=True) and final.meta == saved.meta
+    meta = run_dir.document().get("meta", {})
+    same = len(final) == state["iteration"] and final.stop_reason == state["stop_reason"]
+    return same and final.meta == meta and history_crc(final.records) == state["log_crc"]
+
+
+def checkpoint_history(
+    run_dir: RunDir,
+    state: dict[str, Any],
+    records: list[IterationRecord],
+    meta: dict[str, Any] | None = None,
+) -> History | None:
+    """The history at the checkpoint ``state``: the first ``state["iteration"]`` ``records`` of the log.
+
+    Its metadata is ``meta``, else the one in ``config.json``.
+
+    None if the log lacks one of them (damaged or truncated); :class:`RunDirError` if they are all there
+    but differ from those the checkpoint was written after (an edited log or another run's).
+    """
+    count = state["iteration"]
+    kept = records[:count]
+    if len(kept) < count or any(r.iteration != i for i, r in enumerate(kept, 1)):
+        return None
+    if history_crc(kept) != state["log_crc"]:
+        raise run_dir.damaged(run_dir.LOG, f"iterations 1 to {count} differ from those checkpointed", REBUILD)
+    meta = dict(run_dir.document().get("meta", {}) if meta is None else meta)
+    return History(list(kept), meta, state["stop_reason"])
+
+
+def read_history(run_dir: RunDir) -> History:
+    """``history.json`` if the run finished, else the iterations of the checkpoint and those after it.
+
+    Nothing is skipped silently: a damaged ``history.json`` (or one that the final checkpoint did not
+    close) is rebuilt from the checkpoint and the log, and damaged log lines are named, with a
+    :class:`RunDirWarning`; the history then stops before the first missing iteration. A damaged
+    checkpoint raises :class:`RunDirError`.
+    """
+    loaded = run_dir.load_checkpoint()
+    state = None if loaded is None else loaded[0]
+    path = run_dir.file(run_dir.HISTORY_JSON)
+    if path.exists():
+        try:
+            final = History.from_json(path)
+            if state is None or _is_final(run_dir, final, state):
+                return final
+            problem = f"differs from the final history of {run_dir.CHECKPOINT}"
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            problem = f"damaged ({type(exc).__name__}: {exc})"
+        message = f"{path}: {problem}; rebuilt from {run_dir.CHECKPOINT} and {run_dir.LOG}"
+        warnings.warn(message + " (`creps-gym resume` rewrites it)", RunDirWarning, stacklevel=3)
+    damaged: list[int] = []
+    records, _ = run_dir.read_log(damaged)
+    history, legacy = History(meta=dict(run_dir.document().get("meta", {}))), False
+    if state is not None and "history" in state:
+        try:
+            history, legacy = History.from_dict(state["history"]), True
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise run_dir.damaged(run_dir.CHECKPOINT, exc, RESTART) from None
+    elif state is not None:
+        history = checkpoint_history(run_dir, state, records) or history
+    from_checkpoint = len(history)
+    for record in records:
+        if record.iteration == len(history) + 1 and history.stop_reason is None:
+            history.append(record)
+    checkpointed = 0 if state is None or legacy else state["iteration"]
+    legacy_part = from_checkpoint if legacy else None
+    _warn_log_problems(run_dir, records, damaged, (len(history), checkpointed), legacy_part)
+    return history
+
+
+def _warn_log_problems(
+    run_dir: RunDir,
+    records: list[IterationRecord],
+    damaged: list[int],
+    lengths: tuple[int, int],
+    legacy: int | None,
+) -> None:
+    """Warn about damaged lines, missing and left-out iterations of the log read into a history.
+
+    ``lengths``: the history's and the (log-based) checkpoint's numbers of iterations.
+    """
+    length = lengths[0]
+    lost = [record.iteration for record in records if record.iteration > length]
+    kept = {record.iteration for record in records}
+    missing = [i for i in range(1, max(lengths) + 1) if i not in kept]
+    problems = [f"damaged lines {damaged}"] if damaged else []
+    if missing and not damaged:
+        problems.append(f"iterations {missing[0]} to {missing[-1]} are missing (a truncated log?)")
+    if lost:
+        problems.append(f"logged iterations {lost[0]} to {lost[-1]} follow a gap and are left out")
+    if problems:
+        where = "" if legacy is None else f" ({legacy} from {RunDir.CHECKPOINT}, the rest from the log)"
+        warnings.warn(
+            f"{run_dir.file(RunDir.LOG)}: {'; '.join(problems)}; the history has iterations 1 to "
+            f"{length}{where}",
+            RunDirWarning,
+            stacklevel=4,
+        )

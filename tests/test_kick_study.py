@@ -1,0 +1,118 @@
+"""The kick study (``benchmarks/kick``): runs resume bit-identically, oracles cache, and the committed summary
+is exactly what the committed code renders from the committed ``results.json``."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+pytest.importorskip("cma")
+
+from benchmarks.kick import report, run, study
+
+pytestmark = pytest.mark.extras
+FULL = Path(run.__file__).resolve().parent / "results" / "full"
+
+
+@pytest.fixture(scope="module")
+def precision_env() -> study.OffsetParams:
+    return study.make_env("precision", threads=1)
+
+
+@pytest.mark.parametrize("name", ["c-cma-es", "creps-cma-old"])
+def test_an_interrupted_run_resumes_bit_identically(name: str, precision_env, tmp_path: Path) -> None:
+    spec = study.RunSpec("precision", name, samples=6, iterations=4, options={"ridge": 1e-2})
+    straight = study.train_run(spec, precision_env, 0, 7, tmp_path / "straight", checkpoint_every=1)
+    half = study.RunSpec("precision", name, samples=6, iterations=2, options={"ridge": 1e-2})
+    study.train_run(half, precision_env, 0, 7, tmp_path / "resumed", checkpoint_every=1)
+    resumed = study.train_run(spec, precision_env, 0, 7, tmp_path / "resumed", checkpoint_every=1)
+    assert resumed["iterations"] == straight["iterations"] == 4
+    assert resumed["values"] == straight["values"]
+    assert resumed["history"] == straight["history"]
+
+
+def test_a_finished_run_is_read_back_and_the_seed_changes_it(precision_env, tmp_path: Path) -> None:
+    spec = study.RunSpec("precision", "creps", samples=6, iterations=2)
+    first = study.train_run(spec, precision_env, 0, 0, tmp_path, checkpoint_every=1)
+    path = tmp_path / "creps-trial0.json"
+    document = json.loads(path.read_text())
+    document["values"] = [-1.0] * 10  # a cached result is returned as it is, without training again
+    path.write_text(json.dumps(document))
+    assert study.train_run(spec, precision_env, 0, 0, tmp_path)["values"] == [-1.0] * 10
+    changed = study.RunSpec("precision", "creps", samples=6, iterations=2, options={"ridge": 1e-3})
+    recomputed = study.train_run(changed, precision_env, 0, 0, tmp_path, checkpoint_every=1)
+    assert recomputed["values"] != [-1.0] * 10 and recomputed["setting"]["options"] == {"ridge": 1e-3}
+    other = study.train_run(spec, precision_env, 1, 0, tmp_path / "trial1", checkpoint_every=1)
+    assert other["history"]["batch"] != first["history"]["batch"]
+
+
+def test_the_oracle_learns_one_context_and_caches_it(precision_env, tmp_path: Path) -> None:
+    result = study.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path)
+    assert result["context"] == [6.0] and result["episodes"] == 26 and result["population"] == 13
+    assert np.isfinite(result["value"]) and result["value"] >= 0.0
+    assert study.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path) == result
+
+
+def test_results_have_the_issue_shape_and_the_summary_says_what_spreads(tmp_path: Path) -> None:
+    runs = tmp_path / "runs"
+    for experiment, values in (("precision", [0.5] * 10), ("flexibility", [3.0] * 28)):
+        (runs / experiment).mkdir(parents=True)
+        for trial, shift in enumerate((0.0, 1.0)):
+            document = {
+                "experiment": experiment, "name": "c-cma-es", "features": "rbf", "options": {},
+                "trial": trial, "samples": 20, "budget_iterations": 5, "iterations": 5, "episodes": 100,
+                "stopped": [],
+                "values": [v + shift for v in values], "history": {"batch": [], "evaluations": [[5, values]]},
+            }  # fmt: skip
+            (runs / experiment / f"c-cma-es-trial{trial}.json").write_text(json.dumps(document))
+        oracle = {
+            "index": 0,
+            "context": [0.15, -0.15],
+            "optimizer": "cma",
+            "episodes": 13,
+            "value": 8.0,
+            "best": 9.0,
+        }
+        (runs / experiment / "oracle-00.json").write_text(json.dumps(oracle))
+    document = report.collect(tmp_path, "quick", run.MODES["quick"])
+    assert document["precision"]["c-cma-es"]["trial_errors"] == [0.5, 1.5]
+    assert document["flexibility"]["c-cma-es"]["trial_distances"] == [3.0, 4.0]
+    assert document["flexibility"]["oracle"]["position_distances"] == [8.0]
+    text = report.summary_text(document)
+    assert "1.00 ± 0.50 m" in text  # precision: mean ± std across the two trials
+    assert "3.50 ± 0.50 m" in text and "| 0.44 |" in text  # flexibility, and 3.5 / 8.0 of the oracle
+
+
+def test_the_script_runs_by_path_writes_results_summary_and_figures_and_resumes(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    script = Path(run.__file__)
+    args = [sys.executable, str(script), "--quick", "--only", "precision", "--methods", "creps"]
+    args += ["--out", str(tmp_path), "--threads", "1"]
+    first = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
+    assert first.returncode == 0, first.stderr[-2000:]
+    document = json.loads((tmp_path / "results.json").read_text())
+    assert len(document["precision"]["creps"]["trial_errors"]) == 1
+    assert (tmp_path / "summary.md").read_text() == report.summary_text(document)
+    assert (tmp_path / "precision.png").stat().st_size > 10_000
+    written = (tmp_path / "runs" / "precision" / "creps-trial0.json").read_text()
+    second = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
+    assert second.returncode == 0, second.stderr[-2000:]
+    assert (tmp_path / "runs" / "precision" / "creps-trial0.json").read_text() == written  # read back
+    assert (tmp_path / "summary.md").read_text() == report.summary_text(document)
+
+
+@pytest.mark.parametrize("mode", ["quick", "full"])
+def test_the_committed_summary_is_rendered_from_the_committed_results(mode: str, tmp_path: Path) -> None:
+    folder = FULL.parent / mode
+    if not (folder / "results.json").exists():
+        pytest.skip(f"no committed {mode} results yet: python benchmarks/kick/run.py --{mode}")
+    shutil.copy(folder / "results.json", tmp_path / "results.json")
+    document = json.loads((tmp_path / "results.json").read_text())
+    assert (folder / "summary.md").read_text() == report.summary_text(document)

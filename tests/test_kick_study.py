@@ -82,9 +82,13 @@ def test_results_have_the_issue_shape_and_the_summary_says_what_spreads(tmp_path
         }
         (runs / experiment / "oracle-00.json").write_text(json.dumps(oracle))
     document = report.collect(tmp_path, "quick", run.MODES["quick"])
+    assert "— (oracle incomplete)" in report.summary_text(document)  # no fraction of a partial oracle
+    for index in range(1, len(study.grid_contexts())):
+        (runs / "flexibility" / f"oracle-{index:02d}.json").write_text(json.dumps(oracle))
+    document = report.collect(tmp_path, "quick", run.MODES["quick"])
     assert document["precision"]["c-cma-es"]["trial_errors"] == [0.5, 1.5]
     assert document["flexibility"]["c-cma-es"]["trial_distances"] == [3.0, 4.0]
-    assert document["flexibility"]["oracle"]["position_distances"] == [8.0]
+    assert document["flexibility"]["oracle"]["position_distances"] == [8.0] * 28
     text = report.summary_text(document)
     assert "1.00 ± 0.50 m" in text  # precision: mean ± std across the two trials
     assert "3.50 ± 0.50 m" in text and "| 0.44 |" in text  # flexibility, and 3.5 / 8.0 of the oracle

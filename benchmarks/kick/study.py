@@ -161,7 +161,9 @@ def train_run(
     else:
         opt = _new_optimizer(spec, env, int(np.random.SeedSequence(base_seed).generate_state(1)[0]))
         history = {"setting": setting, "batch": [], "evaluations": []}
+    # The history is written before the checkpoint, so after a kill it may run ahead of it: cut it back.
     history["batch"] = history["batch"][: opt.iteration]
+    history["evaluations"] = [e for e in history["evaluations"] if e[0] <= opt.iteration]
     start = time.perf_counter()
     while opt.iteration < spec.iterations and not opt.stop():
         rng = np.random.default_rng([*base_seed, opt.iteration])
@@ -173,8 +175,8 @@ def train_run(
         if opt.iteration % EVAL_EVERY == 0:
             history["evaluations"].append([opt.iteration, mean_policy_metric(env, spec.experiment, opt)])
         if opt.iteration % checkpoint_every == 0 or opt.iteration == spec.iterations or opt.stop():
-            opt.save(ckpt)
             _write_json(history_path, history)
+            opt.save(ckpt)
     result = {
         "experiment": spec.experiment,
         "name": spec.name,

@@ -15,7 +15,7 @@ import pytest
 pytest.importorskip("mujoco")
 pytest.importorskip("cma")
 
-from benchmarks.kick import report, run, study
+from benchmarks.kick import oracle, report, run, study
 
 pytestmark = pytest.mark.extras
 FULL = Path(run.__file__).resolve().parent / "results" / "full"
@@ -54,10 +54,38 @@ def test_a_finished_run_is_read_back_and_the_seed_changes_it(precision_env, tmp_
 
 
 def test_the_oracle_learns_one_context_and_caches_it(precision_env, tmp_path: Path) -> None:
-    result = study.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path)
+    result = oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path)
     assert result["context"] == [6.0] and result["episodes"] == 26 and result["population"] == 13
     assert np.isfinite(result["value"]) and result["value"] >= 0.0
-    assert study.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path) == result
+    assert oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path) == result
+
+
+@pytest.fixture(scope="module")
+def flexibility_env() -> study.OffsetParams:
+    return study.make_env("flexibility", threads=1)
+
+
+def test_the_oracle_restarts_with_twice_the_population_when_a_start_stops(flexibility_env, tmp_path) -> None:
+    # The reference kick never touches a ball at x_B = 0.30 m: flat returns stop pycma within two iterations.
+    result = oracle.oracle_point(flexibility_env, "flexibility", 24, episodes=130, seed=0, folder=tmp_path)
+    starts = result["starts"]
+    assert [s["population"] for s in starts] == [13, 26, 52]
+    assert all(s["stop"] for s in starts[:-1])
+    assert result["episodes"] == sum(s["episodes"] for s in starts) <= 130
+    assert result["value"] == max(s["value"] for s in starts)
+
+
+def test_an_old_oracle_record_is_reused_only_if_its_start_ran_its_budget(precision_env, tmp_path) -> None:
+    fresh = oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path / "fresh")
+    old = {k: v for k, v in fresh.items() if k != "starts"}
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "oracle-03.json").write_text(json.dumps(old))
+    reused = oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path / "old")
+    assert reused == {**old, "starts": [{**fresh["starts"][0]}]}
+    stopped_early = {**old, "episodes": 13, "value": 99.0}
+    (tmp_path / "old" / "oracle-03.json").write_text(json.dumps(stopped_early))
+    recomputed = oracle.oracle_point(precision_env, "precision", 3, 26, seed=0, folder=tmp_path / "old")
+    assert recomputed["value"] == fresh["value"] and "starts" in recomputed
 
 
 def test_results_have_the_issue_shape_and_the_summary_says_what_spreads(tmp_path: Path) -> None:
@@ -79,6 +107,7 @@ def test_results_have_the_issue_shape_and_the_summary_says_what_spreads(tmp_path
             "episodes": 13,
             "value": 8.0,
             "best": 9.0,
+            "starts": [{"population": 13, "episodes": 13, "value": 8.0, "stop": {}}],
         }
         (runs / experiment / "oracle-00.json").write_text(json.dumps(oracle))
     document = report.collect(tmp_path, "quick", run.MODES["quick"])

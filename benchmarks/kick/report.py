@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.kick.oracle import read_oracle
 from benchmarks.kick.study import GRID_X, GRID_Y, TARGETS
 
 __all__ = ["collect", "render", "summary_text"]
@@ -58,15 +59,14 @@ def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
             entry["iterations"].append(run["iterations"])
             entry["stopped"].append(run["stopped"])
             entry["curves"].append([[i, float(np.mean(v))] for i, v in run["history"]["evaluations"]])
-        points = [
-            json.loads(p.read_text()) for p in sorted((out / "runs" / experiment).glob("oracle-*.json"))
-        ]
+        points = [read_oracle(p) for p in sorted((out / "runs" / experiment).glob("oracle-*.json"))]
         if points:
             document[experiment]["oracle"] = {
                 per_point: [r["value"] for r in points],
                 "best": [r["best"] for r in points],
                 "contexts": [r["context"] for r in points],
                 "episodes": [r["episodes"] for r in points],
+                "starts": [len(r["starts"]) for r in points],
                 "optimizer": points[0]["optimizer"],
             }
     document["in_progress"] = _in_progress(out)
@@ -154,7 +154,8 @@ def _oracle_intro(oracle: dict[str, Any], point: str, done: int, total: int) -> 
     """``Oracle (<optimizer> per <point>, <episodes> episodes each, <done> of <total> <point>s): ``."""
     plural = "targets" if point == "target" else "positions"
     return (
-        f"Oracle ({oracle['optimizer']} per {point}, {max(oracle['episodes'])} episodes each, "
+        f"Oracle ({oracle['optimizer']} per {point} with IPOP restarts, {max(oracle['episodes'])} episodes "
+        f"each at most, {max(oracle['starts'])} starts at most, "
         f"{done} of {total} {plural}): "
     )
 

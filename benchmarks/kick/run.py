@@ -33,8 +33,9 @@ from typing import Any
 if not __package__:
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
+from benchmarks.kick.oracle import oracle_point
 from benchmarks.kick.report import render
-from benchmarks.kick.study import RunSpec, evaluation_contexts, make_env, oracle_point, train_run
+from benchmarks.kick.study import RunSpec, evaluation_contexts, make_env, train_run
 from benchmarks.study_tools import NO_STAGNATION
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -29,7 +29,7 @@ import numpy as np
 import creps_gym  # noqa: F401  (registers the ids)
 from creps_gym.envs.base import initial_distribution
 from creps_gym.optimizers.features import RBFFeatures
-from creps_gym.optimizers.registry import make_optimizer, optimizer_class, recommended_samples
+from creps_gym.optimizers.registry import make_optimizer, optimizer_class
 from creps_gym.wrappers import OffsetParams
 
 __all__ = [
@@ -37,12 +37,14 @@ __all__ = [
     "GRID_Y",
     "TARGETS",
     "RunSpec",
+    "episode_metric",
+    "evaluate",
     "evaluation_contexts",
     "grid_contexts",
     "make_env",
     "mean_policy_metric",
-    "oracle_point",
     "train_run",
+    "write_json",
 ]
 
 TARGETS = np.linspace(3.0, 12.0, 10)  # precision: the 10 evaluation targets (m)
@@ -92,7 +94,7 @@ def grid_contexts() -> np.ndarray:
     return np.stack([xs.ravel(), ys.ravel()], axis=1)
 
 
-def _metric(experiment: str, contexts: np.ndarray, info: dict[str, Any]) -> np.ndarray:
+def episode_metric(experiment: str, contexts: np.ndarray, info: dict[str, Any]) -> np.ndarray:
     """Per episode (n,): the distance (m) from the ball's rest point to the target ``s`` straight ahead
     (precision), or the ball's forward distance (m), 0 when the robot falls (flexibility)."""
     x, y = info["ball_displacement"].T
@@ -110,7 +112,7 @@ def mean_policy_metric(env: OffsetParams, experiment: str, opt: Any) -> list[flo
     """The mean policy's per-target errors (precision) or per-position distances (flexibility)."""
     contexts = evaluation_contexts(experiment)
     _, info = evaluate(env, contexts, opt.recommend(contexts))
-    return _metric(experiment, contexts, info).tolist()
+    return episode_metric(experiment, contexts, info).tolist()
 
 
 def _new_optimizer(spec: RunSpec, env: OffsetParams, seed: int) -> Any:
@@ -128,7 +130,7 @@ def _new_optimizer(spec: RunSpec, env: OffsetParams, seed: int) -> Any:
     )
 
 
-def _write_json(path: Path, document: Any) -> None:
+def write_json(path: Path, document: Any) -> None:
     """Atomic JSON write (a kill never leaves half a file)."""
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(document))
@@ -175,7 +177,7 @@ def train_run(
         if opt.iteration % EVAL_EVERY == 0:
             history["evaluations"].append([opt.iteration, mean_policy_metric(env, spec.experiment, opt)])
         if opt.iteration % checkpoint_every == 0 or opt.iteration == spec.iterations or opt.stop():
-            _write_json(history_path, history)
+            write_json(history_path, history)
             opt.save(ckpt)
     result = {
         "experiment": spec.experiment,
@@ -193,56 +195,5 @@ def train_run(
         "history": history,
         "seconds_last_session": time.perf_counter() - start,
     }
-    _write_json(result_path, result)
-    return result
-
-
-def oracle_point(
-    env: OffsetParams, experiment: str, index: int, episodes: int, seed: int, folder: Path, name: str = "cma"
-) -> dict[str, Any]:
-    """The oracle at one evaluation point: ``name`` (pycma by default) learning that one context alone
-    (target ``TARGETS[index]`` or ball position ``grid_contexts()[index]``) from the env-declared start, at
-    its default population, for ``episodes`` episodes.
-
-    Cached as ``oracle-<index>.json`` under ``folder``. ``value`` is the final mean's metric (error to the
-    target, or forward distance with 0 for a fall) and ``best`` the best metric of any sample that did not
-    fall.
-    """
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"oracle-{index:02d}.json"
-    if path.exists():
-        done = json.loads(path.read_text())
-        if done["budget_episodes"] == episodes:
-            return done
-    context = TARGETS[index : index + 1] if experiment == "precision" else grid_contexts()[index]
-    p, z = env.action_space.shape[0], env.unwrapped.context_dim
-    population = recommended_samples(name, p, 0)
-    mean, std = initial_distribution(env)
-    sequence = np.random.SeedSequence([seed, zlib.crc32(experiment.encode()), index])
-    sub_seed = int(sequence.generate_state(1)[0])
-    opt = make_optimizer(name, p, z, sub_seed, initial_mean=mean, initial_cov=std**2)
-    contexts = np.tile(context, (population, 1))
-    sign = -1.0 if experiment == "precision" else 1.0  # the best sample: smallest error, farthest kick
-    best, start = -np.inf, time.perf_counter()
-    for _ in range(episodes // population):
-        offsets = opt.ask(contexts)
-        returns, info = evaluate(env, contexts, offsets)
-        opt.tell(contexts, offsets, returns)
-        metric = _metric(experiment, contexts, info)
-        best = max(best, float(np.max(np.where(info["fell"], -np.inf, sign * metric))))
-        if opt.stop():
-            break
-    _, info = evaluate(env, context[None], opt.recommend(context[None]))
-    result = {
-        "index": index,
-        "context": context.tolist(),
-        "optimizer": name,
-        "population": population,
-        "budget_episodes": episodes,
-        "episodes": opt.evaluations,
-        "value": float(_metric(experiment, context[None], info)[0]),
-        "best": sign * best if np.isfinite(best) else None,
-        "seconds": time.perf_counter() - start,
-    }
-    _write_json(path, result)
+    write_json(result_path, result)
     return result

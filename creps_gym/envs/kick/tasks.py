@@ -138,10 +138,9 @@ class KickFlexibilityEnv(KickEnv):
     mirror-image kick; ``info["mirrored"]`` says when. The legs' joint axes are mirror images, so a ball
     at (x_B, y_B) and θ give the mirror image of the kick of the ball at (x_B, -y_B).""",
         """    ``Box([0.15, -0.15], [0.30, 0.15], (2,), float64)``: the ball position (x_B, y_B) in metres
-    relative to the torso (x forward, y left), the paper's box; uniform by default. The whole box is
-    within this robot's reach: CMA-ES from the reference kick (60 iterations of 24 episodes) kicked 7.4 m
-    at (0.30, -0.05) and 1.4 m at the hardest corner (0.30, -0.15) without falling, so the paper's box is
-    kept.""",
+    relative to the torso (x forward, y left), the paper's box; uniform by default. The reference kick
+    reaches balls up to x_B = 0.20 m; how far a search from it reaches is measured per ball position by
+    the kick study's oracle (``benchmarks/kick``), not assumed.""",
         """    v1 (``forward_only=True``): ``sign(x) x² - y²``, with x, y the ball's displacement (m) forward
     and to the left, so only forward distance pays and a backward kick is penalised.
     v0 (``forward_only=False``): the paper's ``x² - y²``, which pays a backward kick as much as the

@@ -60,6 +60,13 @@ def test_the_oracle_learns_one_context_and_caches_it(precision_env, tmp_path: Pa
     assert oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path) == result
 
 
+def test_trial_indices_pick_the_trials_one_process_runs() -> None:
+    assert run.trial_numbers(run.parse_args(["--full"]), 3) == [0, 1, 2]
+    assert run.trial_numbers(run.parse_args(["--full", "--trial-indices", "2"]), 3) == [2]
+    with pytest.raises(SystemExit):
+        run.parse_args(["--trial-indices", "-1"])
+
+
 @pytest.fixture(scope="module")
 def flexibility_env() -> study.OffsetParams:
     return study.make_env("flexibility", threads=1)

@@ -75,6 +75,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--only", choices=("precision", "flexibility", "oracle"), default=None)
     parser.add_argument("--methods", nargs="+", default=None, help="registry names to run (default: all)")
     parser.add_argument("--trials", type=int, default=None, help="override the mode's number of trials")
+    parser.add_argument(
+        "--trial-indices", type=int, nargs="+", default=None,
+        help="run only these trials (0-based; e.g. one trial per process on another core)",
+    )  # fmt: skip
     parser.add_argument("--render-only", action="store_true", help="compute nothing; render finished runs")
     parser.add_argument("--out", type=Path, default=None, help="default: benchmarks/kick/results/<mode>")
     parser.add_argument("--threads", type=int, default=0, help="simulation threads (0: all CPUs)")
@@ -86,6 +90,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         args.out = RESULTS / args.mode
     if args.trials is not None and args.trials < 1:
         parser.error(f"--trials: expected an int >= 1, got {args.trials}")
+    if args.trial_indices is not None and min(args.trial_indices) < 0:
+        parser.error(f"--trial-indices: expected ints >= 0, got {args.trial_indices}")
     return args
 
 
@@ -101,6 +107,11 @@ def run_specs(args: argparse.Namespace) -> list[tuple[RunSpec, int]]:
                 spec = RunSpec(experiment, name, SAMPLES[experiment], iterations, features, options)
                 runs.append((spec, args.trials or trials))
     return runs
+
+
+def trial_numbers(args: argparse.Namespace, trials: int) -> list[int]:
+    """The trials to run: ``--trial-indices`` if given, else 0 .. trials - 1."""
+    return list(args.trial_indices) if args.trial_indices is not None else list(range(trials))
 
 
 def compute(args: argparse.Namespace) -> None:
@@ -119,7 +130,7 @@ def compute(args: argparse.Namespace) -> None:
         return
     for spec, trials in run_specs(args):
         env = envs.setdefault(spec.experiment, make_env(spec.experiment, args.threads))
-        for trial in range(trials):
+        for trial in trial_numbers(args, trials):
             result = train_run(spec, env, trial, args.seed, args.out / "runs" / spec.experiment,
                                args.checkpoint_every)  # fmt: skip
             metric = sum(result["values"]) / len(result["values"])

@@ -60,6 +60,19 @@ def test_the_oracle_learns_one_context_and_caches_it(precision_env, tmp_path: Pa
     assert oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path) == result
 
 
+def test_the_reach_probe_scores_distance_falls_and_forward_kicks() -> None:
+    from benchmarks.kick import reach_probe
+
+    info = {
+        "fell": np.array([False, True, False]),
+        "ball_displacement": np.array([[0.0, 0.0], [5.0, 0.0], [3.0, 1.0]]),
+        "min_foot_ball_distance": np.array([0.2, 0.0, -0.01]),
+    }
+    np.testing.assert_allclose(reach_probe.shaped_loss(info), [0.2, 1.0, -0.31])
+    summary = reach_probe.probe(23, episodes=32, seed=0, population=16)
+    assert summary["episodes"] == 32 and summary["context"] == [0.3, -0.05]
+
+
 def test_trial_indices_pick_the_trials_one_process_runs() -> None:
     assert run.trial_numbers(run.parse_args(["--full"]), 3) == [0, 1, 2]
     assert run.trial_numbers(run.parse_args(["--full", "--trial-indices", "2"]), 3) == [2]

@@ -380,6 +380,26 @@ def test_flexibility_v1_pays_forward_distance_only(flexibility):
     forward_only.close()
 
 
+def test_flexibility_v2_scores_a_miss_by_how_close_the_foot_came():
+    v1 = gym.make("creps_gym/KickFlexibility-v1", num_threads=1).unwrapped
+    v2 = gym.make("creps_gym/KickFlexibility-v2", num_threads=1).unwrapped
+    contexts = np.array([[0.30, -0.05], [0.20, -0.05], [0.20, -0.05]])  # far ball (missed), near ball
+    params = np.tile(v1.reference_params(), (3, 1))
+    params[2] = np.random.default_rng(0).uniform(-1, 1, 25)  # a random pose: it falls
+    r1, info = v1.evaluate(contexts, params)
+    r2, info2 = v2.evaluate(contexts, params)
+    np.testing.assert_array_equal(info["fell"], [False, False, True])
+    assert info["min_foot_ball_distance"][0] > 0.0 and info["ball_displacement"][0, 0] == 0.0  # a miss
+    miss = np.where(info["fell"], 1.0, np.clip(info["min_foot_ball_distance"], 0.0, 1.0))
+    np.testing.assert_allclose(r2, r1 - miss)
+    assert r2[0] < 0.0 < r2[1] and r2[2] < -1.0 - 0.999  # a fall is below every standing kick
+    assert "v2: a kick that misses" in type(v2).__doc__
+    with pytest.raises(ValueError, match="miss_weight"):
+        gym.make("creps_gym/KickFlexibility-v2", miss_weight=-1.0)
+    v1.close()
+    v2.close()
+
+
 @pytest.mark.slow
 def test_the_generic_path_learns_from_the_declared_start():
     """Issue 13: with no initial distribution given, C-CMA-ES through the runner improves on the start.

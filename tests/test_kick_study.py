@@ -73,6 +73,16 @@ def test_the_reach_probe_scores_distance_falls_and_forward_kicks() -> None:
     assert summary["episodes"] == 32 and summary["context"] == [0.3, -0.05]
 
 
+def test_run_files_that_name_no_env_ran_on_the_legacy_one() -> None:
+    legacy = {"setting": {"features": "rbf", "options": {}, "samples": 20}}
+    assert study.stored_setting(legacy, "precision")["env"] == study.ENV_IDS["precision"]  # still current
+    assert study.stored_setting(legacy, "flexibility")["env"] == "creps_gym/KickFlexibility-v1"
+    assert study.ENV_IDS["flexibility"] == "creps_gym/KickFlexibility-v2"  # so v1 runs are computed again
+    record = {"budget_episodes": 26, "episodes": 26, "population": 13}
+    assert oracle._reusable(record, "precision", 26) and not oracle._reusable(record, "flexibility", 26)
+    assert oracle._reusable({**record, "env": study.ENV_IDS["flexibility"]}, "flexibility", 26)
+
+
 def test_trial_indices_pick_the_trials_one_process_runs() -> None:
     assert run.trial_numbers(run.parse_args(["--full"]), 3) == [0, 1, 2]
     assert run.trial_numbers(run.parse_args(["--full", "--trial-indices", "2"]), 3) == [2]
@@ -81,13 +91,18 @@ def test_trial_indices_pick_the_trials_one_process_runs() -> None:
 
 
 @pytest.fixture(scope="module")
-def flexibility_env() -> study.OffsetParams:
-    return study.make_env("flexibility", threads=1)
+def flat_flexibility_env() -> study.OffsetParams:
+    """v1, whose return is a flat 0 for every kick that misses the ball."""
+    return study.OffsetParams(study.gym.make(study.LEGACY_ENV_IDS["flexibility"], num_threads=1))
 
 
-def test_the_oracle_restarts_with_twice_the_population_when_a_start_stops(flexibility_env, tmp_path) -> None:
+def test_the_oracle_restarts_with_twice_the_population_when_a_start_stops(
+    flat_flexibility_env, tmp_path
+) -> None:
     # The reference kick never touches a ball at x_B = 0.30 m: flat returns stop pycma within two iterations.
-    result = oracle.oracle_point(flexibility_env, "flexibility", 24, episodes=130, seed=0, folder=tmp_path)
+    result = oracle.oracle_point(
+        flat_flexibility_env, "flexibility", 24, episodes=130, seed=0, folder=tmp_path
+    )
     starts = result["starts"]
     assert [s["population"] for s in starts] == [13, 26, 52]
     assert all(s["stop"] for s in starts[:-1])
@@ -101,7 +116,7 @@ def test_an_old_oracle_record_is_reused_only_if_its_start_ran_its_budget(precisi
     (tmp_path / "old").mkdir()
     (tmp_path / "old" / "oracle-03.json").write_text(json.dumps(old))
     reused = oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path / "old")
-    assert reused == {**old, "starts": [{**fresh["starts"][0]}]}
+    assert reused == {**old, "env": study.ENV_IDS["precision"], "starts": [{**fresh["starts"][0]}]}
     stopped_early = {**old, "episodes": 13, "value": 99.0}
     (tmp_path / "old" / "oracle-03.json").write_text(json.dumps(stopped_early))
     recomputed = oracle.oracle_point(precision_env, "precision", 3, 26, seed=0, folder=tmp_path / "old")
@@ -116,12 +131,15 @@ def test_results_have_the_issue_shape_and_the_summary_says_what_spreads(tmp_path
             document = {
                 "experiment": experiment, "name": "c-cma-es", "features": "rbf", "options": {},
                 "trial": trial, "samples": 20, "budget_iterations": 5, "iterations": 5, "episodes": 100,
-                "stopped": [],
+                "stopped": [], "setting": {"env": study.ENV_IDS[experiment]},
                 "values": [v + shift for v in values], "history": {"batch": [], "evaluations": [[5, values]]},
             }  # fmt: skip
             (runs / experiment / f"c-cma-es-trial{trial}.json").write_text(json.dumps(document))
+        stale = {**document, "trial": 2, "setting": {"env": "creps_gym/KickFlexibility-v1"}}
+        (runs / experiment / "c-cma-es-trial2.json").write_text(json.dumps(stale))  # another env: ignored
         oracle = {
             "index": 0,
+            "env": study.ENV_IDS[experiment],
             "context": [0.15, -0.15],
             "optimizer": "cma",
             "episodes": 13,
@@ -136,7 +154,7 @@ def test_results_have_the_issue_shape_and_the_summary_says_what_spreads(tmp_path
         (runs / "flexibility" / f"oracle-{index:02d}.json").write_text(json.dumps(oracle))
     document = report.collect(tmp_path, "quick", run.MODES["quick"])
     assert document["precision"]["c-cma-es"]["trial_errors"] == [0.5, 1.5]
-    assert document["flexibility"]["c-cma-es"]["trial_distances"] == [3.0, 4.0]
+    assert document["flexibility"]["c-cma-es"]["trial_distances"] == [3.0, 4.0]  # the v1 trial is stale
     assert document["flexibility"]["oracle"]["position_distances"] == [8.0] * 28
     text = report.summary_text(document)
     assert "1.00 ± 0.50 m" in text  # precision: mean ± std across the two trials

@@ -25,7 +25,15 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.kick.study import TARGETS, episode_metric, evaluate, grid_contexts, write_json
+from benchmarks.kick.study import (
+    ENV_IDS,
+    LEGACY_ENV_IDS,
+    TARGETS,
+    episode_metric,
+    evaluate,
+    grid_contexts,
+    write_json,
+)
 from creps_gym.envs.base import initial_distribution
 from creps_gym.optimizers.registry import make_optimizer, recommended_samples
 from creps_gym.wrappers import OffsetParams
@@ -33,20 +41,23 @@ from creps_gym.wrappers import OffsetParams
 __all__ = ["oracle_point", "read_oracle"]
 
 
-def read_oracle(path: Path) -> dict[str, Any]:
-    """An oracle record; a record without ``starts`` (written by a single start that ran its whole budget)
-    gets its one start listed."""
-    record = json.loads(path.read_text())
+def read_oracle(path: Path, experiment: str) -> dict[str, Any]:
+    """An oracle record of ``experiment``; a record without ``starts`` (written by a single start that ran
+    its whole budget) gets its one start listed, and one without ``env`` the legacy env it ran on."""
+    record = {"env": LEGACY_ENV_IDS[experiment], **json.loads(path.read_text())}
     if "starts" not in record:
         start = {key: record[key] for key in ("population", "episodes", "value")}
         record["starts"] = [{**start, "stop": {}}]
     return record
 
 
-def _reusable(record: dict[str, Any], episodes: int) -> bool:
-    """Same budget, and either written with restarts or a single start that never stopped early (the
-    restarting oracle would reproduce it)."""
-    if record["budget_episodes"] != episodes:
+def _reusable(record: dict[str, Any], experiment: str, episodes: int) -> bool:
+    """Same env and budget, and either written with restarts or a single start that never stopped early
+    (the restarting oracle would reproduce it)."""
+    if (
+        record["budget_episodes"] != episodes
+        or record.get("env", LEGACY_ENV_IDS[experiment]) != ENV_IDS[experiment]
+    ):
         return False
     return "starts" in record or record["episodes"] == episodes // record["population"] * record["population"]
 
@@ -99,8 +110,8 @@ def oracle_point(
     """
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"oracle-{index:02d}.json"
-    if path.exists() and _reusable(json.loads(path.read_text()), episodes):
-        return read_oracle(path)
+    if path.exists() and _reusable(json.loads(path.read_text()), experiment, episodes):
+        return read_oracle(path, experiment)
     context = TARGETS[index : index + 1] if experiment == "precision" else grid_contexts()[index]
     population = recommended_samples(name, env.action_space.shape[0], 0)
     sequence = np.random.SeedSequence([seed, zlib.crc32(experiment.encode()), index])
@@ -114,6 +125,7 @@ def oracle_point(
     best = max(s.pop("best") for s in starts)
     result = {
         "index": index,
+        "env": ENV_IDS[experiment],
         "context": context.tolist(),
         "optimizer": name,
         "population": starts[0]["population"],

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.kick.oracle import read_oracle
-from benchmarks.kick.study import GRID_X, GRID_Y, TARGETS
+from benchmarks.kick.study import ENV_IDS, GRID_X, GRID_Y, TARGETS, stored_setting
 
 __all__ = ["collect", "render", "summary_text"]
 
@@ -38,16 +38,20 @@ METRIC = {
 }
 
 
-def _runs(folder: Path) -> list[dict[str, Any]]:
+def _runs(folder: Path, experiment: str) -> list[dict[str, Any]]:
+    """The finished runs under ``folder`` on the experiment's current env (a file of another env is stale)."""
     paths = [p for p in sorted(folder.glob("*-trial*.json")) if not p.name.endswith(".history.json")]
-    return [json.loads(p.read_text()) for p in paths]
+    runs = [json.loads(p.read_text()) for p in paths]
+    return [r for r in runs if stored_setting(r, experiment)["env"] == ENV_IDS[experiment]]
 
 
 def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
     """The results document from the finished run files under ``out/runs`` (trials in order)."""
     document: dict[str, Any] = {"mode": mode, "budgets": budgets, "precision": {}, "flexibility": {}}
     for experiment, (per_trial, per_point) in METRIC.items():
-        for run in sorted(_runs(out / "runs" / experiment), key=lambda r: (r["name"], r["trial"])):
+        for run in sorted(
+            _runs(out / "runs" / experiment, experiment), key=lambda r: (r["name"], r["trial"])
+        ):
             entry = document[experiment].setdefault(run["name"], {
                 per_trial: [], per_point: [], "trials": [], "iterations": [], "stopped": [], "curves": [],
                 "features": run["features"], "options": run["options"], "samples": run["samples"],
@@ -59,7 +63,8 @@ def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
             entry["iterations"].append(run["iterations"])
             entry["stopped"].append(run["stopped"])
             entry["curves"].append([[i, float(np.mean(v))] for i, v in run["history"]["evaluations"]])
-        points = [read_oracle(p) for p in sorted((out / "runs" / experiment).glob("oracle-*.json"))]
+        paths = sorted((out / "runs" / experiment).glob("oracle-*.json"))
+        points = [r for p in paths if (r := read_oracle(p, experiment))["env"] == ENV_IDS[experiment]]
         if points:
             document[experiment]["oracle"] = {
                 per_point: [r["value"] for r in points],
@@ -161,7 +166,12 @@ def _oracle_intro(oracle: dict[str, Any], point: str, done: int, total: int) -> 
 
 
 def _flexibility_section(document: dict[str, Any]) -> list[str]:
-    lines = ["## Flexibility (Fig. 7), `KickFlexibility-v1`", "", f"Paper: {PAPER['flexibility']}.", ""]
+    lines = [
+        f"## Flexibility (Fig. 7), `{ENV_IDS['flexibility']}`",
+        "",
+        f"Paper: {PAPER['flexibility']}.",
+        "",
+    ]
     header = (
         "| method | budget (it. × N) | trials | mean forward distance | per trial | iterations | stopped by "
         "| fraction of the oracle | balls at x_B = 0.30 m kicked > 0.5 m |"

@@ -33,8 +33,10 @@ from creps_gym.optimizers.registry import make_optimizer, optimizer_class
 from creps_gym.wrappers import OffsetParams
 
 __all__ = [
+    "ENV_IDS",
     "GRID_X",
     "GRID_Y",
+    "LEGACY_ENV_IDS",
     "TARGETS",
     "RunSpec",
     "episode_metric",
@@ -43,13 +45,16 @@ __all__ = [
     "grid_contexts",
     "make_env",
     "mean_policy_metric",
+    "stored_setting",
     "train_run",
     "write_json",
 ]
 
 TARGETS = np.linspace(3.0, 12.0, 10)  # precision: the 10 evaluation targets (m)
 GRID_X, GRID_Y = np.linspace(0.15, 0.30, 4), np.linspace(-0.15, 0.15, 7)  # flexibility: the ball grid (m)
-ENV_IDS = {"precision": "creps_gym/KickPrecision-v0", "flexibility": "creps_gym/KickFlexibility-v1"}
+ENV_IDS = {"precision": "creps_gym/KickPrecision-v0", "flexibility": "creps_gym/KickFlexibility-v2"}
+#: The env of each experiment in run and oracle files that do not name theirs (written before they did).
+LEGACY_ENV_IDS = {"precision": "creps_gym/KickPrecision-v0", "flexibility": "creps_gym/KickFlexibility-v1"}
 EVAL_EVERY = 50  # iterations between evaluations of the mean policy (the learning curves)
 
 
@@ -137,6 +142,11 @@ def write_json(path: Path, document: Any) -> None:
     os.replace(tmp, path)
 
 
+def stored_setting(document: dict[str, Any], experiment: str) -> dict[str, Any]:
+    """The ``setting`` of a run file, with the env it ran on (``LEGACY_ENV_IDS`` if the file does not say)."""
+    return {"env": LEGACY_ENV_IDS[experiment], **document.get("setting", {})}
+
+
 def train_run(
     spec: RunSpec, env: OffsetParams, trial: int, seed: int, folder: Path, checkpoint_every: int = 10
 ) -> dict[str, Any]:
@@ -144,21 +154,22 @@ def train_run(
 
     Files under ``folder``: ``<name>-trial<k>.npz`` (optimiser), ``.history.json`` (the setting; per
     iteration, mean return and fall rate of the batch; every ``EVAL_EVERY`` iterations the mean policy's
-    metric) and, when finished, ``.json`` (the result). A result or checkpoint of another setting (features,
-    options, batch size) is computed again. The run ends at ``spec.iterations`` or when the optimiser's own
-    stop criteria are met.
+    metric) and, when finished, ``.json`` (the result). A result or checkpoint of another setting (env,
+    features, options, batch size) is computed again. The run ends at ``spec.iterations`` or when the
+    optimiser's own stop criteria are met.
     """
     folder.mkdir(parents=True, exist_ok=True)
     stem = folder / f"{spec.name}-trial{trial}"
     result_path, ckpt, history_path = (stem.with_suffix(s) for s in (".json", ".npz", ".history.json"))
-    setting = {"features": spec.features, "options": spec.options, "samples": spec.samples}
+    setting = {"env": ENV_IDS[spec.experiment], "features": spec.features, "options": spec.options,
+               "samples": spec.samples}  # fmt: skip
     if result_path.exists():
         done = json.loads(result_path.read_text())
-        if done["budget_iterations"] == spec.iterations and done.get("setting") == setting:
+        if done["budget_iterations"] == spec.iterations and stored_setting(done, spec.experiment) == setting:
             return done
     base_seed = [seed, spec.key, trial]
     history = json.loads(history_path.read_text()) if ckpt.exists() else {}
-    if history.get("setting") == setting:  # a checkpoint of another setting is started over
+    if stored_setting(history, spec.experiment) == setting:  # a checkpoint of another setting starts over
         opt = optimizer_class(spec.name).load(ckpt)
     else:
         opt = _new_optimizer(spec, env, int(np.random.SeedSequence(base_seed).generate_state(1)[0]))

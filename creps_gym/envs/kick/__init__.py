@@ -11,6 +11,8 @@ Registered ids
     Kick a ball placed at (x_B, y_B) as far as possible; return x² - y² (the paper's).
 ``creps_gym/KickFlexibility-v1``
     As v0 with a return for forward distance only: sign(x) x² - y².
+``creps_gym/KickFlexibility-v2``
+    As v1, and a kick that misses the ball scores minus its closest foot-ball distance (m) instead of 0.
 """
 
 from __future__ import annotations
@@ -39,5 +41,11 @@ REGISTRATIONS: list[dict[str, Any]] = [
         "entry_point": f"{_TASKS}:KickFlexibilityEnv",
         "vector_entry_point": f"{_TASKS}:KickFlexibilityVectorEnv",
         "kwargs": {"rolling_friction": 0.003, "fall_penalty": 1.0, "forward_only": True},
+    },
+    {
+        "id": "creps_gym/KickFlexibility-v2",
+        "entry_point": f"{_TASKS}:KickFlexibilityEnv",
+        "vector_entry_point": f"{_TASKS}:KickFlexibilityVectorEnv",
+        "kwargs": {"rolling_friction": 0.003, "fall_penalty": 1.0, "forward_only": True, "miss_weight": 1.0},
     },
 ]

@@ -121,6 +121,12 @@ class KickEnv(ContextualEpisodicEnv):
         """Return of a fall: the 'ball not moved' return minus ``fall_penalty``, shape (n,)."""
         return self.task_returns(contexts, np.zeros((contexts.shape[0], 2))) - self.fall_penalty
 
+    def episode_returns(self, contexts: Array, result: SimulationResult) -> Array:
+        """Returns (n,) of simulated episodes: the task's, or the fall return for a fall."""
+        return np.where(
+            result.fell, self.fallen_returns(contexts), self.task_returns(contexts, result.displacement)
+        )
+
     # -- evaluation ----------------------------------------------------------------------------------------
     def simulate(self, contexts: Array, params: Array, frame_steps: int = 0) -> SimulationResult:
         """Run the episodes of contexts (n, z) and normalised params (n, 25) without scoring them."""
@@ -152,9 +158,7 @@ class KickEnv(ContextualEpisodicEnv):
                 f"params: expected {contexts.shape[0]} rows (one per context), got {params.shape[0]}"
             )
         result = self.simulate(contexts, params)
-        returns = np.where(
-            result.fell, self.fallen_returns(contexts), self.task_returns(contexts, result.displacement)
-        )
+        returns = self.episode_returns(contexts, result)
         info = {
             "fell": result.fell.copy(),
             "ball_displacement": result.displacement.copy(),

@@ -7,8 +7,9 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import check_bool
+from creps_gym._validation import check_bool, check_real
 from creps_gym.envs.kick.env import KickEnv, KickVectorEnv
+from creps_gym.envs.kick.simulation import SimulationResult
 
 __all__ = [
     "FLEXIBILITY_HIGH",
@@ -66,6 +67,7 @@ _MANUAL = """{summary}
     * ``rolling_friction`` (0.003): the ball's rolling friction, which sets the distance scale (calibrated
       so that a strong kick, launched at about 4.5 m/s, rolls 12-14 m; pinned by a test).
     * ``fall_penalty`` (1.0): subtracted from the "ball not moved" return when the robot falls.
+    * ``forward_only``, ``miss_weight`` (flexibility only): see Return and Version History.
     * ``num_threads`` (0 = all CPUs): threads of the batched simulation; results do not depend on it.
     * ``fixed_base`` (False): debug option that welds the torso to the world; not a benchmark setting.
     * ``render_mode`` (None, ``"rgb_array"``, ``"rgb_array_list"``), ``width`` (480), ``height`` (360):
@@ -145,15 +147,32 @@ class KickFlexibilityEnv(KickEnv):
     and to the left, so only forward distance pays and a backward kick is penalised.
     v0 (``forward_only=False``): the paper's ``x² - y²``, which pays a backward kick as much as the
     mirrored forward one.
-    A fall returns ``-fall_penalty``.""",
-        version_history="""    * v1: the return is ``sign(x) x² - y²`` (forward distance only;
+    A fall returns ``-fall_penalty``.
+    v2 (``miss_weight=1``) subtracts ``miss_weight · d`` from the v1 return, with d in [0, 1] the smallest
+    distance (m) between a foot and the ball during the kick (``info["min_foot_ball_distance"]``, 0 once
+    a foot touches it), and ``miss_weight`` more from a fall. A kick that misses the ball thus scores how
+    close it came instead of a flat 0, which is what tells a search how to reach a far ball, and a fall
+    stays below every kick that stands.""",
+        version_history="""    * v2: a kick that misses the ball scores ``-miss_weight · d`` (its closest foot-ball distance
+      d, m) instead of 0, and a fall ``-fall_penalty - miss_weight`` (``miss_weight=1``).
+    * v1: the return is ``sign(x) x² - y²`` (forward distance only;
       ``forward_only=True``).
     * v0: initial version, the paper's ``x² - y²``.""",
     )
 
-    def __init__(self, *, forward_only: bool = False, **kwargs: Any) -> None:
+    def __init__(self, *, forward_only: bool = False, miss_weight: float = 0.0, **kwargs: Any) -> None:
         self.forward_only = check_bool(forward_only, "forward_only")
+        self.miss_weight = check_real(miss_weight, "miss_weight")
         super().__init__(FLEXIBILITY_LOW, FLEXIBILITY_HIGH, **kwargs)
+
+    def episode_returns(self, contexts: Array, result: SimulationResult) -> Array:
+        """The v0/v1 return minus ``miss_weight`` times the closest foot-ball distance (m, in [0, 1]; 1 for
+        a fall), shape (n,)."""
+        returns = super().episode_returns(contexts, result)
+        if self.miss_weight == 0.0:
+            return returns
+        miss = np.where(result.fell, 1.0, np.clip(result.min_foot_ball_distance, 0.0, 1.0))
+        return returns - self.miss_weight * miss
 
     def ball_positions(self, contexts: Array) -> tuple[Array, NDArray[np.bool_]]:
         """The ball at the context (n, 2); mirrored when ``y_B > 0``."""

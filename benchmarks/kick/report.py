@@ -155,12 +155,17 @@ def _precision_section(document: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _count(n: int, noun: str) -> str:
+    """``"1 start"``, ``"3 starts"``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 def _oracle_intro(oracle: dict[str, Any], point: str, done: int, total: int) -> str:
     """``Oracle (<optimizer> per <point>, <episodes> episodes each, <done> of <total> <point>s): ``."""
     plural = "targets" if point == "target" else "positions"
     return (
         f"Oracle ({oracle['optimizer']} per {point} with IPOP restarts, {max(oracle['episodes'])} episodes "
-        f"each at most, {max(oracle['starts'])} starts at most, "
+        f"each at most, {_count(max(oracle['starts']), 'start')} at most, "
         f"{done} of {total} {plural}): "
     )
 

@@ -387,7 +387,7 @@ def test_flexibility_v2_scores_a_miss_by_how_close_the_foot_came():
     params = np.tile(v1.reference_params(), (3, 1))
     params[2] = np.random.default_rng(0).uniform(-1, 1, 25)  # a random pose: it falls
     r1, info = v1.evaluate(contexts, params)
-    r2, info2 = v2.evaluate(contexts, params)
+    r2, _ = v2.evaluate(contexts, params)
     np.testing.assert_array_equal(info["fell"], [False, False, True])
     assert info["min_foot_ball_distance"][0] > 0.0 and info["ball_displacement"][0, 0] == 0.0  # a miss
     miss = np.where(info["fell"], 1.0, np.clip(info["min_foot_ball_distance"], 0.0, 1.0))

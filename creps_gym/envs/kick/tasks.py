@@ -153,8 +153,8 @@ class KickFlexibilityEnv(KickEnv):
     a foot touches it), and ``miss_weight`` more from a fall. A kick that misses the ball thus scores how
     close it came instead of a flat 0, which is what tells a search how to reach a far ball, and a fall
     stays below every kick that stands.""",
-        version_history="""    * v2: a kick that misses the ball scores ``-miss_weight · d`` (its closest foot-ball distance
-      d, m) instead of 0, and a fall ``-fall_penalty - miss_weight`` (``miss_weight=1``).
+        version_history="""    * v2: a kick that misses the ball scores ``-miss_weight · d`` (d: its closest
+      foot-ball distance, m) instead of 0, and a fall ``-fall_penalty - miss_weight`` (``miss_weight=1``).
     * v1: the return is ``sign(x) x² - y²`` (forward distance only;
       ``forward_only=True``).
     * v0: initial version, the paper's ``x² - y²``.""",

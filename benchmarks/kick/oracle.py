@@ -40,6 +40,8 @@ from creps_gym.wrappers import OffsetParams
 
 __all__ = ["oracle_point", "read_oracle"]
 
+SIGN = {"precision": -1.0, "flexibility": 1.0}  # better metric: smaller error, farther kick
+
 
 def read_oracle(path: Path, experiment: str) -> dict[str, Any]:
     """An oracle record of ``experiment``; a record without ``starts`` (written by a single start that ran
@@ -76,7 +78,7 @@ def _one_start(
     mean, std = initial_distribution(env)
     opt = make_optimizer(name, p, z, seed, initial_mean=mean, initial_cov=std**2)
     contexts = np.tile(context, (population, 1))
-    sign = -1.0 if experiment == "precision" else 1.0  # the best sample: smallest error, farthest kick
+    sign = SIGN[experiment]
     best = -np.inf
     stop: dict[str, Any] = {}
     while opt.evaluations + population <= budget and not stop:
@@ -115,12 +117,12 @@ def oracle_point(
     context = TARGETS[index : index + 1] if experiment == "precision" else grid_contexts()[index]
     population = recommended_samples(name, env.action_space.shape[0], 0)
     sequence = np.random.SeedSequence([seed, zlib.crc32(experiment.encode()), index])
-    sign = -1.0 if experiment == "precision" else 1.0
-    starts, begin = [], time.perf_counter()
-    while sum(s["episodes"] for s in starts) + population <= episodes:
-        sub_seed = _start_seed(sequence, len(starts))
-        left = episodes - sum(s["episodes"] for s in starts)
-        starts.append(_one_start(env, experiment, context, population, left, sub_seed, name))
+    sign = SIGN[experiment]
+    starts, used, begin = [], 0, time.perf_counter()
+    while used + population <= episodes:
+        seed_r = _start_seed(sequence, len(starts))
+        starts.append(_one_start(env, experiment, context, population, episodes - used, seed_r, name))
+        used += starts[-1]["episodes"]
         population *= 2
     best = max(s.pop("best") for s in starts)
     result = {
@@ -130,7 +132,7 @@ def oracle_point(
         "optimizer": name,
         "population": starts[0]["population"],
         "budget_episodes": episodes,
-        "episodes": sum(s["episodes"] for s in starts),
+        "episodes": used,
         "value": sign * max(sign * s["value"] for s in starts),
         "best": sign * best if np.isfinite(best) else None,
         "starts": starts,

@@ -57,7 +57,7 @@ def run_all(
     workers: int = 2,
     worker: Callable[[RunSpec, Path], dict[str, Any]] = execute,
     log: Callable[[str], None] = print,
-    compute: bool = True,
+    compute: bool | Callable[[RunSpec], bool] = True,
 ) -> list[dict[str, Any]]:
     """Results of the specs, in order: cached ones are read, the others computed in a process pool.
 
@@ -74,8 +74,9 @@ def run_all(
         checkpoints under other budgets, once the run's document is stored.
     log : callable
         Receives one progress line per computed run.
-    compute : bool
-        False: compute nothing and return only the cached results (to render a partial study).
+    compute : bool or callable
+        False: compute nothing and return only the cached results (to render a partial study); a predicate
+        ``compute(spec)``: compute only the missing runs it accepts (the results leave the others out).
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
@@ -93,7 +94,14 @@ def run_all(
     if not compute:
         log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} missing (not computed)")
         return [results[spec.key] for spec in specs if spec.key in results]
-    log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} to compute with {workers} worker(s)")
+    skipped = 0
+    if callable(compute):
+        chosen = [spec for spec in todo if compute(spec)]
+        skipped, todo = len(todo) - len(chosen), chosen
+    log(
+        f"{len(specs) - len(todo) - skipped} runs cached in {cache}, {len(todo)} to compute with {workers} "
+        f"worker(s)" + (f", {skipped} missing left out" if skipped else "")
+    )
 
     partial = cache / "partial"
 
@@ -113,7 +121,7 @@ def run_all(
             futures = {pool.submit(worker, spec, partial / spec.key): spec for spec in todo}
             for count, future in enumerate(as_completed(futures), 1):
                 done(futures[future], future.result(), count)
-    return [results[spec.key] for spec in specs]
+    return [results[spec.key] for spec in specs if spec.key in results]
 
 
 def available_methods(
@@ -231,9 +239,9 @@ def resolve_outputs(
     args.out = args.out or results / study_dir.name / label
 
 
-#: Options that change where or how fast a study runs, not its results, with their argument counts: the
-#: reported command leaves them out.
-NEUTRAL_OPTIONS = {"--render-only": 0, "--workers": 1, "--cache": 1, "--out": 1}
+#: Options that change where or how fast a study runs, not its results, with their argument counts (None:
+#: every argument up to the next option): the reported command leaves them out.
+NEUTRAL_OPTIONS = {"--render-only": 0, "--workers": 1, "--cache": 1, "--out": 1, "--compute-methods": None}
 
 
 def command_flags(argv: Sequence[str] | None, mode: str) -> str:
@@ -243,11 +251,13 @@ def command_flags(argv: Sequence[str] | None, mode: str) -> str:
     kept, skip = [], 0
     for arg in given:
         name, has_value, _ = arg.partition("=")
-        if skip:
+        if skip and not (skip < 0 and arg.startswith("--")):
             skip -= 1
         elif name in NEUTRAL_OPTIONS:
-            skip = 0 if has_value else NEUTRAL_OPTIONS[name]
+            count = NEUTRAL_OPTIONS[name]
+            skip = 0 if has_value else (-1 if count is None else count)  # -1: until the next option
         else:
+            skip = 0
             kept.append(arg)
     return " ".join(kept) or f"--{mode}"
 
@@ -273,12 +283,16 @@ def run_study(
     start = time.perf_counter()
     cached_before = sum(cached_result(args.cache, spec) is not None for spec in specs)
     worker = functools.partial(execute, baselines=baselines)
-    documents = run_all(specs, args.cache, workers=args.workers, worker=worker, compute=not args.render_only)
+    chosen = getattr(args, "compute_methods", None)  # compute only these methods' missing runs
+    compute = (
+        (lambda spec: spec.method in chosen) if chosen and not args.render_only else not args.render_only
+    )
+    documents = run_all(specs, args.cache, workers=args.workers, worker=worker, compute=compute)
     if not documents:
         print(f"no cached runs in {args.cache}: nothing to render")
         return 1
     wall = time.perf_counter() - start
-    computed = 0 if args.render_only else len(specs) - cached_before
+    computed = 0 if args.render_only else len(documents) - cached_before
     timing = invocation_timing(args.out, wall, computed, len(specs))
     table = write_report(args, documents, timing)
     print(f"wrote {table} and its figures in {wall:.0f} s")

@@ -341,6 +341,21 @@ def test_the_reported_command_leaves_out_what_does_not_change_the_results() -> N
     ]
     assert study_runner.command_flags(flags, "full") == "--full --no-z --seeds 2"
     assert study_runner.command_flags(["--render-only"], "quick") == "--quick"
+    methods = ["--full", "--compute-methods", "c-cma-es", "creps-cma-csa", "--dims", "64", "--workers", "1"]
+    assert study_runner.command_flags(methods, "full") == "--full --dims 64"
+
+
+def test_a_compute_predicate_computes_only_the_runs_it_accepts(tmp_path: Path) -> None:
+    old = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-old", 0, 3000)
+    new = study_tools.RunSpec("Sphere", 3, 1, "c-cma-es", 0, 3000)
+    calls: list[str] = []
+    chosen = study_runner.run_all(
+        [old, new], tmp_path, workers=1, worker=_count_calls(calls), log=str, compute=lambda s: s is new
+    )
+    assert calls == [new.key] and [d["spec"]["method"] for d in chosen] == ["c-cma-es"]
+    calls.clear()
+    both = study_runner.run_all([old, new], tmp_path, workers=1, worker=_count_calls(calls), log=str)
+    assert calls == [old.key] and [d["spec"]["method"] for d in both] == ["creps-cma-old", "c-cma-es"]
 
 
 #: Every committed rendering under docs/results/ (study, the options that computed it).
@@ -527,6 +542,47 @@ def test_run_spec_options_reach_the_optimiser(tmp_path: Path) -> None:
     assert bare["values"][0] == reuse["values"][0]  # the first update: nothing to reuse yet
     assert bare["values"] != reuse["values"]
     assert bare["spec"]["options"] == (("baseline_batches", 1),)  # JSON: [["baseline_batches", 1]]
+
+
+def test_ccmaes_study_sweeps_the_batch_size_on_the_sphere_at_z_1(tmp_path: Path) -> None:
+    from benchmarks.ccmaes import report
+
+    cache, out = tmp_path / "cache", tmp_path / "out"
+    args = [
+        "--columns",
+        "c-cma-es-n12",
+        "c-cma-es-n16",
+        "cma-fixed",
+        "--dim",
+        "4",
+        "--context-dims",
+        "1",
+        "3",
+    ]
+    args += ["--seeds", "1", "--headline-seeds", "1", "--budget", "3000", "--workers", "1"]
+    log = _script("ccmaes", *args, "--cache", str(cache), "--out", str(out))
+    # The sweep runs on the Sphere at z = 1 only; pycma on every function and z.
+    sweep = sorted(k for k in _documents(cache) if "c-cma-es" in k)
+    assert sweep == [
+        "Sphere-p4-z1-c-cma-es-e100-uniform5-s0-b3000-n12",
+        "Sphere-p4-z1-c-cma-es-e100-uniform5-s0-b3000-n16",
+    ]
+    assert "to compute" in log
+    section = (out / "results.md").read_text().split("## Sphere, z = 1: C-CMA-ES's batch size (1 seed(s))")[1]
+    header, _, row = section.strip().splitlines()[:3]
+    assert header.startswith("| N = 12 | N = 16 | N = 20 |") and header.endswith("| target |")
+    assert row.startswith("| ") and " | – | – | – | – | ≤ " in row  # N = 20 .. 40 not run
+    assert "**Partial: runs cached of 1 seeds: N = 20: 0; N = 24: 0; N = 32: 0; N = 40: 0.**" in section
+    # With every column there, the table names the batch sizes that meet the target.
+    runs = {c.name: [{"hit": 100 * c.batch, "spec": {"seed": 0}}] for c in report.BATCH_SWEEP}
+    cells = {("Sphere", 1, name): documents for name, documents in runs.items()}
+    cells[("Sphere", 1, "cma-fixed")] = [{"hit": 1000, "spec": {"seed": 0}}]
+    text = report.sweep_table(cells, 10_000, 1)
+    assert (
+        "| 1,200 (1/1) | 1,600 (1/1) | 2,000 (1/1) | 2,400 (1/1) | 3,200 (1/1) | 4,000 (1/1) | ≤ 2,000 |"
+        in text
+    )
+    assert "Batch sizes that meet the target: N = 12, N = 16, N = 20." in text and "Partial" not in text
 
 
 def test_ccmaes_study_renders_the_remedies_from_the_cached_runs(tmp_path: Path) -> None:

@@ -3,6 +3,8 @@ convergence with golden sample counts, and every bad option."""
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -176,6 +178,31 @@ def test_the_baseline_removes_a_quadratic_of_the_context_exactly():
     shifted, explained = context_advantages(contexts, returns + 1e3 * extra, degree=2, ridge=0.0)
     np.testing.assert_allclose(shifted, plain, atol=1e-9)
     assert explained > 0.99
+
+
+def test_standardised_advantages_of_flat_returns_stay_finite_and_rank_nothing():
+    contexts = np.random.default_rng(0).uniform(0, 3, (20, 2))
+    for returns in (np.full(20, -7.0), np.zeros(20)):  # residuals at round-off, and exactly zero
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            advantages, _ = context_advantages(contexts, returns, degree=2, ridge=0.0, standardise=True)
+        assert np.isfinite(advantages).all() and np.ptp(advantages) <= 1e-12 * max(
+            1.0, np.abs(advantages).max()
+        )
+
+
+def test_standardised_advantages_rank_each_context_on_its_own_scale():
+    """Two contexts whose returns spread 4 times apart: raw advantages give the wide one the top ranks,
+    standardised ones rank both on a common scale (the same spread in each)."""
+    rng = np.random.default_rng(1)
+    contexts = np.repeat([[0.0], [1.0]], 20, axis=0)
+    returns = rng.standard_normal(40) * np.where(contexts[:, 0] > 0.5, 4.0, 1.0) + 5.0 * contexts[:, 0]
+    raw, _ = context_advantages(contexts, returns, degree=1, ridge=0.0)
+    scaled, _ = context_advantages(contexts, returns, degree=1, ridge=0.0, standardise=True)
+    top_raw, top_scaled = np.argsort(-raw)[:10], np.argsort(-scaled)[:10]
+    assert np.sum(top_raw < 20) <= 1  # raw: the wide context takes (nearly) every top rank
+    assert 3 <= np.sum(top_scaled < 20) <= 7
+    np.testing.assert_allclose(np.std(scaled[:20]), np.std(scaled[20:]), rtol=0.05)
 
 
 # Golden sample counts at seed 0 (episodes until the mean policy's mean regret on 100 test contexts is

@@ -81,6 +81,12 @@ REMEDIES = (
 )
 #: The function of the remedies table.
 REMEDY_FUNCTION = "Rosenbrock"
+#: C-CMA-ES at fixed batch sizes around its recommended one (24 at p = 15, z = 1), on :data:`SWEEP_FUNCTION`
+#: at z = 1 with the headline seeds: whether any N meets the recommended-N target there.
+BATCH_SWEEP = tuple(
+    Column(f"c-cma-es-n{n}", "c-cma-es", n, f"N = {n}", "0.4") for n in (12, 16, 20, 24, 32, 40)
+)
+SWEEP_FUNCTION = "Sphere"
 #: The columns of the headline table (run with the headline seeds).
 HEADLINE = ("creps-cma-old", "c-cma-es", "c-cma-es-rec", "cma-fixed")
 #: Issue 12's targets for C-CMA-ES at N = 50: (function, z) -> (most episodes, least fraction of seeds).
@@ -194,6 +200,30 @@ def remedies_table(cells: Cells, dims: Sequence[int], budget: int, seeds: int) -
         missing += [
             f"{c.label} at z = {z}: {len(r)}" for c, r in zip(REMEDIES, runs, strict=True) if len(r) < seeds
         ]
+    if missing:
+        lines += ["", f"**Partial: runs cached of {seeds} seeds: " + "; ".join(missing) + ".**"]
+    return "\n".join(lines) + "\n"
+
+
+def sweep_table(cells: Cells, budget: int, seeds: int) -> str:
+    """:data:`BATCH_SWEEP` on :data:`SWEEP_FUNCTION` at z = 1: median episodes (seeds that got there / seeds)
+    per batch size, the recommended-N target (:data:`RECOMMENDED_FACTOR` × pycma's episodes for one context at
+    its default population) and the batch sizes that meet it."""
+    runs = [cells.get((SWEEP_FUNCTION, 1, c.name), []) for c in BATCH_SWEEP]
+    reference = median_episodes(cells.get((SWEEP_FUNCTION, 1, "cma-fixed"), []))
+    bound = None if reference is None or math.isinf(reference) else RECOMMENDED_FACTOR * reference
+    lines = [
+        "| " + " | ".join(c.label for c in BATCH_SWEEP) + " | target |",
+        "|---" * (len(BATCH_SWEEP) + 1) + "|",
+    ]
+    target = "–" if bound is None else f"≤ {bound:,.0f}"
+    lines.append("| " + " | ".join(_episodes_text(r, budget) for r in runs) + f" | {target} |")
+    if bound is not None and all(runs):
+        meeting = [
+            c.label for c, r in zip(BATCH_SWEEP, runs, strict=True) if target_met(r, bound, 0.0) == "met"
+        ]
+        lines += ["", f"Batch sizes that meet the target: {', '.join(meeting) or 'none'}."]
+    missing = [f"{c.label}: {len(r)}" for c, r in zip(BATCH_SWEEP, runs, strict=True) if len(r) < seeds]
     if missing:
         lines += ["", f"**Partial: runs cached of {seeds} seeds: " + "; ".join(missing) + ".**"]
     return "\n".join(lines) + "\n"

@@ -34,16 +34,19 @@ matplotlib.use("Agg")
 
 from benchmarks.baselines import BASELINES
 from benchmarks.ccmaes.report import (
+    BATCH_SWEEP,
     COLUMNS,
     HEADLINE,
     REMEDIES,
     REMEDY_FUNCTION,
+    SWEEP_FUNCTION,
     Column,
     csa_text,
     headline_table,
     plot_curves,
     remedies_table,
     seed_table,
+    sweep_table,
 )
 from benchmarks.study_runner import (
     add_mode_options,
@@ -59,8 +62,9 @@ HERE = Path(__file__).resolve().parent
 FUNCTIONS = ("Sphere", "Rosenbrock", "ShiftedRotatedElliptic")
 #: The issue's setting: N = 50 samples per iteration, 100 test contexts, mean U[-5, 5]^p with σ0 = 1.
 SAMPLES, EVAL_CONTEXTS, INITIAL = 50, 100, "uniform5"
-#: Every column: the methods', then the remedies' variants of C-CMA-ES (on Rosenbrock, headline seeds).
-ALL_COLUMNS = COLUMNS + tuple(c for c in REMEDIES if c.name not in {m.name for m in COLUMNS})
+#: Every column: the methods', then the remedies' variants of C-CMA-ES (on Rosenbrock, headline seeds) and
+#: its batch sizes (on the Sphere at z = 1, headline seeds).
+ALL_COLUMNS = COLUMNS + tuple(c for c in REMEDIES if c.name not in {m.name for m in COLUMNS}) + BATCH_SWEEP
 PRESETS = {
     "quick": {"seeds": 2, "headline_seeds": 2, "budget": 100_000},
     "full": {"seeds": 5, "headline_seeds": 20, "budget": 200_000},
@@ -128,11 +132,13 @@ def column_specs(args: argparse.Namespace, log: Any = print) -> list[tuple[str, 
             log(f"skipped column {column.name!r}: creps_gym.optimizers.ccmaes has no recommended_batch_size")
             continue
         seeds = max(args.seeds, args.headline_seeds) if column.name in HEADLINE else args.seeds
-        functions = args.functions
-        if column not in COLUMNS:  # a remedy (not c-cma-es): on its function only, with the headline seeds
-            functions = [name for name in functions if name == REMEDY_FUNCTION]
+        functions, dims = args.functions, args.context_dims
+        if column not in COLUMNS:  # a remedy or a batch size: on its function only, with the headline seeds
+            only = SWEEP_FUNCTION if column in BATCH_SWEEP else REMEDY_FUNCTION
+            functions = [name for name in functions if name == only]
+            dims = [z for z in dims if z == 1] if column in BATCH_SWEEP else dims
             seeds = max(args.seeds, args.headline_seeds)
-        for name, z, seed in itertools.product(functions, args.context_dims, range(seeds)):
+        for name, z, seed in itertools.product(functions, dims, range(seeds)):
             pairs.append((column.name, make_spec(column, name, args.dim, z, seed, args.budget)))
     return pairs
 
@@ -221,16 +227,24 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
 
 
 def remedies_text(args: argparse.Namespace, documents: list[dict]) -> list[str]:
-    """The remedies section of ``results.md`` (empty without remedy runs in the study)."""
-    if not any(column not in {c.name for c in COLUMNS} for column, _ in args.pairs):
-        return []
+    """The remedies and batch-size sections of ``results.md`` (each empty without its runs in the study)."""
+    names = {column for column, _ in args.pairs}
     seeds = max(args.seeds, args.headline_seeds)
     cells = group(args.pairs, documents)
-    return [
-        f"## {REMEDY_FUNCTION}: the remedies ({seeds} seed(s), C-CMA-ES, N = 50)",
-        "",
-        remedies_table(cells, args.context_dims, args.budget, seeds),
-    ]
+    text = []
+    if names & {c.name for c in REMEDIES} - {c.name for c in COLUMNS}:
+        text += [
+            f"## {REMEDY_FUNCTION}: the remedies ({seeds} seed(s), C-CMA-ES, N = 50)",
+            "",
+            remedies_table(cells, args.context_dims, args.budget, seeds),
+        ]
+    if names & {c.name for c in BATCH_SWEEP}:
+        text += [
+            f"## {SWEEP_FUNCTION}, z = 1: C-CMA-ES's batch size ({seeds} seed(s))",
+            "",
+            sweep_table(cells, args.budget, seeds),
+        ]
+    return text
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -109,6 +109,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="grid methods besides CREPS-CMA-old (default: all, as published; none with --max-interpolation "
         "or --no-z); those not registered yet are skipped",
     )
+    parser.add_argument(
+        "--compute-methods",
+        nargs="+",
+        help="compute only these methods' missing runs (e.g. c-cma-es); the others' cached runs are rendered",
+    )
     add_output_options(parser, HERE, out="heatmaps and table (default docs/results/scaling/<label>)")
     args = parser.parse_args(argv)
     args.mode = args.mode or "full"

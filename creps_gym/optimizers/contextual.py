@@ -83,7 +83,7 @@ def context_advantages(
     advantages = residuals[-n:] * scale
     total = float(np.sum((returns - returns.mean()) ** 2))
     explained = 1.0 - float(advantages @ advantages) / total if total > 0 else 0.0
-    if standardise:
+    if standardise and residuals.any():  # all zero (flat returns): nothing to rank, nothing to scale
         squares = residuals**2
         variance = (phi @ weighted_ml_fit(phi, squares[:, None], uniform, ridge, features.constant_column))[
             :, 0

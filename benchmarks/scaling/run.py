@@ -112,6 +112,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--compute-methods",
         nargs="+",
+        choices=[METHOD, *EXTRA_LABELS, *BASELINE_NAMES],
         help="compute only these methods' missing runs (e.g. c-cma-es); the others' cached runs are rendered",
     )
     add_output_options(parser, HERE, out="heatmaps and table (default docs/results/scaling/<label>)")

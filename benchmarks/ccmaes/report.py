@@ -187,6 +187,11 @@ def headline_table(cells: Cells, rows: Sequence[tuple[str, int]], budget: int) -
     return "\n".join(lines) + "\n"
 
 
+def _partial_line(missing: Sequence[str], seeds: int) -> str:
+    """The bold line naming the cells (``"<label>: <runs>"``) with fewer than ``seeds`` runs cached."""
+    return f"**Partial: runs cached of {seeds} seeds: " + "; ".join(missing) + ".**"
+
+
 def remedies_table(cells: Cells, dims: Sequence[int], budget: int, seeds: int) -> str:
     """The :data:`REMEDIES` on :data:`REMEDY_FUNCTION`, one row per z: median episodes (seeds that got
     there / seeds), and a line naming the cells with fewer than ``seeds`` runs cached."""
@@ -201,7 +206,7 @@ def remedies_table(cells: Cells, dims: Sequence[int], budget: int, seeds: int) -
             f"{c.label} at z = {z}: {len(r)}" for c, r in zip(REMEDIES, runs, strict=True) if len(r) < seeds
         ]
     if missing:
-        lines += ["", f"**Partial: runs cached of {seeds} seeds: " + "; ".join(missing) + ".**"]
+        lines += ["", _partial_line(missing, seeds)]
     return "\n".join(lines) + "\n"
 
 
@@ -225,7 +230,7 @@ def sweep_table(cells: Cells, budget: int, seeds: int) -> str:
         lines += ["", f"Batch sizes that meet the target: {', '.join(meeting) or 'none'}."]
     missing = [f"{c.label}: {len(r)}" for c, r in zip(BATCH_SWEEP, runs, strict=True) if len(r) < seeds]
     if missing:
-        lines += ["", f"**Partial: runs cached of {seeds} seeds: " + "; ".join(missing) + ".**"]
+        lines += ["", _partial_line(missing, seeds)]
     return "\n".join(lines) + "\n"
 
 

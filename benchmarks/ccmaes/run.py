@@ -215,7 +215,7 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
         seed_table(few, columns, rows, args.budget),
         csa_text(few, rows),
         "",
-        *remedies_text(args, documents),
+        *extra_sections(args, documents),
         "## Figures",
         "",
         f"![curves]({figure})",
@@ -226,7 +226,7 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
     return path
 
 
-def remedies_text(args: argparse.Namespace, documents: list[dict]) -> list[str]:
+def extra_sections(args: argparse.Namespace, documents: list[dict]) -> list[str]:
     """The remedies and batch-size sections of ``results.md`` (each empty without its runs in the study)."""
     names = {column for column, _ in args.pairs}
     seeds = max(args.seeds, args.headline_seeds)

@@ -98,6 +98,7 @@ BASELINE_OPTIONS = {
     "reuse": {"baseline_batches": 3},
     "standardised": {"standardise_advantages": True},
     "cubic": {"baseline_degree": 3},
+    "huber": {"baseline_loss": "huber"},
 }
 
 
@@ -180,6 +181,36 @@ def test_the_baseline_removes_a_quadratic_of_the_context_exactly():
     assert explained > 0.99
 
 
+def test_a_huber_baseline_is_not_dragged_by_a_few_falls():
+    """Returns = a context term + the samples' quality, except 6 of 60 "falls" far below. Least squares
+    lets the falls drag V, so the other advantages hardly follow quality; Huber's fit does not."""
+    rng = np.random.default_rng(2)
+    contexts = rng.uniform(3.0, 12.0, (60, 1))
+    quality = rng.standard_normal(60)
+    returns = -(contexts[:, 0] ** 2) / 10.0 + quality
+    falls = np.arange(0, 60, 10)
+    returns[falls] = -(contexts[falls, 0] ** 2) - 1.0
+    kept = np.setdiff1d(np.arange(60), falls)
+    squared, _ = context_advantages(contexts, returns, degree=2, ridge=1e-10)
+    huber, _ = context_advantages(contexts, returns, degree=2, ridge=1e-10, loss="huber")
+    assert np.corrcoef(huber[kept], quality[kept])[0, 1] > 0.99
+    assert np.corrcoef(squared[kept], quality[kept])[0, 1] < 0.5
+    assert set(np.argsort(huber)[:6]) == set(falls)  # the falls still rank last
+
+
+def test_a_huber_baseline_of_clean_returns_is_close_to_least_squares():
+    rng = np.random.default_rng(3)
+    contexts = rng.uniform(0.0, 3.0, (50, 2))
+    returns = contexts[:, 0] * contexts[:, 1] + rng.standard_normal(50)
+    squared, _ = context_advantages(contexts, returns, degree=2, ridge=0.0)
+    huber, _ = context_advantages(contexts, returns, degree=2, ridge=0.0, loss="huber")
+    assert np.corrcoef(squared, huber)[0, 1] > 0.98
+    exact = contexts[:, 0] - 2.0 * contexts[:, 1] ** 2  # in the span of the features: nothing to rank
+    for loss in ("squared", "huber"):
+        advantages, _ = context_advantages(contexts, exact, degree=2, ridge=0.0, loss=loss)
+        np.testing.assert_allclose(advantages, 0.0, atol=1e-9)
+
+
 def test_standardised_advantages_of_flat_returns_stay_finite_and_rank_nothing():
     contexts = np.random.default_rng(0).uniform(0, 3, (20, 2))
     for returns in (np.full(20, -7.0), np.zeros(20)):  # residuals at round-off, and exactly zero
@@ -247,6 +278,7 @@ def test_recommended_batch_size_grows_with_dimension_and_context():
         ({"baseline_batches": 0}, ValueError, "baseline_batches: expected an integer >= 1"),
         ({"standardise_advantages": 1}, TypeError, "standardise_advantages"),
         ({"step_size_signal": "both"}, ValueError, "step_size_signal: expected one of"),
+        ({"baseline_loss": "l1"}, ValueError, "baseline_loss: expected one of .*'huber'\\), got 'l1'"),
         ({"ridge": -1e-3}, ValueError, "ridge"),
         ({"baseline_ridge": float("nan")}, ValueError, "baseline_ridge"),
         ({"c_sigma": 0.0}, ValueError, "c_sigma"),

@@ -161,6 +161,28 @@ def test_results_have_the_issue_shape_and_the_summary_says_what_spreads(tmp_path
     assert "3.50 ± 0.50 m" in text and "| 0.44 |" in text  # flexibility, and 3.5 / 8.0 of the oracle
 
 
+def test_a_finished_run_being_recomputed_under_another_setting_is_in_progress_not_rendered(
+    tmp_path: Path,
+) -> None:
+    folder = tmp_path / "runs" / "precision"
+    folder.mkdir(parents=True)
+    old = {"env": study.ENV_IDS["precision"], "features": "affine", "options": {}, "samples": 20}
+    for trial in (0, 1):
+        document = {
+            "experiment": "precision", "name": "c-cma-es", "features": "affine", "options": {},
+            "trial": trial, "samples": 20, "budget_iterations": 5, "iterations": 5, "episodes": 100,
+            "stopped": [], "setting": old, "values": [float(trial)] * 10,
+            "history": {"batch": [], "evaluations": []},
+        }  # fmt: skip
+        (folder / f"c-cma-es-trial{trial}.json").write_text(json.dumps(document))
+        (folder / f"c-cma-es-trial{trial}.history.json").write_text(json.dumps({"setting": old, "batch": []}))
+    new = {**old, "options": {"baseline_loss": "huber"}}  # trial 1 restarted under new options
+    (folder / "c-cma-es-trial1.history.json").write_text(json.dumps({"setting": new, "batch": [[0, 0]] * 3}))
+    document = report.collect(tmp_path, "quick", run.MODES["quick"])
+    assert document["precision"]["c-cma-es"]["trial_errors"] == [0.0]
+    assert document["in_progress"] == {"precision/c-cma-es-trial1": 3}
+
+
 def test_the_script_runs_by_path_writes_results_summary_and_figures_and_resumes(tmp_path: Path) -> None:
     pytest.importorskip("matplotlib")
     script = Path(run.__file__)

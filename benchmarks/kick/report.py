@@ -39,10 +39,24 @@ METRIC = {
 
 
 def _runs(folder: Path, experiment: str) -> list[dict[str, Any]]:
-    """The finished runs under ``folder`` on the experiment's current env (a file of another env is stale)."""
+    """The finished runs under ``folder`` on the experiment's current env (a file of another env is stale),
+    except those being computed again under another setting (:func:`_superseded`)."""
     paths = [p for p in sorted(folder.glob("*-trial*.json")) if not p.name.endswith(".history.json")]
-    runs = [json.loads(p.read_text()) for p in paths]
-    return [r for r in runs if stored_setting(r, experiment)["env"] == ENV_IDS[experiment]]
+    runs = [(p, json.loads(p.read_text())) for p in paths]
+    return [
+        r
+        for p, r in runs
+        if stored_setting(r, experiment)["env"] == ENV_IDS[experiment] and not _superseded(p, r, experiment)
+    ]
+
+
+def _superseded(path: Path, result: dict[str, Any], experiment: str) -> bool:
+    """Whether a finished run is being computed again under another setting: its history file, which a
+    restarted run rewrites at its first checkpoint, holds a setting other than the result's."""
+    history = path.with_name(path.name.removesuffix(".json") + ".history.json")
+    if not history.exists():
+        return False
+    return stored_setting(json.loads(history.read_text()), experiment) != stored_setting(result, experiment)
 
 
 def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
@@ -83,8 +97,10 @@ def _in_progress(out: Path) -> dict[str, int]:
     progress = {}
     for history in sorted((out / "runs").glob("*/*.history.json")):
         stem = history.name.removesuffix(".history.json")
-        if not (history.parent / f"{stem}.json").exists():
-            progress[f"{history.parent.name}/{stem}"] = len(json.loads(history.read_text())["batch"])
+        result = history.parent / f"{stem}.json"
+        experiment = history.parent.name
+        if not result.exists() or _superseded(result, json.loads(result.read_text()), experiment):
+            progress[f"{experiment}/{stem}"] = len(json.loads(history.read_text())["batch"])
     return progress
 
 

@@ -50,6 +50,7 @@ from creps_gym.optimizers.cma_rules import (
     update_paths_and_cov,
 )
 from creps_gym.optimizers.contextual import (
+    LOSSES,
     baseline_features,
     coefficient_shift,
     context_advantages,
@@ -103,6 +104,9 @@ class CCMAESConfig:
     baseline_degree : int           degree of the context baseline's polynomial (2: a full quadratic).
     baseline_batches : int          batches the baseline is fitted on: the current one and the last
         (``baseline_batches`` − 1)·N samples before it (sample reuse; 1: the current batch only).
+    standardise_advantages : bool   divide a_k by a context-dependent scale fitted like V (C1).
+    baseline_loss : str             ``"squared"`` (least squares) or ``"huber"`` (Huber's M-estimate, robust
+        to a few outlying returns such as falls) for the fit of V (C1).
     ridge, baseline_ridge : float   relative ridges of the mean fit (C3) and of the baseline (C1).
     c_sigma, d_sigma, c_c, c_1, c_mu : float or None   learning rates; None = the tutorial's defaults.
     seed : int or None              seed of the sampling Generator.
@@ -121,6 +125,7 @@ class CCMAESConfig:
     baseline_degree: int = 2
     baseline_batches: int = 3
     standardise_advantages: bool = False
+    baseline_loss: str = "squared"
     restarts: int = 3
     step_size_signal: str = "mean"
     ridge: float = 1e-8
@@ -155,6 +160,8 @@ class CCMAESConfig:
         object.__setattr__(self, "active", check_bool(self.active, "active"))
         standardise = check_bool(self.standardise_advantages, "standardise_advantages")
         object.__setattr__(self, "standardise_advantages", standardise)
+        if self.baseline_loss not in LOSSES:
+            raise ValueError(f"baseline_loss: expected one of {LOSSES}, got {self.baseline_loss!r}")
         if self.step_size_signal not in SIGNALS:
             raise ValueError(f"step_size_signal: expected one of {SIGNALS}, got {self.step_size_signal!r}")
         for name, low, high in (
@@ -251,6 +258,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             config.baseline_ridge,
             *past,
             config.standardise_advantages,
+            config.baseline_loss,
         )
         constants = self.config.constants(returns.shape[0])
         order = np.argsort(-advantages, kind="stable")

@@ -20,7 +20,11 @@ __all__ = [
     "context_advantages",
     "contextual_mean",
     "recent_samples",
+    "robust_refit",
 ]
+
+LOSSES = ("squared", "huber")
+HUBER_K = 1.345  # the Huber threshold in robust standard deviations: 95 % efficiency for Gaussian residuals
 
 Array = NDArray[np.float64]
 
@@ -42,6 +46,7 @@ def context_advantages(
     past_contexts: Array | None = None,
     past_returns: Array | None = None,
     standardise: bool = False,
+    loss: str = "squared",
 ) -> tuple[Array, float]:
     """a_k = R_k − V(s_k), Eq. (C1), and the fraction of the batch returns' variance that V explains.
 
@@ -79,6 +84,8 @@ def context_advantages(
     uniform = np.full(all_returns.shape[0], 1.0 / all_returns.shape[0])
     scale = float(np.abs(all_returns).max()) or 1.0  # the fit is linear in R; scaling keeps it in range
     fit = weighted_ml_fit(phi, all_returns[:, None] / scale, uniform, ridge, features.constant_column)
+    if loss == "huber":
+        fit = robust_refit(phi, all_returns / scale, fit, ridge, features.constant_column)
     residuals = all_returns / scale - (phi @ fit)[:, 0]
     advantages = residuals[-n:] * scale
     total = float(np.sum((returns - returns.mean()) ** 2))
@@ -90,6 +97,45 @@ def context_advantages(
         ]
         advantages = advantages / np.sqrt(np.maximum(variance[-n:], 0.01 * squares.mean()))
     return advantages, explained
+
+
+def robust_refit(
+    phi: Array, targets: Array, fit: Array, ridge: float, constant_column: int | None, iterations: int = 50
+) -> Array:
+    """Huber's M-estimate of a linear fit by iteratively reweighted least squares, started from ``fit``.
+
+    Each pass weighs sample k by min(1, c·σ̂/|r_k|), with r the residuals of the current fit, σ̂ = 1.4826 ×
+    their median absolute deviation and c = :data:`HUBER_K`, and refits. Since σ̂ scales with the
+    targets, the estimate keeps the least-squares fit's equivariance: adding a function in the span of
+    ``phi`` to the targets, or scaling them by a positive factor, changes the fit and leaves the
+    (scaled) residuals unchanged.
+
+    Parameters
+    ----------
+    phi : ndarray, shape (n, k)      features
+    targets : ndarray, shape (n,)
+    fit : ndarray, shape (k, 1)      the starting fit (least squares)
+    ridge : float
+    constant_column : int or None    as in :func:`~creps_gym.optimizers.policies.weighted_ml_fit`
+    iterations : int                 at most this many passes (it stops once the fit no longer moves)
+
+    Returns
+    -------
+    ndarray, shape (k, 1)
+    """
+    for _ in range(iterations):
+        residuals = targets - (phi @ fit)[:, 0]
+        deviation = np.abs(residuals - np.median(residuals))
+        sigma = 1.4826 * float(np.median(deviation))
+        if sigma <= 1e-12 * float(np.abs(targets).max(initial=0.0)):  # half the fit is exact: keep it
+            return fit
+        weights = np.minimum(1.0, HUBER_K * sigma / np.maximum(np.abs(residuals), 1e-300))
+        refit = weighted_ml_fit(phi, targets[:, None], weights / weights.sum(), ridge, constant_column)
+        moved = float(np.abs(refit - fit).max())
+        fit = refit
+        if moved <= 1e-12 * max(float(np.abs(fit).max()), 1e-300):
+            break
+    return fit
 
 
 def contextual_mean(

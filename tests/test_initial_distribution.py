@@ -43,7 +43,7 @@ def test_the_reacher_declares_its_own_start():
 
 def test_the_kick_declares_the_reference_kick():
     pytest.importorskip("mujoco")
-    env = gym.make("creps_gym/KickPrecision-v1", num_threads=1)
+    env = gym.make("creps_gym/KickPrecision-v0", num_threads=1)
     mean, std = initial_distribution(env)  # through gymnasium's wrappers (order enforcing, checker)
     assert np.array_equal(mean, env.unwrapped.reference_params())
     assert np.array_equal(std, np.full(25, 0.02))

@@ -1,4 +1,4 @@
-"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0/v1, KickFlexibility-v0/v1/v2)."""
+"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0, creps_gym/KickFlexibility-v0/v1)."""
 
 from __future__ import annotations
 
@@ -172,20 +172,6 @@ def test_fall_is_penalised(precision, flexibility):
     assert info["fell"][0] and returns[0] == -1.0
     heavy = gym.make(FLEXIBILITY, fall_penalty=7.5, num_threads=1).unwrapped
     assert heavy.evaluate(np.array([[0.2, -0.1]]), zeros)[0][0] == -7.5
-
-
-def test_a_fall_on_precision_v1_scores_below_every_standing_kick_within_reach():
-    """v0 scores a fall at a short target above a standing kick that misses it by more than √(s² + 1) m (at
-    s = 3: a fall -10, a 6.5 m kick -12.25); v1 scores it -s² - 100, below any standing kick that misses by
-    less than 10 m, which covers every kick the robot can make at s = 3 (it rolls at most 12-14 m)."""
-    v1 = gym.make("creps_gym/KickPrecision-v1", num_threads=1).unwrapped
-    zeros, kick = np.zeros((1, 25)), REFERENCE_KICK[None, :]
-    returns, info = v1.evaluate(np.array([[3.0]]), zeros)
-    assert info["fell"][0] and returns[0] == -(3.0**2) - 100.0
-    standing, info = v1.evaluate(np.array([[3.0]]), kick)  # the reference kick: about 8.5 m
-    assert not info["fell"][0] and standing[0] > returns[0]
-    v0, _ = gym.make(PRECISION, num_threads=1).unwrapped.evaluate(np.array([[3.0]]), kick)
-    assert v0[0] == standing[0] < -(3.0**2) - 1.0  # the same kick, which v0 scores below a fall
 
 
 def test_fixed_base_debug_option_never_falls():

@@ -51,7 +51,7 @@ def test_a_wrapper_that_does_not_map_the_distribution_falls_back_to_its_box():
 
 def test_the_kick_offsets_start_at_the_reference_kick():
     pytest.importorskip("mujoco")
-    env = OffsetParams(gym.make("creps_gym/KickPrecision-v1", num_threads=1))
+    env = OffsetParams(gym.make("creps_gym/KickPrecision-v0", num_threads=1))
     np.testing.assert_array_equal(env.action(np.zeros(25)), env.unwrapped.reference_params())
     np.testing.assert_array_equal(initial_distribution(env)[1], np.ones(25))
     env.close()

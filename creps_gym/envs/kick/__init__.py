@@ -6,9 +6,7 @@ Importing this package is cheap and does not import mujoco: the env modules (``t
 Registered ids
 --------------
 ``creps_gym/KickPrecision-v0``
-    Kick a fixed ball to a target distance s in [3, 12] m; return -(x - s)² - y², a fall -s² - 1.
-``creps_gym/KickPrecision-v1``
-    As v0, and a fall returns -s² - 100, below every standing kick within the robot's reach.
+    Kick a fixed ball to a target distance s in [3, 12] m; return -(x - s)² - y².
 ``creps_gym/KickFlexibility-v0``
     Kick a ball placed at (x_B, y_B) as far as possible; return x² - y² (the paper's).
 ``creps_gym/KickFlexibility-v1``
@@ -31,12 +29,6 @@ REGISTRATIONS: list[dict[str, Any]] = [
         "entry_point": f"{_TASKS}:KickPrecisionEnv",
         "vector_entry_point": f"{_TASKS}:KickPrecisionVectorEnv",
         "kwargs": {"rolling_friction": 0.003, "fall_penalty": 1.0},
-    },
-    {
-        "id": "creps_gym/KickPrecision-v1",
-        "entry_point": f"{_TASKS}:KickPrecisionEnv",
-        "vector_entry_point": f"{_TASKS}:KickPrecisionVectorEnv",
-        "kwargs": {"rolling_friction": 0.003, "fall_penalty": 100.0},
     },
     {
         "id": "creps_gym/KickFlexibility-v0",

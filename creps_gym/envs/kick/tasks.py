@@ -66,8 +66,7 @@ _MANUAL = """{summary}
     ## Arguments
     * ``rolling_friction`` (0.003): the ball's rolling friction, which sets the distance scale (calibrated
       so that a strong kick, launched at about 4.5 m/s, rolls 12-14 m; pinned by a test).
-    * ``fall_penalty`` (1.0; 100 in ``KickPrecision-v1``): subtracted from the "ball not moved" return when
-      the robot falls.
+    * ``fall_penalty`` (1.0): subtracted from the "ball not moved" return when the robot falls.
     * ``forward_only``, ``miss_weight`` (flexibility only): see Return and Version History.
     * ``num_threads`` (0 = all CPUs): threads of the batched simulation; results do not depend on it.
     * ``fixed_base`` (False): debug option that welds the torso to the world; not a benchmark setting.
@@ -111,13 +110,7 @@ class KickPrecisionEnv(KickEnv):
         """    ``Box(3, 12, (1,), float64)``: the target distance ``s`` in metres, uniform by default;
     ``reset(options={"context": [s]})`` sets it. The context is the observation and ``info["context"]``.""",
         """    ``-(x - s)² - y²``, with x, y the ball's displacement (m) forward and to the left.
-    A fall returns ``-s² - fall_penalty`` ("ball not moved" minus the penalty): ``fall_penalty=1`` in v0,
-    100 in v1, so that in v1 a fall scores below every standing kick that misses by less than 10 m, which
-    at s = 3 m is every kick the robot can make.""",
-        version_history="""    * v1: ``fall_penalty=100``. In v0 a fall at a short target scored above a
-      standing kick that missed it by more than √(s² + 1) m (at s = 3 m: a fall -10, a 6.5 m kick
-      -12.25), so a search learning short kicks was pushed towards falling.
-    * v0: initial version (``fall_penalty=1``).""",
+    A fall returns ``-s² - fall_penalty``.""",
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -193,7 +186,7 @@ class KickFlexibilityEnv(KickEnv):
 
 
 class KickPrecisionVectorEnv(KickVectorEnv):
-    """Native vector env of ``creps_gym/KickPrecision-v0`` and ``-v1`` (batched, multi-threaded)."""
+    """Native vector env of ``creps_gym/KickPrecision-v0`` (batched, multi-threaded)."""
 
     single_env_class: ClassVar[type[KickEnv]] = KickPrecisionEnv
 

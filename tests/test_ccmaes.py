@@ -211,6 +211,12 @@ def test_a_huber_baseline_of_clean_returns_is_close_to_least_squares():
         np.testing.assert_allclose(advantages, 0.0, atol=1e-9)
 
 
+def test_context_advantages_reject_an_unknown_loss():
+    contexts, returns = np.zeros((10, 1)), np.arange(10.0)
+    with pytest.raises(ValueError, match=r"loss: expected one of .*'huber'\), got 'l1'"):
+        context_advantages(contexts, returns, degree=1, ridge=0.0, loss="l1")
+
+
 def test_standardised_advantages_of_flat_returns_stay_finite_and_rank_nothing():
     contexts = np.random.default_rng(0).uniform(0, 3, (20, 2))
     for returns in (np.full(20, -7.0), np.zeros(20)):  # residuals at round-off, and exactly zero

@@ -70,6 +70,8 @@ def context_advantages(
         advantages on the same features (floored at 1 % of their mean), so that contexts where the returns
         spread widely do not take all the top and bottom ranks.
     """
+    if loss not in LOSSES:
+        raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
     n, z = contexts.shape
     all_contexts, all_returns = contexts, returns
     if past_returns is not None and past_returns.size:

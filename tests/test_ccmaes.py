@@ -93,6 +93,46 @@ def test_the_mean_shift_signal_is_n_0_c_over_mu_eff_under_random_selection():
         np.testing.assert_allclose(np.cov(samples.T), np.eye(samples.shape[1]), atol=0.1)
 
 
+def test_a_mean_learning_rate_moves_the_mean_part_way_and_leaves_the_rest_of_the_update_alone():
+    """c_m < 1 (C3'): A ← A + c_m (A_fit − A), while σ, C and both paths see the same signal as at c_m = 1
+    (the fit's shift, i.e. the mean's step over c_m, as in the tutorial's p_σ)."""
+    rng = np.random.default_rng(5)
+    full, half = (CCMAES(4, 1, initial_mean=0.5, seed=2, c_m=c_m) for c_m in (1.0, 0.5))
+    contexts = rng.uniform(0, 3, (12, 1))
+    params = full.ask(contexts)
+    np.testing.assert_array_equal(params, half.ask(contexts))
+    returns = _sphere_returns(contexts, params)
+    before = full.policy.coefficients.copy()
+    full.tell(contexts, params, returns)
+    half.tell(contexts, params, returns)
+    np.testing.assert_allclose(
+        half.policy.coefficients, before + 0.5 * (full.policy.coefficients - before), atol=1e-15
+    )
+    np.testing.assert_array_equal(half.policy.cov, full.policy.cov)
+    np.testing.assert_array_equal(half.path_sigma, full.path_sigma)
+    assert half.policy.step_size == full.policy.step_size
+
+
+def test_a_mean_learning_rate_below_one_still_converges_and_damps_the_mean_under_random_returns():
+    """On a contextual sphere c_m = 0.5 still reaches a small regret; under random returns (pure noise) the
+    mean moves c_m times as far per iteration, relative to σ, as at c_m = 1."""
+    optimizer = CCMAES(5, 1, initial_mean=2.0, seed=0, c_m=0.5)
+    _drive(optimizer, lambda s, th, rng: _sphere_returns(s, th), 300, 16)
+    test = np.linspace(0, 3, 7)[:, None]
+    assert np.abs(optimizer.recommend(test) - 0.3 * test).max() < 1e-4
+    jumps = {}
+    for c_m in (1.0, 0.3):
+        optimizer = CCMAES(5, 1, seed=1, c_m=c_m)
+        rng, steps = np.random.default_rng(2), []
+        for _ in range(200):
+            contexts = rng.uniform(0, 3, (16, 1))
+            before, sigma = optimizer.recommend(contexts), optimizer.policy.step_size
+            optimizer.tell(contexts, optimizer.ask(contexts), rng.standard_normal(16))
+            steps.append(np.linalg.norm(optimizer.recommend(contexts) - before, axis=1).mean() / sigma)
+        jumps[c_m] = float(np.mean(steps))
+    assert abs(jumps[0.3] / jumps[1.0] - 0.3) < 0.05, jumps
+
+
 BASELINE_OPTIONS = {
     "default": {},
     "reuse": {"baseline_batches": 3},
@@ -292,6 +332,9 @@ def test_recommended_batch_size_grows_with_dimension_and_context():
         ({"d_sigma": -2.0}, ValueError, "d_sigma"),
         ({"c_c": float("inf")}, ValueError, "c_c"),
         ({"c_1": 0.6, "c_mu": 0.6}, ValueError, "c_1 \\+ c_mu <= 1"),
+        ({"c_m": 0.0}, ValueError, "c_m: expected .*, got 0.0"),
+        ({"c_m": 1.2}, ValueError, "c_m"),
+        ({"c_m": "half"}, TypeError, "c_m"),
         ({"tolx": -1.0}, ValueError, "tolx"),
         ({"tolupsigma": 0.5}, ValueError, "tolupsigma"),
         ({"max_condition": 0.0}, ValueError, "max_condition"),

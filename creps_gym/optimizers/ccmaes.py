@@ -109,6 +109,8 @@ class CCMAESConfig:
         to a few outlying returns such as falls) for the fit of V (C1).
     ridge, baseline_ridge : float   relative ridges of the mean fit (C3) and of the baseline (C1).
     c_sigma, d_sigma, c_c, c_1, c_mu : float or None   learning rates; None = the tutorial's defaults.
+    c_m : float                     the mean's learning rate in (0, 1] (C3'): A ← A + c_m (A_fit − A);
+        below 1 it averages the regression's noise over about (2 − c_m)/c_m batches.
     seed : int or None              seed of the sampling Generator.
     restarts : int                  restarts from the initial distribution when a stop criterion is met
         (``stop()`` reports criteria only once they are used up).
@@ -135,6 +137,7 @@ class CCMAESConfig:
     c_c: float | None = None
     c_1: float | None = None
     c_mu: float | None = None
+    c_m: float = 1.0
     seed: int | None = None
     tolx: float = 1e-11
     tolupsigma: float = 1e20
@@ -176,6 +179,7 @@ class CCMAESConfig:
         for name, high in (("c_sigma", 1.0), ("d_sigma", 1e6), ("c_c", 1.0), ("c_1", 1.0), ("c_mu", 1.0)):
             if getattr(self, name) is not None:  # None: the tutorial's default; else in (0, high]
                 object.__setattr__(self, name, check_real_in_range(getattr(self, name), name, 0.0, high))
+        object.__setattr__(self, "c_m", check_real_in_range(self.c_m, "c_m", 0.0, 1.0))
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
         object.__setattr__(self, "seed", check_seed(self.seed))
@@ -292,14 +296,14 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         sigma = policy.step_size
         deviations = (params - policy.mean(contexts)) / sigma  # y_k ~ N(0, C)
         try:
-            policy.coefficients = contextual_mean(  # Eq. (C3)
-                policy.mean_map, contexts, params, weights, self.config.ridge
-            )
+            fitted = contextual_mean(policy.mean_map, contexts, params, weights, self.config.ridge)  # (C3)
         except linalg.LinAlgError:
             raise RuntimeError(
                 "tell(): the weighted mean regression (C3) is singular for this batch; use a ridge > 0 or "
                 "more varied contexts. The optimiser was left unchanged"
             ) from None
+        old, c_m = policy.coefficients, self.config.c_m  # the signals below are the fit's shift: step / c_m
+        policy.coefficients = fitted if c_m == 1.0 else old + c_m * (fitted - old)  # Eq. (C3')
         selected = weights > 0
         shift = weights[selected] @ deviations[selected]  # Eq. (C4): N(0, C/μ_eff) if selection is blind
         inv_sqrt = inverse_sqrt(self.policy.cov, self._eigen())
@@ -385,20 +389,18 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         optimizer._init_from_config(config)
         optimizer.rng.bit_generator.state = state["rng"]
         optimizer.policy = LinearGaussianPolicy.from_state(config.mean_map, config.n_params, state)
-        p = config.n_params
-        optimizer.path_sigma = as_float_array(
-            state["path_sigma"], "state['path_sigma']", optimizer.path_sigma.shape
-        ).copy()
-        optimizer.path_cov = as_float_array(state["path_cov"], "state['path_cov']", (p,)).copy()
-        history = as_float_array(state["mean_returns"], "state['mean_returns']", (None,))
-        optimizer.mean_returns = [float(v) for v in history]
+        p, z = config.n_params, config.n_context_dims
+
+        def read(key: str, shape: tuple[int | None, ...]) -> Array:
+            return as_float_array(state[key], f"state['{key}']", shape).copy()
+
+        optimizer.path_sigma = read("path_sigma", optimizer.path_sigma.shape)
+        optimizer.path_cov = read("path_cov", (p,))
+        optimizer.mean_returns = [float(v) for v in read("mean_returns", (None,))]
         window = check_positive_int(state["stagnation_window"], "state['stagnation_window']")
         optimizer.stagnation_window = window
-        z = config.n_context_dims
-        optimizer.past_contexts = as_float_array(state["past_contexts"], "state['past_contexts']", (None, z))
-        optimizer.past_returns = as_float_array(
-            state["past_returns"], "state['past_returns']", (optimizer.past_contexts.shape[0],)
-        )
+        optimizer.past_contexts = read("past_contexts", (None, z))
+        optimizer.past_returns = read("past_returns", (optimizer.past_contexts.shape[0],))
         optimizer.flat_iterations = int(state["flat_iterations"])
         optimizer.restarts_done = int(state["restarts_done"])
         return optimizer

@@ -110,6 +110,7 @@ def test_a_mean_learning_rate_moves_the_mean_part_way_and_leaves_the_rest_of_the
     )
     np.testing.assert_array_equal(half.policy.cov, full.policy.cov)
     np.testing.assert_array_equal(half.path_sigma, full.path_sigma)
+    np.testing.assert_array_equal(half.path_cov, full.path_cov)
     assert half.policy.step_size == full.policy.step_size
 
 

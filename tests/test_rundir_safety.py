@@ -17,6 +17,8 @@ from helpers import SPHERE, cli_command
 from creps_gym.cli import main
 from creps_gym.runner import History, RunDir, RunDirError, RunDirWarning, load_history, resume, run
 
+NO_STAGNATION = 10**9  # iterations: the optimiser's stagnation stop never fires
+
 SETTINGS = {
     "iterations": 6,
     "samples_per_iteration": 6,
@@ -266,7 +268,9 @@ def test_export_of_a_damaged_history_json_rebuilds_it_and_warns(tmp_path, capsys
 # -- item 5: one writer per run directory; only the run's own temporaries are removed ---------------------
 def test_a_second_writer_is_refused_while_the_first_lives(tmp_path):
     out = tmp_path / "run"
-    args = ["--env", SPHERE, "--optimizer", "creps", "--iterations", 100000, "--samples", 6, "--seed", 0]
+    # no stagnation stop: with it the run may end within seconds, while the live run must outlast the test
+    args = ["--env", SPHERE, "--optimizer", "creps", "--iterations", 100000, "--samples", 6, "--seed", 0,
+            "--opt", f"tolstagnation={NO_STAGNATION}"]  # fmt: skip
     live = subprocess.Popen(
         cli_command("run", *args, "--out", out, "--checkpoint-every", 1, "--no-plot"),
         stdout=subprocess.DEVNULL,
@@ -334,9 +338,11 @@ def test_out_refuses_a_folder_that_is_neither_empty_nor_a_run(tmp_path, capsys):
 @pytest.mark.skipif(sys.platform == "win32", reason="needs SIGINT to a subprocess")
 def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
     out = tmp_path / "run"
-    # Long enough that the run is still going when the signal comes (an iteration takes about a millisecond).
+    # Long enough that the run is still going when the signal comes (an iteration takes about 2 ms): the
+    # stagnation stop is off, since with it the run ends after 186 iterations, sometimes before the signal.
     args = ["--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 3000, "--samples", 6,
-            "--seed", 3, "--env-kwarg", "dim=3", "--checkpoint-every", 100000, "--eval-every", 2]  # fmt: skip
+            "--seed", 3, "--env-kwarg", "dim=3", "--checkpoint-every", 100000, "--eval-every", 2,
+            "--opt", f"tolstagnation={NO_STAGNATION}"]  # fmt: skip
     process = subprocess.Popen(
         cli_command("run", *args, "--out", out, "--no-plot"), stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
@@ -349,7 +355,10 @@ def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
     state = RunDir.open(out).load_checkpoint()[0]
     assert 5 <= state["iteration"] == records[-1].iteration < 3000  # nothing done after the checkpoint
     assert main(["resume", str(out), "--no-plot"]) == 0
-    expected = run("creps-cma-old", SPHERE, 3000, 6, 3, env_kwargs={"dim": 3}, eval_every=2)
+    expected = run(
+        "creps-cma-old", SPHERE, 3000, 6, 3, env_kwargs={"dim": 3}, eval_every=2,
+        optimizer_options={"tolstagnation": NO_STAGNATION},
+    )  # fmt: skip
     assert History.from_json(out / RunDir.HISTORY_JSON).equals(expected)
 
 

@@ -339,12 +339,17 @@ def test_out_refuses_a_folder_that_is_neither_empty_nor_a_run(tmp_path, capsys):
 def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
     out = tmp_path / "run"
     # Long enough that the run is still going when the signal comes (an iteration takes about 2 ms): the
-    # stagnation stop is off, since with it the run ends after 186 iterations, sometimes before the signal.
+    # stagnation stop is off, since with it the run would end on its own after 186 iterations.
     args = ["--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 3000, "--samples", 6,
             "--seed", 3, "--env-kwarg", "dim=3", "--checkpoint-every", 100000, "--eval-every", 2,
             "--opt", f"tolstagnation={NO_STAGNATION}"]  # fmt: skip
     process = subprocess.Popen(
-        cli_command("run", *args, "--out", out, "--no-plot"), stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        cli_command("run", *args, "--out", out, "--no-plot"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        # A shell without job control starts background jobs with SIGINT ignored, and the child would inherit
+        # that (`nohup pytest &` failed this test): restore the default, so Python installs its handler.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     wait_for(lambda: iterations_logged(out) >= 5, process, "5 iterations")
     process.send_signal(signal.SIGINT)

@@ -1,4 +1,4 @@
-"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0, creps_gym/KickFlexibility-v0/v1)."""
+"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0, KickFlexibility-v0/v1/v2)."""
 
 from __future__ import annotations
 

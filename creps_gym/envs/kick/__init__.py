@@ -6,7 +6,7 @@ Importing this package is cheap and does not import mujoco: the env modules (``t
 Registered ids
 --------------
 ``creps_gym/KickPrecision-v0``
-    Kick a fixed ball to a target distance s in [3, 12] m; return -(x - s)² - y².
+    Kick a fixed ball to a target distance s in [3, 12] m; return -(x - s)² - y², a fall -s² - 1.
 ``creps_gym/KickFlexibility-v0``
     Kick a ball placed at (x_B, y_B) as far as possible; return x² - y² (the paper's).
 ``creps_gym/KickFlexibility-v1``

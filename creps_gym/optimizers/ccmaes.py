@@ -78,7 +78,6 @@ __all__ = [
 Array = NDArray[np.float64]
 SIGNALS = ("coefficients", "mean")
 
-
 recommended_batch_size = PolicyAccess.recommended_batch_size
 
 
@@ -256,14 +255,9 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         config = self.config
         past = (self.past_contexts, self.past_returns)
         advantages, explained = context_advantages(  # Eq. (C1)
-            contexts,
-            returns,
-            config.baseline_degree,
-            config.baseline_ridge,
-            *past,
-            config.standardise_advantages,
-            config.baseline_loss,
-        )
+            contexts, returns, config.baseline_degree, config.baseline_ridge, *past,
+            config.standardise_advantages, config.baseline_loss,
+        )  # fmt: skip
         constants = self.config.constants(returns.shape[0])
         order = np.argsort(-advantages, kind="stable")
         weights = np.empty_like(constants.weights)
@@ -313,10 +307,10 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             signal = inv_sqrt @ coefficient_shift(  # Eq. (C4'): every coefficient's shift, whitened
                 policy.mean_map, contexts[selected], deviations[selected], weights[selected]
             )
-        before = (self.policy.cov, self.path_sigma, self.path_cov)
         path_sigma, path_cov, cov, hsig = update_paths_and_cov(  # Eqs. (C5)-(C8)
-            *before, signal, shift, deviations, weights, constants, self.iteration, inv_sqrt
-        )
+            self.policy.cov, self.path_sigma, self.path_cov, signal, shift, deviations, weights, constants,
+            self.iteration, inv_sqrt,
+        )  # fmt: skip
         repaired = policy.set_cov(cov)
         policy.step_size = csa_step(sigma, path_sigma, constants)  # Eq. (C9)
         diagnostics = {

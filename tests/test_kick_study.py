@@ -73,6 +73,23 @@ def test_the_reach_probe_scores_distance_falls_and_forward_kicks() -> None:
     assert summary["episodes"] == 32 and summary["context"] == [0.3, -0.05]
 
 
+def test_the_far_end_probe_searches_on_from_a_finished_run(precision_env, tmp_path: Path) -> None:
+    from benchmarks.kick import far_end_probe
+
+    info = {"fell": np.array([False, True]), "ball_displacement": np.array([[9.0, 4.0], [0.0, 0.0]])}
+    np.testing.assert_allclose(far_end_probe.target_errors(12.0, info), [5.0, 13.0])
+    spec = study.RunSpec("precision", "c-cma-es", samples=6, iterations=2, features="affine")
+    study.train_run(spec, precision_env, 0, 0, tmp_path, checkpoint_every=1)
+    lines = far_end_probe.probe(tmp_path / "c-cma-es-trial0", 12.0, samples=8, generations=5, seed=0)
+    assert [sorted(line) for line in lines] == [
+        ["fall_rate", "run", "search_scale", "standing_distance_q10_q50_q90_max_m", "target_m"],
+        ["episodes", "fall_rate", "mean_error_m", "moved_in_radii"],
+    ]
+    assert lines[0]["run"] == "c-cma-es-trial0" and 0.0 <= lines[0]["fall_rate"] <= 1.0
+    assert lines[1]["episodes"] == 5 * 13 and lines[1]["moved_in_radii"] > 0.0
+    assert far_end_probe.probe(tmp_path / "c-cma-es-trial0", 12.0, samples=8, generations=5, seed=0) == lines
+
+
 def test_run_files_that_name_no_env_ran_on_the_legacy_one() -> None:
     legacy = {"setting": {"features": "rbf", "options": {}, "samples": 20}}
     assert study.stored_setting(legacy, "precision")["env"] == study.ENV_IDS["precision"]  # still current

@@ -90,6 +90,30 @@ def test_the_far_end_probe_searches_on_from_a_finished_run(precision_env, tmp_pa
     assert far_end_probe.probe(tmp_path / "c-cma-es-trial0", 12.0, samples=8, generations=5, seed=0) == lines
 
 
+def test_the_selection_probe_sees_a_baseline_that_cannot_follow_the_returns(
+    precision_env, tmp_path: Path
+) -> None:
+    from benchmarks.kick import selection_probe
+
+    rng = np.random.default_rng(0)
+
+    def batches(profile) -> list[tuple[np.ndarray, np.ndarray]]:
+        drawn = [rng.uniform(3.0, 12.0, (20, 1)) for _ in range(60)]
+        return [(s, profile(s[:, 0]) + 0.01 * rng.standard_normal(20)) for s in drawn]
+
+    quadratic = selection_probe.selection_rates(batches(lambda s: -((s - 7.0) ** 2)), 2, "squared")
+    assert all(0.4 < rate < 0.6 for rate in quadratic)  # V follows E[R | s]: half of every bin is selected
+    hockey = batches(lambda s: np.where(s < 11.0, 0.0, 3.0 * (11.0 - s)))  # flat, then falling after 11 m
+    starved = selection_probe.selection_rates(hockey, 2, "squared")
+    assert starved[-1] < 0.3 and starved[3] > 0.9  # the far bin starves, the one before it takes over
+    spec = study.RunSpec("precision", "c-cma-es", samples=6, iterations=2, features="affine")
+    study.train_run(spec, precision_env, 0, 0, tmp_path, checkpoint_every=1)
+    lines = selection_probe.probe(tmp_path / "c-cma-es-trial0", n_batches=3, seed=0, degrees=[2])
+    baselines = [(line["baseline_loss"], line["baseline_degree"]) for line in lines]
+    assert baselines == [("huber", 2), ("squared", 2)]
+    assert all(0.0 <= rate <= 1.0 for line in lines for rate in line["selected_per_bin"].values())
+
+
 def test_run_files_that_name_no_env_ran_on_the_legacy_one() -> None:
     legacy = {"setting": {"features": "rbf", "options": {}, "samples": 20}}
     assert study.stored_setting(legacy, "precision")["env"] == study.ENV_IDS["precision"]  # still current

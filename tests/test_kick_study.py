@@ -82,7 +82,15 @@ def test_the_far_end_probe_searches_on_from_a_finished_run(precision_env, tmp_pa
     study.train_run(spec, precision_env, 0, 0, tmp_path, checkpoint_every=1)
     lines = far_end_probe.probe(tmp_path / "c-cma-es-trial0", 12.0, samples=8, generations=5, seed=0)
     assert [sorted(line) for line in lines] == [
-        ["fall_rate", "run", "search_scale", "standing_distance_q10_q50_q90_max_m", "target_m"],
+        [
+            "fall_rate",
+            "mean_kick_error_m",
+            "mean_kick_fell",
+            "run",
+            "search_scale",
+            "standing_distance_q10_q50_q90_max_m",
+            "target_m",
+        ],
         ["episodes", "fall_rate", "mean_error_m", "moved_in_radii"],
     ]
     assert lines[0]["run"] == "c-cma-es-trial0" and 0.0 <= lines[0]["fall_rate"] <= 1.0

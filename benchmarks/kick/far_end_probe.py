@@ -3,8 +3,8 @@
 For one finished precision run (``--run c-cma-es-trial1``, a checkpoint under ``--folder``) and one target
 s (``--target``, default 12 m, the far end of the training contexts U[3, 12] m):
 
-1. ``--samples`` draws from the run's final π(θ|s): their fall rate and the quantiles of the standing kicks'
-   distance (m);
+1. whether the run's mean kick Aᵀϕ(s) falls, and its error (m, s + 1 for a fall); then ``--samples`` draws
+   from the run's final π(θ|s): their fall rate and the quantiles of the standing kicks' distance (m);
 2. pycma at that target alone, started at the run's mean policy Aᵀϕ(s) with the run's own search scale
    s_π = σ·√(mean diag C), minimising the distance to the target (a fall scores s + 1 m). Every 5
    generations it prints the fall rate of the generation, the error of pycma's mean kick and how far that
@@ -54,8 +54,10 @@ def probe(run: Path, target: float, samples: int, generations: int, seed: int) -
     standing = info["ball_displacement"][~info["fell"], 0]
     quantiles = np.quantile(standing, [0.1, 0.5, 0.9, 1.0]).round(2).tolist() if standing.size else []
     fall_rate = float(info["fell"].mean())
-    lines = [{"run": run.name, "target_m": target, "search_scale": scale, "fall_rate": fall_rate,
-              "standing_distance_q10_q50_q90_max_m": quantiles}]  # fmt: skip
+    _, at_start = evaluate(env, context, start[None])
+    lines = [{"run": run.name, "target_m": target, "mean_kick_fell": bool(at_start["fell"][0]),
+              "mean_kick_error_m": float(target_errors(target, at_start)[0]), "search_scale": scale,
+              "fall_rate": fall_rate, "standing_distance_q10_q50_q90_max_m": quantiles}]  # fmt: skip
     search = make_optimizer("cma", start.size, 1, seed, initial_mean=start, initial_cov=scale**2)
     population = recommended_samples("cma", start.size, 1)  # pycma's default
     batch = np.repeat(context, population, axis=0)

@@ -30,8 +30,8 @@ import numpy as np
 if __package__ in (None, ""):  # run as a script: make ``benchmarks`` importable
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
-from benchmarks.kick.study import evaluate, make_env
-from creps_gym.optimizers.registry import make_optimizer, optimizer_class, recommended_samples
+from benchmarks.kick.study import evaluate, load_run, make_env
+from creps_gym.optimizers.registry import make_optimizer, recommended_samples
 
 FOLDER = Path(__file__).resolve().parent / "results" / "full" / "runs" / "precision"
 
@@ -45,7 +45,7 @@ def target_errors(target: float, info: dict[str, np.ndarray]) -> np.ndarray:
 def probe(run: Path, target: float, samples: int, generations: int, seed: int) -> list[dict[str, float]]:
     """The report lines: the final policy's samples at ``target``, then pycma's progress from its mean."""
     env = make_env("precision", threads=1)
-    learner = optimizer_class(run.name.rsplit("-trial", 1)[0]).load(run.with_suffix(".npz"))
+    learner = load_run(run)
     context = np.array([[target]])
     start = learner.recommend(context)[0]
     scale = float(np.sqrt(np.mean(np.diag(learner.cov))))  # σ·√(mean diag C)

@@ -24,9 +24,8 @@ import numpy as np
 if __package__ in (None, ""):  # run as a script: make ``benchmarks`` importable
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
-from benchmarks.kick.study import evaluate, make_env
+from benchmarks.kick.study import evaluate, load_run, make_env
 from creps_gym.optimizers.contextual import context_advantages
-from creps_gym.optimizers.registry import optimizer_class
 
 FOLDER = Path(__file__).resolve().parent / "results" / "full" / "runs" / "precision"
 BINS = ((3.0, 5.0), (5.0, 7.0), (7.0, 9.0), (9.0, 11.0), (11.0, 12.0))
@@ -59,7 +58,7 @@ def selection_rates(
 def probe(run: Path, n_batches: int, seed: int, degrees: Sequence[int]) -> list[dict[str, object]]:
     """The report lines: one per (loss, degree), with the selection rate per bin of targets."""
     env = make_env("precision", threads=1)
-    learner = optimizer_class(run.name.rsplit("-trial", 1)[0]).load(run.with_suffix(".npz"))
+    learner = load_run(run)
     rng = np.random.default_rng(seed)
     batches = []
     for _ in range(n_batches):

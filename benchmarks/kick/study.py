@@ -120,6 +120,11 @@ def mean_policy_metric(env: OffsetParams, experiment: str, opt: Any) -> list[flo
     return episode_metric(experiment, contexts, info).tolist()
 
 
+def load_run(stem: Path) -> Any:
+    """The optimiser of the run ``<folder>/<name>-trial<k>``, restored from its checkpoint ``<stem>.npz``."""
+    return optimizer_class(stem.name.rsplit("-trial", 1)[0]).load(stem.with_suffix(".npz"))
+
+
 def _new_optimizer(spec: RunSpec, env: OffsetParams, seed: int) -> Any:
     mean, std = initial_distribution(env)  # N(0, I) through OffsetParams' defaults
     z = env.unwrapped.context_dim
@@ -170,7 +175,7 @@ def train_run(
     base_seed = [seed, spec.key, trial]
     history = json.loads(history_path.read_text()) if ckpt.exists() else {}
     if stored_setting(history, spec.experiment) == setting:  # a checkpoint of another setting starts over
-        opt = optimizer_class(spec.name).load(ckpt)
+        opt = load_run(stem)
     else:
         opt = _new_optimizer(spec, env, int(np.random.SeedSequence(base_seed).generate_state(1)[0]))
         history = {"setting": setting, "batch": [], "evaluations": []}

@@ -117,9 +117,12 @@ def test_the_selection_probe_sees_a_baseline_that_cannot_follow_the_returns(
     spec = study.RunSpec("precision", "c-cma-es", samples=6, iterations=2, features="affine")
     study.train_run(spec, precision_env, 0, 0, tmp_path, checkpoint_every=1)
     lines = selection_probe.probe(tmp_path / "c-cma-es-trial0", n_batches=3, seed=0, degrees=[2])
-    baselines = [(line["baseline_loss"], line["baseline_degree"]) for line in lines]
+    assert sorted(lines[0]["median_return_per_bin"]) == sorted(
+        f"[{a:g}, {b:g})" for a, b in selection_probe.BINS
+    )
+    baselines = [(line["baseline_loss"], line["baseline_degree"]) for line in lines[1:]]
     assert baselines == [("huber", 2), ("squared", 2)]
-    assert all(0.0 <= rate <= 1.0 for line in lines for rate in line["selected_per_bin"].values())
+    assert all(0.0 <= rate <= 1.0 for line in lines[1:] for rate in line["selected_per_bin"].values())
 
 
 def test_run_files_that_name_no_env_ran_on_the_legacy_one() -> None:

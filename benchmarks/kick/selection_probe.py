@@ -6,7 +6,8 @@ kick θ alone. If V cannot follow E[R | s], selection favours the targets where 
 others. This probe draws ``--batches`` batches of 20 kicks from a finished precision run's final policy at
 targets s ~ U[3, 12] m, computes the advantages as the optimiser does (each batch with the two batches before
 it, ``baseline_batches=3``) for several baseline degrees and losses, and prints, per baseline, the fraction
-of samples selected in each range of targets. Each line of output is a JSON object.
+of samples selected in each range of targets, after a first line with the median return in each range. Each
+line of output is a JSON object.
 
     python benchmarks/kick/selection_probe.py --run c-cma-es-trial1
 """
@@ -56,7 +57,8 @@ def selection_rates(
 
 
 def probe(run: Path, n_batches: int, seed: int, degrees: Sequence[int]) -> list[dict[str, object]]:
-    """The report lines: one per (loss, degree), with the selection rate per bin of targets."""
+    """The report lines: the median return per bin of targets, then one per (loss, degree) with the
+    selection rate per bin."""
     env = make_env("precision", threads=1)
     learner = load_run(run)
     rng = np.random.default_rng(seed)
@@ -66,7 +68,12 @@ def probe(run: Path, n_batches: int, seed: int, degrees: Sequence[int]) -> list[
         returns, _ = evaluate(env, contexts, learner.ask(contexts))
         batches.append((contexts, returns))
     bins = [f"[{low:g}, {high:g})" for low, high in BINS]
-    lines = []
+    s = np.concatenate([c[:, 0] for c, _ in batches])
+    returns = np.concatenate([r for _, r in batches])
+    medians = [round(float(np.median(returns[(s >= low) & (s < high)])), 3) for low, high in BINS]
+    lines: list[dict[str, object]] = [
+        {"run": run.name, "median_return_per_bin": dict(zip(bins, medians, strict=True))}
+    ]
     for loss in ("huber", "squared"):
         for degree in degrees:
             rates = np.round(selection_rates(batches, degree, loss), 2).tolist()

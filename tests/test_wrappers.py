@@ -13,7 +13,7 @@ from gymnasium.vector import AutoresetMode
 from helpers import EXTRAS, make_or_skip, python_blocks
 
 import creps_gym
-from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
+from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv, initial_distribution
 from creps_gym.wrappers import (
     FixedContexts,
     FixedContextsVector,
@@ -121,6 +121,37 @@ def test_fixed_contexts_cycle_restarts_on_seed_and_sets_the_task():
     assert "context_index" not in info
 
 
+@pytest.mark.parametrize("order", ["cycle", "random"])
+@pytest.mark.parametrize(
+    ("seed", "options", "match"),
+    [
+        (None, {"bogus": 1}, "unknown keys"),
+        (5, {"bogus": 1}, "unknown keys"),
+        (5, {"context": [9.0, 9.0]}, "context box"),
+    ],
+)
+def test_a_rejected_reset_leaves_the_context_wrapper_unchanged(order, seed, options, match):
+    """Neither the cycle position nor the generator moves when the wrapped env rejects the reset."""
+    env, twin = (FixedContexts(Bowl(), SET, order=order) for _ in range(2))
+    for wrapper in (env, twin):
+        wrapper.reset(seed=0)
+        wrapper.reset()
+    with pytest.raises(ValueError, match=match):
+        env.reset(seed=seed, options=options)
+    after, expected = ([_ctx(wrapper.reset()) for _ in range(4)] for wrapper in (env, twin))
+    np.testing.assert_array_equal(after, expected)
+
+
+@pytest.mark.parametrize("options", [{"bogus": 1}, {"context": np.full((2, 2), 9.0)}])
+def test_a_rejected_reset_leaves_the_vector_context_wrapper_unchanged(options):
+    env, twin = (FixedContextsVector(BowlVector(2), SET) for _ in range(2))
+    for wrapper in (env, twin):
+        wrapper.reset(seed=0)
+    with pytest.raises(ValueError):
+        env.reset(seed=3, options=options)
+    np.testing.assert_array_equal(env.reset()[1]["context"], twin.reset()[1]["context"])
+
+
 def test_fixed_contexts_random_is_seeded_and_covers_the_set():
     def run(seed):
         env = FixedContexts(Bowl(), SET, order="random")
@@ -197,6 +228,22 @@ def test_normalize_params_maps_the_unit_box_onto_the_bounds():
         env.step(np.zeros(2))
     with pytest.raises(TypeError, match="1-D Box"):
         NormalizeParams(gym.make("CartPole-v1"))
+
+
+def test_normalize_params_maps_the_declared_initial_distribution():
+    """N(mean, std²) of the env becomes N(normalize(mean), (2 std / (high − low))²) in [-1, 1]^p."""
+
+    class Declaring(gym.Wrapper):
+        def initial_distribution(self):
+            return np.array([-2.0, 0.5, 2.0]), np.array([0.5, 1.0, 0.25])
+
+    env = NormalizeParams(Declaring(Bowl()))
+    mean, std = initial_distribution(env)
+    np.testing.assert_allclose(mean, [-1.0, 0.0, 0.6])
+    np.testing.assert_allclose(std, [0.2, 0.4, 0.1])
+    box_mean, box_std = initial_distribution(NormalizeParams(Bowl()))  # the box rule maps onto itself
+    np.testing.assert_array_equal(box_mean, np.zeros(3))
+    np.testing.assert_array_equal(box_std, np.full(3, 0.5))
 
 
 def test_normalize_params_rejects_infinite_bounds():

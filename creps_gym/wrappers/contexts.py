@@ -36,8 +36,9 @@ from gymnasium.utils import seeding
 from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array
+from creps_gym.envs.base import initial_distribution
 from creps_gym.envs.evaluation import contextual_model
-from creps_gym.wrappers.sources import FixedSource, checked_samples, param_bounds
+from creps_gym.wrappers.sources import FixedSource, checked_samples, param_bounds, unchanged_on_error
 
 __all__ = ["FixedContexts", "HideContext", "NormalizeParams", "SampleContexts"]
 
@@ -58,8 +59,12 @@ class _ContextChoice(gym.Wrapper):
         """Called on a seeded reset."""
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
-        """Reset with a context chosen by the wrapper (unless ``options["context"]`` is given)."""
-        options = {} if options is None else dict(options)
+        """Reset with a context chosen by the wrapper (unless ``options["context"]`` is given); a reset that
+        raises leaves the wrapper's generator and cycle as they were."""
+        with unchanged_on_error(self):
+            return self._reset(seed, {} if options is None else dict(options))
+
+    def _reset(self, seed: int | None, options: dict[str, Any]) -> tuple[Any, dict]:
         if seed is not None:
             self._restart()
         if "context" in options:
@@ -193,3 +198,9 @@ class NormalizeParams(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         if params.shape[-1:] != self.low.shape:
             raise ValueError(f"params: expected shape (..., {self.low.shape[0]}), got {params.shape}")
         return 2.0 * (params - self.low) / (self.high - self.low) - 1.0
+
+    def initial_distribution(self) -> tuple[Array, Array]:
+        """The wrapped env's declared initial distribution in normalised units (mean, std), shape (p,):
+        N(mean, std²) becomes N(normalize(mean), (2 std / (high − low))²)."""
+        mean, std = initial_distribution(self.env)
+        return self.normalize(mean), 2.0 * std / (self.high - self.low)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -11,7 +13,7 @@ from numpy.typing import NDArray
 from creps_gym._validation import as_float_array
 from creps_gym.envs.base import ContextualEpisodicEnv
 
-__all__ = ["ORDERS", "FixedSource", "checked_samples", "param_bounds"]
+__all__ = ["ORDERS", "FixedSource", "checked_samples", "param_bounds", "unchanged_on_error"]
 
 Array = NDArray[np.float64]
 ORDERS = ("cycle", "random")
@@ -64,3 +66,25 @@ def param_bounds(space: Any, wrapper: str) -> tuple[Array, Array]:
     if not (np.isfinite(low).all() and np.isfinite(high).all() and (low < high).all()):
         raise ValueError(f"env.action_space: {wrapper} expected finite bounds with low < high, got {space}")
     return low, high
+
+
+@contextmanager
+def unchanged_on_error(wrapper: Any) -> Iterator[None]:
+    """Undo what a reset did to a context wrapper if the reset raises (a rejected call changes nothing).
+
+    A reset may re-seed or draw from the wrapper's ``np_random`` and move a :class:`FixedSource` cycle
+    (``wrapper.source``) before the wrapped env validates the options; on an exception the generator (its
+    object and its bit state) and the cycle position are put back.
+    """
+    generator = wrapper.np_random
+    state = generator.bit_generator.state
+    source = getattr(wrapper, "source", None)
+    position = None if source is None else source.position
+    try:
+        yield
+    except BaseException:
+        generator.bit_generator.state = state
+        wrapper.np_random = generator
+        if source is not None:
+            source.position = position
+        raise

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array
 from creps_gym.envs.evaluation import contextual_model
-from creps_gym.wrappers.sources import FixedSource, checked_samples, param_bounds
+from creps_gym.wrappers.sources import FixedSource, checked_samples, param_bounds, unchanged_on_error
 
 __all__ = ["FixedContextsVector", "HideContextVector", "NormalizeParamsVector", "SampleContextsVector"]
 
@@ -64,8 +64,12 @@ class _ContextChoiceVector(VectorWrapper):
         return obs, info
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
-        """Reset with per-env contexts chosen by the wrapper (unless ``options["context"]`` is given)."""
-        options = {} if options is None else dict(options)
+        """Reset with per-env contexts chosen by the wrapper (unless ``options["context"]`` is given); a reset
+        that raises leaves the wrapper's generator and cycle as they were."""
+        with unchanged_on_error(self):
+            return self._reset(seed, {} if options is None else dict(options))
+
+    def _reset(self, seed: int | None, options: dict[str, Any]) -> tuple[Any, dict]:
         if "context" in options:
             if seed is not None:
                 self._restart()

@@ -149,6 +149,11 @@ class NoActDim:
     observation_dim, param_low, param_high = None, np.zeros(1), np.ones(1)
 
 
+def _swapped_bounds(controller):
+    controller.param_low, controller.param_high = controller.param_high, controller.param_low
+    return controller
+
+
 @pytest.mark.parametrize(
     ("build", "error", "message"),
     [
@@ -191,7 +196,33 @@ class NoActDim:
             TypeError,
             "context: expected a ContextAccess",
         ),
-        (lambda: DMPController(2, 8), ValueError, "stable"),
+        (lambda: DMPController(2, 8), ValueError, "horizon: expected at least 16 inner steps .* stable"),
+        (
+            lambda: EpisodicEnv(
+                PointGoal(), {"type": "dmp"}, GoalContext([-1, -1], [1, 1]), max_inner_steps=5
+            ),
+            ValueError,
+            "horizon: expected at least 16 inner steps .* max_inner_steps .* got 5",
+        ),
+        (
+            lambda: EpisodicEnv(
+                "Pendulum-v1", {"type": "dmp"}, GoalContext([0, 0], [1, 1]), max_inner_steps=0
+            ),
+            ValueError,
+            "max_inner_steps: expected an integer >= 1, got 0",
+        ),
+        (
+            lambda: EpisodicEnv(
+                "Pendulum-v1", {"type": "dmp"}, GoalContext([0, 0], [1, 1]), max_inner_steps=2.5
+            ),
+            TypeError,
+            "max_inner_steps: expected an integer >= 1, got float",
+        ),
+        (
+            lambda: point_env(_swapped_bounds(DMPController(2, 40))),
+            ValueError,
+            r"controller.param_low, controller.param_high: expected param_low < param_high, got 1.0 and -1.0",
+        ),
         (lambda: DMPController(2, 40, start=[0.0, 0.0, 1.0]), ValueError, "start: expected a scalar"),
         (
             lambda: TrackingDMPController(4, [0, 1], [2], 40, [0, 0], [1, 1]),

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array, check_positive_int
-from creps_gym.movement import DiscreteDMP, DMPConfig
+from creps_gym.movement import DiscreteDMP, DMPConfig, step_spectral_radius
 
 __all__ = [
     "Controller",
@@ -106,6 +106,28 @@ def _dmp_config(n_basis: int, config: dict[str, Any]) -> DMPConfig:
     return DMPConfig(n_basis=n_basis, **config)
 
 
+def _stable_horizon(horizon: Any, config: DMPConfig) -> int:
+    """``horizon`` as an int if the DMP integration with Δt/τ = 1/horizon is stable, else a ValueError
+    naming the shortest stable horizon (the radius falls as the horizon grows: bisection)."""
+    horizon = check_positive_int(horizon, "horizon")
+
+    def stable(steps: int) -> bool:
+        return step_spectral_radius(config, 1.0 / steps) < 1.0
+
+    if stable(horizon):
+        return horizon
+    unstable, enough = horizon, 2 * horizon
+    while not stable(enough):
+        unstable, enough = enough, 2 * enough
+    while enough - unstable > 1:
+        middle = (unstable + enough) // 2
+        unstable, enough = (unstable, middle) if stable(middle) else (middle, enough)
+    raise ValueError(
+        f"horizon: expected at least {enough} inner steps for a stable DMP integration with these gains "
+        f"(the inner episode length: EpisodicEnv's max_inner_steps or the inner time limit), got {horizon}"
+    )
+
+
 class DMPController:
     """Open-loop actions from discrete DMPs, one per action dimension; θ are the DMP weights.
 
@@ -143,15 +165,14 @@ class DMPController:
         **config: Any,
     ) -> None:
         self.action_dim = check_positive_int(action_dim, "action_dim")
-        self.horizon = check_positive_int(horizon, "horizon")
         self.dmp = DiscreteDMP(self.action_dim, _dmp_config(n_basis, config))
+        self.horizon = _stable_horizon(horizon, self.dmp.config)
         bound = _bound(weight_bound, "weight_bound")
         self.param_low = np.full(self.dmp.n_params, -bound)
         self.param_high = np.full(self.dmp.n_params, bound)
         self.start_action = _per_dimension(start, "start", self.action_dim)
         self.goal_action = _per_dimension(goal, "goal", self.action_dim)
         self._actions: Array | None = None
-        self.trajectory(np.zeros((1, self.dmp.n_params)))  # fail now if the horizon is unstable
 
     def trajectory(self, params: Any) -> Array:
         """The action sequences for a batch of weights (n, p): shape (n, horizon + 1, action_dim)."""
@@ -222,16 +243,15 @@ class TrackingDMPController:
                 f"got {self.velocities.size}"
             )
         self.action_dim = int(self.positions.size)
-        self.horizon = check_positive_int(horizon, "horizon")
         goal_low = as_float_array(goal_low, "goal_low", (self.action_dim,))
         goal_high = as_float_array(goal_high, "goal_high", (self.action_dim,))
         self.kp, self.kd = _bound(kp, "kp"), _bound(kd, "kd", allow_zero=True)
         self.dmp = DiscreteDMP(self.action_dim, _dmp_config(n_basis, config))
+        self.horizon = _stable_horizon(horizon, self.dmp.config)
         bound = _bound(weight_bound, "weight_bound")
         self.param_low = np.r_[goal_low, np.full(self.dmp.n_params, -bound)]
         self.param_high = np.r_[goal_high, np.full(self.dmp.n_params, bound)]
         self._reference: Array | None = None
-        self.reference(self.param_low[None, :], goal_low)  # fail now if the horizon is unstable
 
     def reference(self, params: Any, start: Any) -> Array:
         """Reference positions for θ (n, p) from ``start`` (j,) or (n, j): shape (n, horizon + 1, j)."""

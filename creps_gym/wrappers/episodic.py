@@ -18,8 +18,8 @@ It needs ``evaluate(contexts, params)`` to be a pure function; it is, because ev
 from the same inner reset (``start_seed``) and only the context and θ differ. The return is then a
 deterministic function of (s, θ), the model CREPS assumes, and candidates are compared under common random
 numbers. ``evaluate`` loops over the batch on one inner env; to spread episodes of an expensive inner env
-over processes, use ``gymnasium.make_vec(id, n, vectorization_mode="async")`` or the runner's backends (the
-registered examples have no native vector entry point for that reason).
+over processes, use ``gymnasium.make_vec(id, n, vectorization_mode="async")`` or the runner's backends (a
+registered example's native vector entry point, :class:`EpisodicVectorEnv`, runs its envs serially).
 
 Classes
 -------
@@ -51,6 +51,8 @@ SEED_RANGE = 2**31
 
 
 def _make_inner(env: Any, env_kwargs: Mapping[str, Any] | None, max_inner_steps: int | None) -> gym.Env:
+    if max_inner_steps is not None:  # checked here, before gymnasium.make sees it under its own name
+        max_inner_steps = check_positive_int(max_inner_steps, "max_inner_steps")
     if isinstance(env, str):
         extra = {} if max_inner_steps is None else {"max_episode_steps": max_inner_steps}
         return gym.make(env, **extra, **dict(env_kwargs or {}))
@@ -91,9 +93,15 @@ def _check_controller(controller: Any, inner: gym.Env) -> Controller:
             f"got {controller.observation_dim}"
         )
     low = as_float_array(controller.param_low, "controller.param_low", (None,))
-    as_float_array(controller.param_high, "controller.param_high", (low.shape[0],))
+    high = as_float_array(controller.param_high, "controller.param_high", (low.shape[0],))
     if low.shape[0] == 0:
         raise ValueError("controller.param_low: expected at least one parameter, got shape (0,)")
+    if not (low < high).all():
+        bad = int(np.argmin(low < high))
+        raise ValueError(
+            f"controller.param_low, controller.param_high: expected param_low < param_high, got "
+            f"{low[bad]} and {high[bad]} at index {bad}"
+        )
     return controller
 
 

@@ -51,16 +51,44 @@ def test_the_kick_declares_the_reference_kick():
     env.close()
 
 
-def test_foreign_envs_and_mismatched_declarations_fall_back_to_the_box_rule():
+def test_foreign_envs_fall_back_to_the_box_rule():
     mean, std = initial_distribution(_Foreign())
     assert np.array_equal(mean, [1.0, 4.0]) and np.array_equal(std, [1.0, 2.0])
 
+
+def test_a_declaration_in_other_parameter_units_falls_back_to_the_box_rule():
+    """A wrapper between the declaring env and the caller changed the action space without mapping."""
+
+    class Rescale(gym.ActionWrapper):
+        def __init__(self, env):
+            super().__init__(env)
+            self.action_space = gym.spaces.Box(-1.0, 1.0, env.action_space.shape, np.float64)
+
+        def action(self, action):
+            return action
+
+    env = Rescale(_DeclaringSphere(gym.make("creps_gym/Sphere-v0", dim=3)))
+    mean, std = initial_distribution(env)
+    assert np.array_equal(mean, np.zeros(3)) and np.array_equal(std, np.full(3, 0.5))
+
+
+@pytest.mark.parametrize(
+    ("declared", "error", "match"),
+    [
+        ((np.zeros(5), np.ones(5)), ValueError, r"Wrong.initial_distribution\(\) mean: expected shape \(2,"),
+        ((np.zeros(2), -np.ones(2)), ValueError, r"Wrong.initial_distribution\(\) std: expected values > 0"),
+        ((np.zeros(2), np.array([1.0, np.nan])), ValueError, r"std: expected finite values, got nan"),
+        ((np.zeros(2), np.ones(2) + 1j), TypeError, r"std: expected an array of real numbers, got a complex"),
+        ([np.zeros(2), np.ones(2)], TypeError, r"expected a tuple \(mean, std\), got list"),
+    ],
+)
+def test_a_broken_declaration_raises_naming_the_declaring_class(declared, error, match):
     class Wrong(gym.Wrapper):
         def initial_distribution(self):
-            return np.zeros(5), np.ones(5)  # not the action space's shape
+            return declared
 
-    mean, std = initial_distribution(Wrong(_Foreign()))
-    assert np.array_equal(mean, [1.0, 4.0]) and np.array_equal(std, [1.0, 2.0])
+    with pytest.raises(error, match=match):
+        initial_distribution(Wrong(_Foreign()))
 
 
 def test_a_wrapper_declaration_wins_over_the_inner_env():

@@ -71,6 +71,7 @@ def test_records_its_constructor_arguments():
         ({"scale": [1.0, -1.0, 1.0]}, ValueError, "scale > 0"),
         ({"centre": [1.0, 2.0]}, ValueError, "centre"),
         ({"centre": np.nan}, ValueError, "centre"),
+        ({"scale": 1e-320}, ValueError, "scale: expected values that keep the declared distribution"),
     ],
 )
 def test_bad_arguments(kwargs, error, match):

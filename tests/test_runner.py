@@ -6,6 +6,7 @@ import csv
 import io
 import json
 import math
+import re
 from pathlib import Path
 
 import gymnasium as gym
@@ -380,6 +381,10 @@ BACKEND_ERROR = r"backend: expected one of \['auto', 'serial', 'vector', 'ray'\]
      ({"backend": "gpu"}, ValueError, BACKEND_ERROR),
      ({"max_episodes": 5}, ValueError, "max_episodes: expected at least one iteration's samples"),
      ({"initial_std": [1.0, -1.0]}, ValueError, "initial_std: expected a number or a list of positive"),
+     ({"initial_std": 1e-320}, ValueError, "initial_std: .* with a finite variance > 0, got 1e-320"),
+     ({"initial_std": 1e308}, ValueError, "initial_std: .* with a finite variance > 0, got 1e[+]308"),
+     ({"initial_mean": np.zeros((2, 2))}, ValueError, r"initial_mean: expected .* 1-D list .* \(2, 2\)"),
+     ({"initial_mean": "centre"}, ValueError, "initial_mean: expected a number or a list of finite numbers"),
      ({"target_regret": math.nan}, ValueError, "target_regret: expected a positive finite number"),
      ({"seed": -1}, ValueError, "seed: expected an integer >= 0")],
 )  # fmt: skip
@@ -398,7 +403,7 @@ def test_record_round_trip_and_column_errors():
         History([record]).column("nope")
 
 
-def test_the_runner_guide_examples_run(tmp_path, monkeypatch):
+def test_the_runner_guide_examples_run_and_print_what_their_comment_says(tmp_path, monkeypatch, capsys):
     pytest.importorskip("matplotlib")
     guide = Path(__file__).resolve().parent.parent / "docs" / "runner.md"
     blocks = python_blocks(guide)
@@ -407,6 +412,8 @@ def test_the_runner_guide_examples_run(tmp_path, monkeypatch):
     for block in blocks:
         exec(compile(block, str(guide), "exec"), namespace)
     assert namespace["history"].stop_reason == "target_regret"
+    quoted = re.search(r"print\(history\.stop_reason, .*\)  # (\S+ \d+ [0-9.]+)\.\.\.\n", "\n".join(blocks))
+    assert quoted is not None and capsys.readouterr().out.startswith(quoted.group(1))
     assert (tmp_path / "comparison.png").exists() and (
         tmp_path / "runs" / "api-demo" / "history.json"
     ).exists()
@@ -421,3 +428,21 @@ def test_wrapped_action_spaces_are_evaluated_through_episodes_not_the_raw_model(
     env = NormalizeParams(gym.make(SPHERE, dim=3))
     history = run(CREPSCMA(3, 1, seed=0), env, 3, 10, 0)
     assert history.meta["metric"] == "return"
+
+
+def test_numpy_initial_distributions_are_accepted_as_numbers():
+    base = {"env": SPHERE, "optimizer": "creps", "iterations": 2, "samples": 10, "seed": 0}
+    config = RunConfig(**base, initial_mean=np.arange(3.0), initial_std=np.float32(0.5))
+    assert config.initial_mean == [0.0, 1.0, 2.0] and config.initial_std == 0.5
+    assert RunConfig.from_dict(json.loads(json.dumps(config.to_dict()))) == config
+
+
+def test_an_env_declared_std_whose_variance_overflows_is_named():
+    import gymnasium as gym
+
+    class Huge(gym.Wrapper):
+        def initial_distribution(self):
+            return np.zeros(3), np.full(3, 1e200)
+
+    with pytest.raises(ValueError, match="initial_std: expected standard deviations with finite variances"):
+        run("creps", Huge(gym.make(SPHERE, dim=3)), 2, 10, 0)

@@ -76,11 +76,21 @@ def initial_distribution(env: Any) -> tuple[Array, Array]:
     while not hasattr(type(layer), "initial_distribution") and isinstance(layer, gym.Wrapper):
         layer = layer.env
     if hasattr(type(layer), "initial_distribution") and layer.action_space == env.action_space:
-        mean, std = (np.asarray(a, np.float64) for a in layer.initial_distribution())
-        shape = env.action_space.shape
-        if mean.shape == shape and std.shape == shape:
-            return mean.copy(), std.copy()
+        return _checked_declaration(layer, env.action_space.shape)
     return box_initial_distribution(env.action_space)
+
+
+def _checked_declaration(layer: Any, shape: tuple[int, ...]) -> tuple[Array, Array]:
+    """``layer.initial_distribution()`` checked: finite real mean and std of ``shape``, std > 0."""
+    name = f"{type(layer).__name__}.initial_distribution()"
+    declared = layer.initial_distribution()
+    if not isinstance(declared, tuple) or len(declared) != 2:
+        raise TypeError(f"{name}: expected a tuple (mean, std), got {type(declared).__name__}")
+    mean = as_float_array(declared[0], f"{name} mean", shape).copy()
+    std = as_float_array(declared[1], f"{name} std", shape).copy()
+    if not (std > 0).all():
+        raise ValueError(f"{name} std: expected values > 0, got {std}")
+    return mean, std
 
 
 @runtime_checkable

@@ -42,10 +42,12 @@ def split_seed(seed: int) -> tuple[np.random.Generator, int, int]:
 
 
 def default_initial_distribution(action_space: gym.spaces.Box) -> tuple[Array, Array]:
-    """Mean and standard deviations (p,) of the default initial search distribution.
+    """Mean and standard deviations (p,) of the box rule, the runner's start for an env that declares none.
 
     The centre of the action box and a quarter of its width per coordinate (so mean ± 2 std spans the box);
-    coordinates with an infinite bound get mean 0 and standard deviation 1.
+    coordinates with an infinite bound get mean 0 and standard deviation 1. The runner starts from
+    :func:`~creps_gym.envs.base.initial_distribution`, the env-declared distribution, which is this rule
+    for envs without a declaration.
     """
     return box_initial_distribution(action_space)
 
@@ -86,12 +88,16 @@ def build_optimizer(config: RunConfig, env: gym.Env, n_context_dims: int, seed: 
     else:
         mean = per_parameter(config.initial_mean, "initial_mean", mean, n_params)
     std = per_parameter(config.initial_std, "initial_std", std, n_params)
+    with np.errstate(over="ignore", under="ignore"):
+        variances = std**2
+    if not (np.isfinite(variances).all() and (variances > 0).all()):  # e.g. an env-declared std of 1e200
+        raise ValueError(f"initial_std: expected standard deviations with finite variances > 0, got {std}")
     options = dict(config.optimizer_options)
     budget_option = getattr(registered_class(config.optimizer), "budget_option", None)
     if budget_option is not None and budget_option not in options:  # e.g. nevergrad's NGOpt needs it
         options[budget_option] = min(config.iterations * config.samples, config.max_episodes or math.inf)
     return make_optimizer(
-        config.optimizer, n_params, n_context_dims, seed, initial_mean=mean, initial_cov=std**2, **options
+        config.optimizer, n_params, n_context_dims, seed, initial_mean=mean, initial_cov=variances, **options
     )
 
 

@@ -8,6 +8,8 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
+import numpy as np
+
 from creps_gym._validation import check_positive_int
 
 __all__ = ["BACKENDS", "CONTEXT_DRAWS", "VECTOR_MODES", "RunConfig", "check_ray_address"]
@@ -47,13 +49,24 @@ def check_ray_address(value: Any, name: str = "ray_address") -> str:
 
 
 def _vector_or_scalar(value: Any, name: str, positive: bool) -> Any:
+    """A finite number or a list of them (numpy scalars and 1-D arrays accepted) as float or list of float.
+
+    ``positive``: standard deviations, which must be > 0 with a finite variance > 0 (their square).
+    """
     if value is None:
         return None
+    if isinstance(value, np.ndarray):
+        if value.ndim > 1:
+            raise ValueError(f"{name}: expected a number or a 1-D list of numbers, got shape {value.shape}")
+        value = value.tolist()
     items = value if isinstance(value, (list, tuple)) else [value]
     for item in items:
-        bad = isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item)
-        if bad or (positive and item <= 0):
-            kind = "positive finite numbers" if positive else "finite numbers"
+        real = isinstance(item, (int, float, np.integer, np.floating)) and not isinstance(item, bool)
+        bad = not real or not math.isfinite(item)
+        if not bad and positive:
+            bad = not (item > 0 and 0.0 < float(item) * float(item) < math.inf)
+        if bad:
+            kind = "positive finite numbers with a finite variance > 0" if positive else "finite numbers"
             raise ValueError(f"{name}: expected a number or a list of {kind}, got {value!r}")
     return [float(v) for v in items] if isinstance(value, (list, tuple)) else float(value)
 
@@ -104,7 +117,9 @@ class RunConfig:
     checkpoint_every : int
         Checkpoint every this many iterations (and at the end), when the run has a directory.
     initial_mean, initial_std : float, list of float or None
-        Initial search distribution; None = the action box's centre and a quarter of its width.
+        Initial search distribution; None = the env-declared one
+        (:func:`~creps_gym.envs.base.initial_distribution`: an env's own start, else the action box's centre
+        and a quarter of its width).
         ``initial_mean="uniform"`` draws the mean uniformly in the action box from the master seed (the
         paper's initialisation), from a fourth ``SeedSequence`` child that no other stream uses.
     ray_address : str or None
@@ -173,7 +188,7 @@ class RunConfig:
         _optional_positive(self.max_episodes, "max_episodes", integer=True)
         for name in ("target_regret", "max_time"):
             object.__setattr__(self, name, _optional_positive(getattr(self, name), name, integer=False))
-        if self.initial_mean != "uniform":
+        if not (isinstance(self.initial_mean, str) and self.initial_mean == "uniform"):
             object.__setattr__(
                 self, "initial_mean", _vector_or_scalar(self.initial_mean, "initial_mean", False)
             )

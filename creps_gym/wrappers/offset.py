@@ -65,6 +65,13 @@ class OffsetParams(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
             raise ValueError(
                 f"centre, scale: expected finite values and scale > 0, got centre {centre}, scale {scale}"
             )
+        with np.errstate(over="ignore"):
+            in_agent_units = np.r_[(declared_mean - centre) / scale, declared_std / scale]
+        if not np.isfinite(in_agent_units).all():
+            raise ValueError(
+                f"scale: expected values that keep the declared distribution N({declared_mean}, "
+                f"{declared_std}²) finite in agent units, got {scale}"
+            )
         gym.utils.RecordConstructorArgs.__init__(self, centre=centre, scale=scale)
         gym.ActionWrapper.__init__(self, env)
         self.centre, self.scale = np.array(centre, np.float64), np.array(scale, np.float64)

@@ -19,8 +19,10 @@ class OptunaAdapter(MinimizerAdapter):
     """An optuna study (ask-and-tell interface) behind the ask/tell protocol (contexts are ignored).
 
     Optuna needs bounds: each normalised coordinate is searched in ``[-bound_stds, bound_stds]``, i.e.
-    ``initial_mean ± bound_stds * initial_std``. With the runner's default initial distribution (centre of
-    the action box, standard deviation a quarter of its width) and ``bound_stds=2`` this is the action box.
+    ``initial_mean ± bound_stds * initial_std``. The runner's default initial distribution is the one the
+    env declares: for an env with the box rule (centre of the action box, standard deviation a quarter of
+    its width) and ``bound_stds=2`` the bounds are the action box; for an env that declares its own start
+    (the kick: its reference kick with a small σ) they are that start ± 2σ.
     The recommendation is the best trial so far. Creating the study sets optuna's logging verbosity to
     WARNING (optuna otherwise logs every trial).
 

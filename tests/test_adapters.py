@@ -295,3 +295,20 @@ def test_the_documented_adapter_commands_run(index, tmp_path, capsys):
     argv[argv.index("--out") + 1] = str(tmp_path / "run")
     assert cli.main([*argv, "--no-plot"]) == 0
     assert "stop: iterations" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("name", marked(registry.optimizer_names()))
+def test_every_registered_optimizer_rejects_returns_whose_spread_overflows(name):
+    """Returns near ±1e308 are finite but their differences are not: a clear error, state unchanged."""
+    optimizer = registry.make_optimizer(name, 3, 1, 5)
+    contexts = np.linspace(0.0, 1.0, 8)[:, None]
+    params = optimizer.ask(contexts)
+    before = optimizer.state_dict()
+    returns = np.where(np.arange(8) % 2, 1e308, -1e308)
+    with pytest.raises(ValueError, match=r"returns: expected a finite spread max - min .* got returns from"):
+        optimizer.tell(contexts, params, returns)
+    after = optimizer.state_dict()
+    assert after.keys() == before.keys()
+    assert all(np.array_equal(after[key], value) for key, value in before.items())
+    optimizer.tell(contexts, params, -np.sum(params**2, axis=1))  # the pending ask still stands
+    assert optimizer.iteration == 1

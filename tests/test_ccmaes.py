@@ -183,6 +183,19 @@ def test_a_positive_affine_transformation_gives_identical_contextual_updates(opt
     _assert_same_state(reference, transformed)
 
 
+def test_the_baseline_r2_is_scale_free_even_where_squared_returns_overflow():
+    """R² of the context baseline is the same for returns scaled by 1 and by 1e155 (squares near 1e310)."""
+    diagnostics = []
+    for scale in (1.0, 1e155):
+        optimizer = CCMAES(3, 1, seed=0)
+        contexts = np.random.default_rng(0).uniform(0, 1, (12, 1))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, scale * _sphere_returns(contexts, params))
+        diagnostics.append(optimizer.diagnostics["baseline_r2"])
+    assert np.isfinite(diagnostics).all()
+    assert diagnostics[1] == pytest.approx(diagnostics[0], rel=1e-12)
+
+
 @pytest.mark.parametrize("options", sorted(BASELINE_OPTIONS))
 def test_adding_a_quadratic_function_of_the_context_gives_identical_updates(options):
     def quadratic(contexts):

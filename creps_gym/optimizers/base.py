@@ -195,7 +195,7 @@ class ContextualOptimizer(ABC):
             No pending ``ask`` (and ``allow_external`` is False), the batch was told already, or a row was
             not asked.
         ValueError, TypeError
-            Shapes, non-finite values, or fewer than two samples.
+            Shapes, non-finite values, returns whose spread max − min overflows, or fewer than two samples.
         """
         allow_external = check_bool(allow_external, "allow_external")
         contexts = self._check_contexts(contexts, "contexts")
@@ -204,6 +204,13 @@ class ContextualOptimizer(ABC):
         returns = as_float_array(returns, "returns", (n,))
         if n < 2:
             raise ValueError(f"returns: expected at least 2 samples per tell, got {n}")
+        with np.errstate(over="ignore"):
+            spread = returns.max() - returns.min()
+        if not np.isfinite(spread):  # every update compares returns; their differences must be numbers
+            raise ValueError(
+                f"returns: expected a finite spread max - min (at most {np.finfo(np.float64).max:.4g}), "
+                f"got returns from {returns.min():.4g} to {returns.max():.4g}"
+            )
         self._told_rows = self._match_told_rows(contexts, params, allow_external)  # for _update
         external = int((self._told_rows < 0).sum())
         self._update(contexts, params, returns)

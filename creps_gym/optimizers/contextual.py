@@ -90,8 +90,9 @@ def context_advantages(
         fit = robust_refit(phi, all_returns / scale, fit, ridge, features.constant_column)
     residuals = all_returns / scale - (phi @ fit)[:, 0]
     advantages = residuals[-n:] * scale
-    total = float(np.sum((returns - returns.mean()) ** 2))
-    explained = 1.0 - float(advantages @ advantages) / total if total > 0 else 0.0
+    scaled = returns / scale  # R² in the scaled units: squares of returns near 1e155 would overflow
+    total = float(np.sum((scaled - scaled.mean()) ** 2))
+    explained = 1.0 - float(residuals[-n:] @ residuals[-n:]) / total if total > 0 else 0.0
     if standardise and residuals.any():  # all zero (flat returns): nothing to rank, nothing to scale
         squares = residuals**2
         variance = (phi @ weighted_ml_fit(phi, squares[:, None], uniform, ridge, features.constant_column))[

@@ -114,6 +114,78 @@ def test_a_mean_learning_rate_moves_the_mean_part_way_and_leaves_the_rest_of_the
     assert half.policy.step_size == full.policy.step_size
 
 
+def test_mean_repulsion_subtracts_the_fit_of_the_negatively_weighted_shifts():
+    """(C3''): A = fit of θ on ϕ(s) over the positive weights − α · fit of θ − A_oldᵀϕ(s) over the negative
+    ones (weights |w| normalised), each a weighted least-squares solve checked against numpy's lstsq."""
+    rng = np.random.default_rng(3)
+    mean_map, weights = make_features("affine", 2), cma_constants(3, rank_weights(16)).weights
+    contexts, params, old = (
+        rng.uniform(0, 3, (16, 2)),
+        rng.standard_normal((16, 3)),
+        rng.standard_normal((3, 3)),
+    )
+
+    def lstsq(rows, targets, w):
+        root = np.sqrt(w / w.sum())[:, None]
+        return np.linalg.lstsq(root * mean_map(contexts[rows]), root * targets, rcond=None)[0]
+
+    good, bad = weights > 0, weights < 0
+    expected = lstsq(good, params[good], weights[good]) - 0.7 * lstsq(
+        bad, params[bad] - mean_map(contexts[bad]) @ old, -weights[bad]
+    )
+    repelled = contextual_mean(mean_map, contexts, params, weights, 0.0, old, repulsion=0.7)
+    np.testing.assert_allclose(repelled, expected, atol=1e-12)
+    plain = contextual_mean(mean_map, contexts, params, weights, 0.0)
+    np.testing.assert_array_equal(contextual_mean(mean_map, contexts, params, weights, 0.0, old, 0.0), plain)
+
+
+def test_mean_repulsion_lengthens_the_step_on_a_linear_function_and_leaves_sigma_and_c_alone():
+    """On the same batch, α = 1 adds the worst half's shift away from the gradient: a longer step uphill,
+    while σ, C and the paths (driven by the positive weights' shift) are the same as at α = 0."""
+    rng = np.random.default_rng(4)
+    plain, repelled = (CCMAES(6, 1, seed=7, mean_repulsion=alpha) for alpha in (0.0, 1.0))
+    contexts = rng.uniform(0, 3, (20, 1))
+    params = plain.ask(contexts)
+    np.testing.assert_array_equal(params, repelled.ask(contexts))
+    gradient = np.arange(1.0, 7.0)
+    for optimizer in (plain, repelled):
+        optimizer.tell(contexts, params, params @ gradient)
+    steps = [float(np.mean(o.recommend(contexts) @ gradient)) for o in (plain, repelled)]
+    assert steps[1] > 1.5 * steps[0] > 0.0
+    np.testing.assert_array_equal(repelled.policy.cov, plain.policy.cov)
+    np.testing.assert_array_equal(repelled.path_sigma, plain.path_sigma)
+    assert repelled.policy.step_size == plain.policy.step_size
+
+
+def _iterations_to_solve(optimizer, limit: int = 400) -> int:
+    """Iterations (N = 16) until the mean policy is within 1e-4 of θ*(s) = 0.3 s on the contextual sphere."""
+    rng, test = np.random.default_rng(0), np.linspace(0, 3, 7)[:, None]
+    for iteration in range(1, limit + 1):
+        contexts = rng.uniform(0, 3, (16, 1))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, _sphere_returns(contexts, params))
+        if np.abs(optimizer.recommend(test) - 0.3 * test).max() < 1e-4:
+            return iteration
+    return limit + 1
+
+
+def test_mean_repulsion_converges_slower_on_a_sphere_and_restores_bit_identically(tmp_path):
+    """α = 1 still solves the contextual sphere, but its noisier mean steps (CSA sees only the positive
+    weights' shift) take more than 1.5 times the iterations of α = 0 (docs/algorithms.md)."""
+    plain, repelled = (CCMAES(5, 1, initial_mean=2.0, seed=0, mean_repulsion=a) for a in (0.0, 1.0))
+    counts = [_iterations_to_solve(optimizer) for optimizer in (plain, repelled)]
+    assert counts[1] <= 400 and counts[1] > 1.5 * counts[0], counts
+    repelled.save(tmp_path / "ckpt.npz")
+    restored = CCMAES.load(tmp_path / "ckpt.npz")
+    assert restored.config.mean_repulsion == 1.0
+    contexts = np.linspace(0, 3, 5)[:, None]
+    params = repelled.ask(contexts)
+    np.testing.assert_array_equal(params, restored.ask(contexts))
+    for optimizer in (repelled, restored):
+        optimizer.tell(contexts, params, _sphere_returns(contexts, params))
+    np.testing.assert_array_equal(repelled.policy.coefficients, restored.policy.coefficients)
+
+
 def test_a_mean_learning_rate_below_one_still_converges_and_damps_the_mean_under_random_returns():
     """On a contextual sphere c_m = 0.5 still reaches a small regret; under random returns (pure noise) the
     mean moves c_m times as far per iteration, relative to σ, as at c_m = 1."""
@@ -349,6 +421,14 @@ def test_recommended_batch_size_grows_with_dimension_and_context():
         ({"c_m": 0.0}, ValueError, "c_m: expected .*, got 0.0"),
         ({"c_m": 1.2}, ValueError, "c_m"),
         ({"c_m": "half"}, TypeError, "c_m"),
+        ({"mean_repulsion": -0.1}, ValueError, r"mean_repulsion: expected .* \[0.0, 1.0\], got -0.1"),
+        ({"mean_repulsion": 1.5}, ValueError, "mean_repulsion"),
+        ({"mean_repulsion": float("nan")}, ValueError, "mean_repulsion"),
+        (
+            {"mean_repulsion": 0.5, "active": False},
+            ValueError,
+            "mean_repulsion: expected 0 with active=False",
+        ),
         ({"tolx": -1.0}, ValueError, "tolx"),
         ({"tolupsigma": 0.5}, ValueError, "tolupsigma"),
         ({"max_condition": 0.0}, ValueError, "max_condition"),

@@ -12,7 +12,8 @@ One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N
    s (cross terms included); smaller batches fall back to an affine or a constant baseline.
 2. Weights (C2): CMA-ES rank weights on the advantages, positive for the best ⌊N/2⌋, negative for the rest
    (active CMA, ``active=True``).
-3. Mean (C3): A = weighted least squares of θ on ϕ(s) over the positively weighted samples.
+3. Mean (C3): A = weighted least squares of θ on ϕ(s) over the positively weighted samples; optionally
+   (C3'') minus α times the same fit of the negatively weighted samples' shifts (``mean_repulsion``).
 4. Step-size signal (C4): y_w = Σ_{w_k>0} w_k (θ_k − m_old(s_k))/σ, the shift of the mean at the selected
    samples' weighted mean context. Under random selection y_w ~ N(0, C/μ_eff) exactly, as in CMA-ES.
 5. Paths, covariance and step size (C5)–(C9): CMA-ES's cumulative step-size adaptation, rank-one and rank-μ
@@ -45,7 +46,6 @@ from creps_gym.optimizers.cma_rules import (
     expected_norm,
     inverse_sqrt,
     rank_weights,
-    record_mean_return,
     stagnation_window,
     update_paths_and_cov,
 )
@@ -110,6 +110,8 @@ class CCMAESConfig:
     c_sigma, d_sigma, c_c, c_1, c_mu : float or None   learning rates; None = the tutorial's defaults.
     c_m : float                     the mean's learning rate in (0, 1] (C3'): A ← A + c_m (A_fit − A);
         below 1 it averages the regression's noise over about (2 − c_m)/c_m batches.
+    mean_repulsion : float          α in [0, 1] (C3''): A_fit also moves away from the negatively weighted
+        samples by α times their fitted shift (needs ``active``; 0: CMA-ES's positive-weight mean).
     seed : int or None              seed of the sampling Generator.
     restarts : int                  restarts from the initial distribution when a stop criterion is met
         (``stop()`` reports criteria only once they are used up).
@@ -137,6 +139,7 @@ class CCMAESConfig:
     c_1: float | None = None
     c_mu: float | None = None
     c_m: float = 1.0
+    mean_repulsion: float = 0.0
     seed: int | None = None
     tolx: float = 1e-11
     tolupsigma: float = 1e20
@@ -172,6 +175,7 @@ class CCMAESConfig:
             ("tolx", 0.0, 1e300),
             ("tolupsigma", 1.0, 1e300),
             ("max_condition", 1.0, 1e300),
+            ("mean_repulsion", 0.0, 1.0),
         ):
             value = check_real_in_range(getattr(self, name), name, low, high, low_inclusive=low == 0.0)
             object.__setattr__(self, name, value)
@@ -179,6 +183,8 @@ class CCMAESConfig:
             if getattr(self, name) is not None:  # None: the tutorial's default; else in (0, high]
                 object.__setattr__(self, name, check_real_in_range(getattr(self, name), name, 0.0, high))
         object.__setattr__(self, "c_m", check_real_in_range(self.c_m, "c_m", 0.0, 1.0))
+        if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
+            raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
         object.__setattr__(self, "seed", check_seed(self.seed))
@@ -268,11 +274,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
                 "tell(): the update produced non-finite values; the optimiser was left unchanged"
             )
         self.policy, self.path_sigma, self.path_cov = step.policy, step.path_sigma, step.path_cov
-        spread = float(returns.max() - returns.min())  # pycma's tolflatfitness: all returns equal
-        flat = spread <= 1e-12 * max(float(np.abs(returns).max()), 1e-300)
-        self.flat_iterations = self.flat_iterations + 1 if flat else 0
-        self.stagnation_window = stagnation_window(self.n_params, returns.shape[0], config.tolstagnation)
-        self.mean_returns = record_mean_return(self.mean_returns, returns, self.stagnation_window)
+        self._record_returns(returns)
         if config.baseline_batches > 1:
             self.past_contexts, self.past_returns = recent_samples(
                 self.past_contexts, self.past_returns, contexts, returns, config.baseline_batches - 1
@@ -290,7 +292,8 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         sigma = policy.step_size
         deviations = (params - policy.mean(contexts)) / sigma  # y_k ~ N(0, C)
         try:
-            fitted = contextual_mean(policy.mean_map, contexts, params, weights, self.config.ridge)  # (C3)
+            fit = (self.config.ridge, policy.coefficients, self.config.mean_repulsion)
+            fitted = contextual_mean(policy.mean_map, contexts, params, weights, *fit)  # Eqs. (C3), (C3'')
         except linalg.LinAlgError:
             raise RuntimeError(
                 "tell(): the weighted mean regression (C3) is singular for this batch; use a ridge > 0 or "
@@ -313,13 +316,9 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         )  # fmt: skip
         repaired = policy.set_cov(cov)
         policy.step_size = csa_step(sigma, path_sigma, constants)  # Eq. (C9)
-        diagnostics = {
-            "step_size": policy.step_size,
-            "mu_eff": constants.mu_eff,
-            "path_sigma_ratio": float(np.linalg.norm(path_sigma)) / expected_norm(path_sigma.size),
-            "hsig": float(hsig),
-            "cov_repaired": float(repaired),
-        }
+        ratio = float(np.linalg.norm(path_sigma)) / expected_norm(path_sigma.size)
+        diagnostics = {"step_size": policy.step_size, "mu_eff": constants.mu_eff, "path_sigma_ratio": ratio,
+                       "hsig": float(hsig), "cov_repaired": float(repaired)}  # fmt: skip
         return _Step(policy, path_sigma, path_cov, diagnostics)
 
     def _eigen(self) -> tuple[Array, Array]:

@@ -142,14 +142,32 @@ def robust_refit(
 
 
 def contextual_mean(
-    mean_map: FeatureMap, contexts: Array, params: Array, weights: Array, ridge: float
+    mean_map: FeatureMap,
+    contexts: Array,
+    params: Array,
+    weights: Array,
+    ridge: float,
+    old_coefficients: Array | None = None,
+    repulsion: float = 0.0,
 ) -> Array:
-    """New coefficients A (k, p): weighted least squares of θ on ϕ(s) over the positive weights, Eq. (C3)."""
+    """New coefficients A (k, p): weighted least squares of θ on ϕ(s) over the positive weights, Eq. (C3).
+
+    With ``repulsion`` α > 0, Eq. (C3''): minus α times the same fit of the negatively weighted samples'
+    shifts θ_k − A_oldᵀϕ(s_k) (``old_coefficients`` A_old, weights |w_k| normalised to one), so that the
+    mean also moves away from the worst samples: antisymmetric recombination weights (docs/algorithms.md).
+    """
     selected = weights > 0
     positive = weights[selected] / weights[selected].sum()
-    return weighted_ml_fit(
+    fitted = weighted_ml_fit(
         mean_map(contexts[selected]), params[selected], positive, ridge, mean_map.constant_column
     )
+    if repulsion == 0.0 or old_coefficients is None:
+        return fitted
+    rejected = weights < 0
+    features = mean_map(contexts[rejected])
+    shifts = params[rejected] - features @ old_coefficients
+    negative = weights[rejected] / weights[rejected].sum()
+    return fitted - repulsion * weighted_ml_fit(features, shifts, negative, ridge, mean_map.constant_column)
 
 
 def coefficient_shift(mean_map: FeatureMap, contexts: Array, deviations: Array, weights: Array) -> Array:

@@ -26,7 +26,7 @@ from scipy import linalg
 
 from creps_gym._validation import as_float_array, check_positive_int, check_real_in_range, check_seed
 from creps_gym.optimizers.base import ContextualOptimizer
-from creps_gym.optimizers.cma_rules import record_mean_return, stagnation_window
+from creps_gym.optimizers.cma_rules import stagnation_window
 from creps_gym.optimizers.dual import DUAL_KL_TOL, DualSolution, solve_dual
 from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import (
@@ -253,12 +253,7 @@ class CREPS(PolicyAccess, ContextualOptimizer):
         if abs(dual.kl - self.config.epsilon) <= DUAL_KL_TOL:  # warm-start only from an active constraint
             self._eta = dual.eta
         self._diagnostics = self._describe(dual, returns, interpolation, repaired)
-        spread = float(returns.max() - returns.min())
-        flat = spread <= 1e-12 * max(float(np.abs(returns).max()), 1e-300)
-        self.flat_iterations = self.flat_iterations + 1 if flat else 0
-        window = stagnation_window(self.n_params, n, self.config.tolstagnation)
-        self.stagnation_window = window
-        self.mean_returns = record_mean_return(self.mean_returns, returns, window)
+        self._record_returns(returns)
 
     @property
     def diagnostics(self) -> dict[str, float]:

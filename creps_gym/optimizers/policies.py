@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from scipy import linalg
 
 from creps_gym._validation import as_float_array
-from creps_gym.optimizers.cma_rules import stagnated
+from creps_gym.optimizers.cma_rules import record_mean_return, stagnated, stagnation_window
 from creps_gym.optimizers.features import FeatureMap
 
 __all__ = [
@@ -289,6 +289,16 @@ class PolicyAccess:
 
     def _sample(self, contexts: Array) -> Array:
         return self.policy.sample(contexts, self.rng)
+
+    def _record_returns(self, returns: Array) -> None:
+        """What ``tolflatfitness`` and ``tolstagnation`` watch: runs of flat batches (all returns equal, as
+        pycma's) and the last ``stagnation_window`` mean returns."""
+        spread = float(returns.max() - returns.min())
+        flat = spread <= 1e-12 * max(float(np.abs(returns).max()), 1e-300)
+        self.flat_iterations = self.flat_iterations + 1 if flat else 0  # type: ignore[attr-defined]
+        tolstagnation = self.config.tolstagnation  # type: ignore[attr-defined]
+        self.stagnation_window = stagnation_window(self.n_params, returns.shape[0], tolstagnation)
+        self.mean_returns = record_mean_return(self.mean_returns, returns, self.stagnation_window)
 
     def _no_signal_stops(self) -> dict[str, Any]:
         """``tolflatfitness`` and ``tolstagnation``, if met: the returns carry no signal any more."""

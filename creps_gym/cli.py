@@ -271,8 +271,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_resume(args: argparse.Namespace) -> int:
+    from creps_gym.runner.api import resumed_runner
     from creps_gym.runner.callbacks import ProgressBar
-    from creps_gym.runner.loop import Runner
     from creps_gym.runner.rundir import RunDir
 
     _import_modules(args)
@@ -282,7 +282,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
         raise UsageError(
             f"DIR: expected a run started by `creps-gym run`, got {directory.path} (use the Python API)"
         )
-    runner = Runner(config, run_dir=directory, callbacks=[ProgressBar(args.progress)])
+    runner = resumed_runner(directory, config, callbacks=[ProgressBar(args.progress)])
     return _finish(runner, args)
 
 
@@ -320,6 +320,8 @@ _COMMANDS = {
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``creps-gym`` console script; returns the exit code (see the module docstring)."""
+    from gymnasium.error import Error as GymnasiumError
+
     from creps_gym.runner.backends import EpisodeError
     from creps_gym.runner.session import RunDirError
 
@@ -351,7 +353,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{prog}: interrupted; `creps-gym resume DIR` continues from the last checkpoint", file=sys.stderr
         )
         return EXIT_CODES["interrupted"]
-    except (EpisodeError, RuntimeError, ValueError, TypeError, ArithmeticError) as exc:
+    except (EpisodeError, RuntimeError, ValueError, TypeError, ArithmeticError, GymnasiumError) as exc:
         print(f"{prog}: run failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return EXIT_CODES["run_failed"]
 

@@ -95,6 +95,31 @@ def test_resume_never_imports_a_module_named_by_config_json(tmp_path, env):
     assert "--import MODULE" in result.stderr
 
 
+def test_an_unregistered_id_behind_an_imported_module_is_refused(tmp_path):
+    out = make_run(tmp_path / "run", stop_after=3)
+    edit_config(out, env="os:Foo-v0")  # os is imported, and registers nothing
+    result = cli("resume", out, "--no-plot")
+    assert result.returncode == 3 and "Traceback" not in result.stderr
+    assert "env: expected a registered env id, got 'os:Foo-v0'" in result.stderr
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"initial_std": [1.0, 2.0]}, "initial_std: expected a number or 3 numbers"),
+        ({"optimizer_options": {"epsilon": -1.0}}, "epsilon"),
+    ],
+)
+def test_config_values_the_optimizer_refuses_are_a_damaged_run_directory(tmp_path, changes, match):
+    out = make_run(tmp_path / "run")
+    edit_config(out, **changes)
+    (out / RunDir.CHECKPOINT).unlink()
+    with pytest.raises(RunDirError, match=f"config.json: the env or the optimiser refuses its .*{match}"):
+        resume(out)
+    result = cli("resume", out, "--no-plot")
+    assert result.returncode == 3 and "Traceback" not in result.stderr
+
+
 def test_env_kwargs_and_optimizer_from_a_run_directory_import_nothing(tmp_path, monkeypatch):
     out = make_run(tmp_path / "run", stop_after=3)
     (out / "evil_payload.py").write_text(PAYLOAD)
@@ -387,8 +412,16 @@ def limited_memory(gigabytes: float):
         ),
         (["--env-kwarg", "dim=60000"], "argument --env-kwarg: expected a size whose arrays fit in memory"),
         (["--samples", "10000000000"], "argument --samples: expected a size whose arrays fit in memory"),
+        (
+            ["--eval-contexts", "100000000000"],
+            "argument --eval-contexts: expected a size whose arrays fit in memory",
+        ),
+        (
+            ["--env-kwarg", "context_dim=1000000000000"],
+            "argument --env-kwarg: context_dim: expected a size whose arrays fit in memory",
+        ),
     ],
-    ids=["function-arrays", "covariance", "batch"],
+    ids=["function-arrays", "covariance", "batch", "evaluation", "context-arrays"],
 )
 def test_sizes_that_would_exhaust_memory_are_refused_before_allocating(tmp_path, flags, expected):
     args = ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 2, "--samples", 6]
@@ -408,3 +441,10 @@ def test_a_rotated_function_too_big_for_memory_is_refused_by_the_env():
 
     with pytest.raises(ValueError, match=r"dim: expected a size whose arrays fit in memory \(the instance's"):
         gym.make("creps_gym/ShiftedRotatedElliptic-v0", dim=2_000_000)  # 2 p x p rotation matrices: 64 TB
+
+
+def test_a_reacher_with_too_many_basis_functions_for_memory_is_refused_by_the_env():
+    import gymnasium as gym
+
+    with pytest.raises(ValueError, match=r"n_basis: expected a size whose arrays fit in memory .*got 10{11}"):
+        gym.make("creps_gym/PlanarReacher-v0", n_basis=10**11)

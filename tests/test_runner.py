@@ -446,3 +446,27 @@ def test_an_env_declared_std_whose_variance_overflows_is_named():
 
     with pytest.raises(ValueError, match="initial_std: expected standard deviations with finite variances"):
         run("creps", Huge(gym.make(SPHERE, dim=3)), 2, 10, 0)
+
+
+def test_a_module_prefixed_id_runs_as_gymnasium_make_takes_it():
+    """``"module:Env-v0"`` works with the auto (native vector) and serial backends."""
+    for backend in ("auto", "serial"):
+        history = run("creps", "creps_gym:" + SPHERE, 2, 10, 0, env_kwargs={"dim": 3}, backend=backend)
+        plain = run("creps", SPHERE, 2, 10, 0, env_kwargs={"dim": 3}, backend=backend)
+        assert history.column("eval_regret").tolist() == plain.column("eval_regret").tolist()
+
+
+def test_a_start_no_batch_size_can_learn_from_names_the_initial_distribution():
+    with pytest.raises(ValueError, match="initial_mean, initial_std: expected a start 'creps' can learn"):
+        run("creps", SPHERE, 2, 10, 0, initial_mean=1e300)
+    with pytest.raises(ValueError, match="samples: expected a batch size that 'creps' can learn from, got 3"):
+        run("creps", SPHERE, 2, 3, 0)
+
+
+def test_more_workers_than_samples_are_capped_at_the_samples():
+    runner = Runner(RunConfig(SPHERE, "creps", 2, 8, 0, backend="vector", workers=10**11))
+    backend = runner.make_backend()
+    try:
+        assert backend.num_envs == 8
+    finally:
+        backend.close()

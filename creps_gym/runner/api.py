@@ -10,8 +10,9 @@ from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History
 from creps_gym.runner.loop import Runner
 from creps_gym.runner.rundir import RunDir
+from creps_gym.runner.session import RunDirError
 
-__all__ = ["resume", "run"]
+__all__ = ["resume", "resumed_runner", "run"]
 
 
 def run(
@@ -111,11 +112,37 @@ def resume(
         raise ValueError("env: expected the env object this run was started with (its config has no env id)")
     if config.optimizer is None and optimizer_class is None:
         raise ValueError("optimizer_class: expected the class of the run's optimiser object, got None")
-    runner = Runner(
-        config,
-        env=env if config.env is None else None,
-        optimizer_class=optimizer_class,
-        run_dir=directory,
-        callbacks=callbacks,
-    )
+    runner = resumed_runner(directory, config, env=env, optimizer_class=optimizer_class, callbacks=callbacks)
     return runner.run()
+
+
+def resumed_runner(
+    directory: RunDir,
+    config: RunConfig,
+    *,
+    env: Any = None,
+    optimizer_class: Any = None,
+    callbacks: Sequence[Any] = (),
+) -> Runner:
+    """The :class:`Runner` that continues ``directory`` (its ``config``, already checked for trust).
+
+    Values of ``config.json`` that the env or the optimiser refuse (a ``TypeError`` or ``ValueError`` while
+    building them) raise :class:`~creps_gym.runner.session.RunDirError` when ``config.json`` names both
+    the env and the optimiser: the run directory is untrusted input, and a config that cannot run is a
+    damaged one. With an env or optimiser object of the caller's, the error is raised as it is.
+    """
+    try:
+        return Runner(
+            config,
+            env=env if config.env is None else None,
+            optimizer_class=optimizer_class,
+            run_dir=directory,
+            callbacks=callbacks,
+        )
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, RunDirError) or config.env is None or config.optimizer is None:
+            raise
+        raise RunDirError(
+            f"{directory.file(RunDir.CONFIG)}: the env or the optimiser refuses its values "
+            f"({type(exc).__name__}: {exc}); correct them or start a new run"
+        ) from None

@@ -36,6 +36,7 @@ episode runs.
 
 from __future__ import annotations
 
+import importlib
 import math
 import numbers
 from abc import ABC, abstractmethod
@@ -81,6 +82,14 @@ class EnvSource:
     def make(self) -> gym.Env:
         """A fresh env (the object itself for object sources)."""
         return gym.make(self.env_id, **self.kwargs) if self.env_id is not None else self.env
+
+    def registered_spec(self) -> Any:
+        """The registry's ``EnvSpec`` of the id; a ``module:Env-v0``'s module is imported first, as
+        ``gymnasium.make`` does."""
+        module, _, name = str(self.env_id).rpartition(":")
+        if module:
+            importlib.import_module(module)
+        return gym.spec(name)
 
     def spec(self) -> Any:
         """What ``gymnasium.make_vec`` takes: the id, or the object's spec (TypeError if it has none)."""
@@ -267,7 +276,7 @@ def has_native_vector(source: EnvSource) -> bool:
     """Whether ``source`` is a registered id with a native vector entry point and no added wrappers."""
     if source.env_id is None:
         return False
-    spec = gym.spec(source.env_id)
+    spec = source.registered_spec()
     return spec.vector_entry_point is not None and not spec.additional_wrappers
 
 
@@ -285,8 +294,10 @@ def make_backend(
     """Build a backend by name (``"auto"``, ``"serial"``, ``"vector"`` or ``"ray"``).
 
     ``"auto"`` is the fastest correct backend: the native vector env of a registered id that has one
-    (:func:`has_native_vector`), else ``"serial"``. ``ray_address`` is for ``"ray"`` only.
+    (:func:`has_native_vector`), else ``"serial"``. ``ray_address`` is for ``"ray"`` only. ``workers`` (vector
+    sub-envs or Ray chunks) is capped at ``samples``: an iteration has no more episodes to share out.
     """
+    workers = None if workers is None else min(workers, samples)
     if name == "auto":
         name = "vector" if has_native_vector(source) else "serial"
     if name == "serial":

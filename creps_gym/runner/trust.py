@@ -119,7 +119,7 @@ def check_trusted(config: RunConfig, source: str) -> None:
         module = module_reference(text)
         if module is not None and module not in sys.modules:
             raise refuse(field, text, f"no reference to a module that is not imported (here {module!r})")
-    if config.env is not None and module_reference(config.env) is None and config.env not in gym.registry:
+    if config.env is not None and config.env.split(":", 1)[-1] not in gym.registry:  # module imported above
         raise refuse("env", config.env, "a registered env id")
 
 
@@ -132,15 +132,15 @@ def check_run_memory(config: RunConfig, n_params: int, n_context_dims: int, *, c
     """
     p, z, n, e = n_params, n_context_dims, config.samples, config.eval_contexts
     square = 6.0 * p * p if covariance else 0.0
-    batch = 4.0 * n * p + 4.0 * n * (z + 1) + 2.0 * e * p
-    if batch > square:
-        name, value = "samples", n
+    batch, evaluation = 4.0 * n * p + 4.0 * n * (z + 1), 2.0 * e * p
+    if max(batch, evaluation) > square:  # name the largest term's argument
+        name, value = ("samples", n) if batch >= evaluation else ("eval_contexts", e)
     elif config.env_kwargs:
         name, value = "env_kwargs", config.env_kwargs
     else:
         name, value = "env", config.env
-    what = f"the covariance (p x p, p = {p}) and the batch (samples x p)"
-    check_fits_in_memory(8.0 * (square + batch), name, value, what)
+    what = f"the covariance (p x p, p = {p}), the batch (samples x p) and the evaluation (eval_contexts x p)"
+    check_fits_in_memory(8.0 * (square + batch + evaluation), name, value, what)
 
 
 def config_fingerprint(config: RunConfig, checkpoint_format: str = CHECKPOINT_FORMAT) -> str:

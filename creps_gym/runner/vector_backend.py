@@ -65,7 +65,7 @@ class VectorBackend(Backend):
     def __init__(self, source: EnvSource, retries: int, workers: int | None, mode: str, samples: int) -> None:
         super().__init__(source, retries)
         spec = source.spec()
-        registered = gym.spec(spec) if isinstance(spec, str) else spec
+        registered = source.registered_spec() if isinstance(spec, str) else spec
         wrapped = bool(registered.additional_wrappers)  # a native vector env cannot apply them
         native = registered.vector_entry_point is not None and not wrapped
         if mode == "native" and not native:
@@ -97,7 +97,7 @@ class VectorBackend(Backend):
         if self.mode != "native":
             return {}
         spec = self.source.spec()
-        creator = (gym.spec(spec) if isinstance(spec, str) else spec).vector_entry_point
+        creator = (self.source.registered_spec() if isinstance(spec, str) else spec).vector_entry_point
         if isinstance(creator, str):
             creator = load_env_creator(creator)
         ours = isinstance(creator, type) and issubclass(creator, ContextualEpisodicVectorEnv)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import difflib
 import re
+import warnings
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -66,7 +67,9 @@ def env_rows(env_ids: Iterable[str]) -> list[list[str]]:
     rows = [["id", "context", "parameters θ", "initial (default)", "description"]]
     for env_id in env_ids:
         try:
-            env = gym.make(env_id)
+            with warnings.catch_warnings():  # listing the older versions is not using them
+                warnings.filterwarnings("ignore", message=r".*is out of date\. You should consider upgrading")
+                env = gym.make(env_id)
         except Exception as exc:  # an env whose optional extra is missing is still listed
             rows.append([env_id, "?", "?", "?", plain(f"(not available: {type(exc).__name__}: {exc})")[:100]])
             continue

@@ -314,6 +314,8 @@ def test_scalar_env_protocol_errors_leave_the_episode_usable():
         env.reset(options={"context": [3.5]})
     with pytest.raises(ValueError, match="unknown keys"):
         env.reset(options={"contexts": [1.0]})
+    with pytest.raises(TypeError, match=r"options: expected a dict such as .* or None, got str"):
+        env.reset(options="context")
 
 
 @pytest.mark.filterwarnings("ignore:.*render_mode")

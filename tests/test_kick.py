@@ -367,6 +367,16 @@ def test_save_video_rejects_bad_input(tmp_path):
         save_video(frames, tmp_path / "kick.avi")
     with pytest.raises(ValueError, match="frames"):
         save_video([], tmp_path / "kick.gif")
+    for fps in (0, -1, float("nan")):
+        with pytest.raises(ValueError, match=f"fps: expected a finite value > 0, got {fps}"):
+            save_video(frames, tmp_path / "kick.gif", fps=fps)
+    with pytest.raises(ValueError, match=r"frames\[0\]: expected shape \(height, width, 3\)"):
+        save_video([np.zeros((2, 2), np.uint8)], tmp_path / "kick.gif")
+    with pytest.raises(ValueError, match=r"frames\[1\]: expected .* \(12, 16, 3\), got \(13, 16, 3\)"):
+        save_video([frames[0], np.zeros((13, 16, 3), np.uint8)], tmp_path / "kick.gif")
+    with pytest.raises(TypeError, match=r"frames\[0\]: expected a uint8 RGB image .*, got float64"):
+        save_video([np.full((12, 16, 3), 0.5)], tmp_path / "kick.gif")
+    assert not list(tmp_path.iterdir())  # nothing written
 
 
 def test_flexibility_v1_pays_forward_distance_only(flexibility):

@@ -26,6 +26,7 @@ SupportsRegret
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import gymnasium as gym
@@ -91,6 +92,17 @@ def _checked_declaration(layer: Any, shape: tuple[int, ...]) -> tuple[Array, Arr
     if not (std > 0).all():
         raise ValueError(f"{name} std: expected values > 0, got {std}")
     return mean, std
+
+
+def _options_dict(options: Any) -> dict[str, Any]:
+    """``reset``'s ``options`` as a new dict (None: empty), or a ``TypeError`` naming ``options``."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise TypeError(
+            f"options: expected a dict such as {{'context': s}} or None, got {type(options).__name__}"
+        )
+    return dict(options)
 
 
 @runtime_checkable
@@ -231,7 +243,7 @@ class ContextualEpisodicEnv(gym.Env[Array, Array]):
     # -- gymnasium API -----------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Array, dict]:
         """Start an episode. ``options={"context": s}`` sets the context (shape (z,)); else it is sampled."""
-        options = {} if options is None else dict(options)
+        options = _options_dict(options)
         unknown = set(options) - {"context"}
         if unknown:
             raise ValueError(f"options: expected only the key 'context', got unknown keys {sorted(unknown)}")
@@ -327,7 +339,7 @@ class ContextualEpisodicVectorEnv(VectorEnv):
         """Reset all envs (or those in ``options["reset_mask"]``); returns contexts (n, z) and info."""
         if isinstance(seed, list):
             raise TypeError("seed: expected an int or None for a native vector env, got a list")
-        options = {} if options is None else dict(options)
+        options = _options_dict(options)
         unknown = set(options) - {"context", "reset_mask"}
         if unknown:
             raise ValueError(

@@ -74,23 +74,37 @@ def check_batch_size(
 ) -> None:
     """One ask/tell of ``make()`` on ``contexts`` (n, z) with distinct returns; ValueError if it refuses.
 
-    An error naming one of the optimiser ``options`` (e.g. ``epsilon``) is raised as it is; any other
-    ``ValueError`` of the ``tell`` is raised as an error of ``samples``. Other exceptions are left to the
-    run itself (the synthetic batch is not the run's).
+    An error naming one of the optimiser ``options`` (e.g. ``epsilon``) is raised as it is. Any other
+    ``ValueError`` of the ``tell`` is an error of ``samples`` if a batch four times as large is accepted,
+    else of the initial distribution. Other exceptions are left to the run itself (the synthetic batch is not
+    the run's).
     """
+    error = _tell_error(make, contexts)
+    if error is None:
+        return
+    if str(error).partition(":")[0] in options:
+        raise ValueError(str(error)) from None
+    if _tell_error(make, np.tile(contexts, (4, 1))) is None:
+        raise ValueError(
+            f"samples: expected a batch size that {label} can learn from, got {contexts.shape[0]} ({error})"
+        ) from None
+    raise ValueError(
+        f"initial_mean, initial_std: expected a start {label} can learn from (a synthetic batch drawn there "
+        f"failed at any batch size), got this error: {error}"
+    ) from None
+
+
+def _tell_error(make: Callable[[], Any], contexts: NDArray[np.float64]) -> ValueError | None:
+    """The ``ValueError`` one ask/tell of a fresh ``make()`` on ``contexts`` raises, if any."""
     optimizer = make()
     params = optimizer.ask(contexts)
-    returns = -np.arange(contexts.shape[0], dtype=np.float64)
     try:
-        optimizer.tell(contexts, params, returns)
+        optimizer.tell(contexts, params, -np.arange(contexts.shape[0], dtype=np.float64))
     except ValueError as exc:
-        if str(exc).partition(":")[0] in options:
-            raise ValueError(str(exc)) from None
-        raise ValueError(
-            f"samples: expected a batch size that {label} can learn from, got {contexts.shape[0]} ({exc})"
-        ) from None
+        return exc
     except Exception:  # only the batch size is checked here; the run reports any other failure
-        return
+        return None
+    return None
 
 
 def unwrapped_model(env: gym.Env) -> Any:

@@ -56,7 +56,8 @@ class ContextualFunctionEnv(ContextualEpisodicEnv):
         arrays = "the instance's arrays (A, shift, bounds" + (
             ", 2 p x p rotation matrices)" if rotation else ")"
         )
-        check_fits_in_memory(8.0 * (self.dim * (context_dim + 12) + rotation), "dim", dim, arrays)
+        name, value = ("context_dim", context_dim) if context_dim > self.dim else ("dim", dim)  # the larger
+        check_fits_in_memory(8.0 * (self.dim * (context_dim + 12) + rotation), name, value, arrays)
         #: The seeded A, o, R and x* of this instance.
         self.problem: FunctionInstance = make_instance(
             self.dim,

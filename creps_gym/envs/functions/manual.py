@@ -43,9 +43,10 @@ The reward of the one step is ``-f(x)`` (maximised). {info_text}
 
 ## Episode End
 Every episode is one step: ``terminated=True, truncated=False``. A step before the first reset, or a second
-step before the next reset, raises ``RuntimeError``; a wrong shape or a non-finite theta raises
-``ValueError``, and so does a finite theta whose return overflows (far outside the box, e.g. theta = 1e200):
-no step returns ±inf or NaN. The paper's stopping target is {target_text}.
+step before the next reset, raises ``RuntimeError`` (through ``gymnasium.make``'s order enforcing, a step
+before the first reset raises ``gymnasium.error.ResetNeeded`` first); a wrong shape or a non-finite theta
+raises ``ValueError``, and so does a finite theta whose return overflows (far outside the box, e.g.
+theta = 1e200): no step returns ±inf or NaN. The paper's stopping target is {target_text}.
 
 ## Arguments
 ``gymnasium.make("creps_gym/{name}-v0", dim=15, context_dim=1, instance=0)``

@@ -9,10 +9,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
+
+from creps_gym._validation import check_real
 
 __all__ = ["KickRenderer", "save_video"]
 
@@ -106,15 +109,30 @@ def save_video(frames: Sequence[NDArray[np.uint8]], path: str | Path, fps: float
     path = Path(path)
     if path.suffix.lower() not in (".gif", ".mp4"):
         raise ValueError(f"path: expected a file name ending in .gif or .mp4, got {str(path)!r}")
-    if len(frames) == 0:
-        raise ValueError("frames: expected at least one frame, got an empty sequence")
+    fps = check_real(fps, "fps", strict=True)
+    stack = _frame_stack(frames)
     try:
         import imageio.v3 as iio
     except ImportError as exc:
         raise ImportError("save_video needs imageio: pip install 'creps-gym[video]'") from exc
-    stack = np.stack([np.asarray(f, dtype=np.uint8) for f in frames])
     if path.suffix.lower() == ".gif":
         iio.imwrite(path, stack, duration=1000.0 / fps, loop=0)
     else:
         iio.imwrite(path, stack, fps=fps, codec="libx264")
     return path
+
+
+def _frame_stack(frames: Sequence[Any]) -> NDArray[np.uint8]:
+    """The frames as one (n, height, width, 3) uint8 array, or a ValueError/TypeError naming ``frames``."""
+    if len(frames) == 0:
+        raise ValueError("frames: expected at least one frame, got an empty sequence")
+    arrays = [np.asarray(frame) for frame in frames]
+    for index, array in enumerate(arrays):
+        if array.dtype != np.uint8:
+            raise TypeError(f"frames[{index}]: expected a uint8 RGB image (env.render()), got {array.dtype}")
+        if array.ndim != 3 or array.shape[2] != 3 or array.shape != arrays[0].shape:
+            raise ValueError(
+                f"frames[{index}]: expected shape (height, width, 3) like frames[0] {arrays[0].shape}, "
+                f"got {array.shape}"
+            )
+    return np.stack(arrays)

@@ -94,7 +94,8 @@ class SimulationResult:
         The ball's final displacement (m) in x and y; for a fallen episode, its displacement at the fall.
     fell : ndarray of bool, shape (n,)
     min_foot_ball_distance : ndarray, shape (n,)
-        Smallest surface distance (m) between either foot and the ball during phase 1 (capped at 1 m).
+        Smallest signed surface distance (m) between either foot and the ball during phase 1 (capped at
+        1 m; negative while a foot penetrates the ball, as MuJoCo's contact distance is).
     launch_speed : ndarray, shape (n,)
         Highest ball speed (m/s) during phase 1.
     sim_time : ndarray, shape (n,)

@@ -49,7 +49,7 @@ _MANUAL = """{summary}
     of 200 kicks sampled around the reference (seed 0, uniform contexts): precision 2.5 % at σ = 0.02,
     16 % at 0.03, 54 % at 0.05, 81 % at 0.08; flexibility 3.5 % at σ = 0.02, 21 % at 0.03, 55 % at 0.05,
     84 % at 0.08. From this start ``creps-gym run --optimizer c-cma-es --iterations 20 --samples 20 --seed
-    0`` raises the mean policy's evaluation return from -5.64 (the reference kick) to -4.69.
+    0`` raises the mean policy's evaluation return from -5.64 (the reference kick) to -3.78.
 
     ## Return
 {returns}
@@ -149,10 +149,11 @@ class KickFlexibilityEnv(KickEnv):
     mirrored forward one.
     A fall returns ``-fall_penalty``.
     v2 (``miss_weight=1``) subtracts ``miss_weight · d`` from the v1 return, with d in [0, 1] the smallest
-    distance (m) between a foot and the ball during the kick (``info["min_foot_ball_distance"]``, 0 once
-    a foot touches it), and ``miss_weight`` more from a fall. A kick that misses the ball thus scores how
-    close it came instead of a flat 0, which is what tells a search how to reach a far ball, and a fall
-    stays below every kick that stands.""",
+    distance (m) between a foot and the ball during the kick (``info["min_foot_ball_distance"]`` clipped to
+    [0, 1]: the info is MuJoCo's signed distance, negative while a foot presses into the ball), and
+    ``miss_weight`` more from a fall. A kick that misses the ball thus scores how close it came instead of a
+    flat 0, which is what tells a search how to reach a far ball, and a fall stays below every kick that
+    stands.""",
         version_history="""    * v2: a kick that misses the ball scores ``-miss_weight · d`` (d: its closest
       foot-ball distance, m) instead of 0, and a fall ``-fall_penalty - miss_weight`` (``miss_weight=1``).
     * v1: the return is ``sign(x) x² - y²`` (forward distance only;

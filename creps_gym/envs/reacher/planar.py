@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_real
+from creps_gym._validation import as_float_array, check_fits_in_memory, check_positive_int, check_real
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
 from creps_gym.movement import DiscreteDMP, DMPConfig, DMPTrajectory
 
@@ -134,6 +134,9 @@ class PlanarReacherEnv(ContextualEpisodicEnv):
     ) -> None:
         self.position_weight = check_real(position_weight, "position_weight")
         self.acceleration_weight = check_real(acceleration_weight, "acceleration_weight")
+        n_basis = check_positive_int(n_basis, "n_basis")
+        # one episode's basis activations (steps x basis), forcing and weights, per link, and the boxes
+        check_fits_in_memory(8.0 * N_LINKS * n_basis * (N_STEPS + 12), "n_basis", n_basis, "the DMP's arrays")
         config = DMPConfig(
             n_basis=n_basis, alpha_z=ALPHA_Z, beta_z=BETA_Z, alpha_x=3.0, weight_scale=ALPHA_Z * BETA_Z
         )

@@ -610,3 +610,16 @@ def test_divide_by_z_reaches_the_covariance_update():
     )
     with pytest.raises(TypeError, match="divide_by_z: expected a bool, got int 0"):
         CREPSCMA(4, 1, divide_by_z=0)
+
+
+@pytest.mark.parametrize("function", ["Sphere", "Rosenbrock", "ShiftedRotatedElliptic"])
+def test_the_documented_effective_sample_size_and_interpolation_of_eq_14(function):
+    """docs/algorithms.md: with ε = 0.5, N = 50 and n = 15, φ_eff is about 20–26 and λ = φ_eff/n² about
+    0.09–0.12 (medians over the first 40 iterations; every iteration within 19–27)."""
+    from creps_gym.runner import run
+
+    history = run("creps-cma-old", f"creps_gym/{function}-v0", 40, 50, 0, eval_every=40)
+    ess = np.array([record.diagnostics["ess"] for record in history.records])
+    interpolation = np.median([record.diagnostics["interpolation"] for record in history.records])
+    assert 20.0 <= np.median(ess) <= 26.0 and ((ess > 19.0) & (ess < 27.0)).all(), ess
+    assert 0.09 <= interpolation <= 0.12

@@ -80,10 +80,20 @@ def _convert(value: Any, name: str) -> NDArray[np.float64]:
         raise TypeError(f"{name}: expected an array of real numbers, got a {what} array")
     try:
         return np.asarray(value, dtype=np.float64)
+    except OverflowError:  # a Python int beyond the float range
+        raise ValueError(f"{name}: expected finite values, got an integer beyond the float range") from None
     except (TypeError, ValueError) as exc:
         raise TypeError(
             f"{name}: expected an array of real numbers, got {type(value).__name__} ({exc})"
         ) from None
+
+
+def _as_float(value: Any, name: str) -> float:
+    """``float(value)``, with a Python int beyond the float range named as a ``ValueError``."""
+    try:
+        return float(value)
+    except OverflowError:
+        raise ValueError(f"{name}: expected a finite number, got an integer beyond the float range") from None
 
 
 def check_finite(array: NDArray[np.float64], name: str) -> None:
@@ -131,7 +141,7 @@ def check_real_in_range(
     """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name}: expected a real number, got {type(value).__name__} {value!r}")
-    number = float(value)
+    number = _as_float(value, name)
     above = low <= number if low_inclusive else low < number
     below = number <= high if high_inclusive else number < high
     if not (np.isfinite(number) and above and below):
@@ -145,7 +155,7 @@ def check_real(value: Any, name: str, *, minimum: float = 0.0, strict: bool = Fa
     relation = f"{'>' if strict else '>='} {minimum:g}"
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name}: expected a real number {relation}, got {type(value).__name__} {value!r}")
-    number = float(value)
+    number = _as_float(value, name)
     if not np.isfinite(number) or number < minimum or (strict and number == minimum):
         raise ValueError(f"{name}: expected a finite value {relation}, got {value!r}")
     return number

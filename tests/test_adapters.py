@@ -168,13 +168,34 @@ def test_subsets_are_fine_for_nevergrad_and_optuna():
         assert np.array_equal(adapter.state_dict()["told_index"], [4, 0, 2])
 
 
+@EXTRAS
+def test_nevergrad_optimisers_that_run_one_candidate_at_a_time_are_refused():
+    for name in ("Powell", "Cobyla"):
+        with pytest.raises(
+            ValueError, match=f"optimizer: expected a nevergrad optimiser that evaluates batches.*{name}"
+        ):
+            NevergradAdapter(2, 0, seed=0, optimizer=name)
+
+
+@EXTRAS
+def test_pycma_options_given_as_numpy_scalars_are_saved_as_numbers(tmp_path):
+    adapter = CMAAdapter(2, 0, seed=1, CMA_elitist=np.bool_(True), popsize=np.int64(4))
+    contexts = np.zeros((4, 0))
+    params = adapter.ask(contexts)
+    adapter.tell(contexts, params, -(params**2).sum(axis=1))
+    restored = CMAAdapter.load(adapter.save(tmp_path / "cma.npz"))
+    assert restored.options["CMA_elitist"] is True and restored.options["popsize"] == 4
+    np.testing.assert_array_equal(restored.ask(contexts), adapter.ask(contexts))
+
+
 @pytest.mark.parametrize(
     ("kwargs", "error", "match"),
     [
         ({"initial_cov": [[1.0, 0.5], [0.5, 1.0]]}, ValueError, "off-diagonal"),
         ({"initial_cov": -1.0}, ValueError, "initial_cov: expected positive variances"),
         ({"initial_mean": np.zeros((2, 2))}, ValueError, r"initial_mean: expected a scalar or shape \(2,\)"),
-        ({"seed": 1.5}, TypeError, "seed: expected a non-negative int"),
+        ({"seed": 1.5}, TypeError, r"seed: expected an int in \[0, 2\*\*32\) or None, got float"),
+        ({"seed": 2**32}, ValueError, r"seed: expected an int in \[0, 2\*\*32\) or None, got 4294967296"),
         ({"bogus": 1}, TypeError, "bogus"),
     ],
 )

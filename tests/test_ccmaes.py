@@ -498,3 +498,10 @@ def test_the_runner_and_cli_take_the_recommended_batch_size_when_none_is_given(t
     command += ["c-cma-es", "--iterations", "1", "--seed", "0", "--out", str(tmp_path / "run")]
     subprocess.run(command, check=True, capture_output=True, timeout=120)
     assert '"samples": 24' in (tmp_path / "run" / "config.json").read_text()
+
+
+@pytest.mark.parametrize("given", [{"c_1": 0.9}, {"c_mu": 0.99}])
+def test_one_given_rank_rate_caps_the_others_default_so_the_active_weights_stay_non_positive(given):
+    constants = CCMAES(3, 1, **given).config.constants(10)
+    assert constants.c_1 + constants.c_mu <= 1.0 + 1e-15
+    assert (constants.weights[5:] <= 0.0).all() and constants.weights[:5].sum() == pytest.approx(1.0)

@@ -144,3 +144,20 @@ def test_kl_stays_on_the_bound_across_a_real_run():
         optimizer.tell(contexts, params, -((params + contexts @ shift.T) ** 2).sum(1))
         gaps.append(abs(optimizer.diagnostics["kl"] - 0.5))
     assert max(gaps) <= DUAL_KL_TOL
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"epsilon": -1.0}, ValueError, r"epsilon: expected a finite value in \(0.0, 2.30"),
+        ({"epsilon": 10.0}, ValueError, "epsilon: expected a finite value in"),
+        ({"returns": np.r_[np.nan, np.arange(9.0)]}, ValueError, "returns: expected finite"),
+        ({"baseline_features": np.zeros((9, 1))}, ValueError, r"baseline_features: expected shape \(10, n\)"),
+        ({"eta0": 0.0}, ValueError, "eta0"),
+        ({"max_iter": 0}, ValueError, "max_iter"),
+    ],
+)
+def test_solve_dual_checks_its_arguments(kwargs, error, match):
+    arguments = {"returns": np.arange(10.0), "baseline_features": np.zeros((10, 1)), "epsilon": 0.5, **kwargs}
+    with pytest.raises(error, match=match):
+        solve_dual(**arguments)

@@ -79,7 +79,15 @@ def test_user_feature_maps_can_be_registered(monkeypatch):
         (lambda: RBFFeatures(2, centres=np.zeros((3, 1))), r"centres: expected shape \(k, 2\)"),
         (
             lambda: RBFFeatures(1, centres=[[0.0]], bandwidth=0.0),
-            "bandwidth: expected a finite number > 0, got 0.0",
+            "bandwidth: expected a finite number > 0 whose 2 h² is too, got 0.0",
+        ),
+        (
+            lambda: RBFFeatures(1, centres=[[0.0]], bandwidth=1e-170),  # 2 h² underflows to 0
+            "bandwidth: expected a finite number > 0 whose 2 h² is too, got 1e-170",
+        ),
+        (
+            lambda: RBFFeatures(1, centres=[[0.0]], bandwidth=10**400),
+            "bandwidth: expected a finite number > 0 whose 2 h² is too, got 1000",
         ),
         (lambda: AffineFeatures(-1), "context_dim: expected an int >= 0, got -1"),
         (
@@ -91,6 +99,12 @@ def test_user_feature_maps_can_be_registered(monkeypatch):
 def test_feature_errors(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+@pytest.mark.parametrize("spec", [3, None, 1.5])
+def test_a_feature_spec_of_the_wrong_type_is_named(spec):
+    with pytest.raises(TypeError, match="features: expected a name, a spec dict or a FeatureMap, got"):
+        make_features(spec, 1)
 
 
 def test_rbf_features_compare_and_hash_by_value():

@@ -137,3 +137,118 @@ def test_pure_noise_returns_end_in_a_stop_criterion(name, n_params):
 def test_tolstagnation_is_validated(name):
     with pytest.raises(ValueError, match="tolstagnation: expected an integer >= 1, got 0"):
         make_optimizer(name, 3, 1, 0, tolstagnation=0)
+
+
+def _set(key, value):
+    def tamper(state):
+        state[key] = value
+
+    return tamper
+
+
+def _drop(key):
+    def tamper(state):
+        del state[key]
+
+    return tamper
+
+
+@pytest.mark.parametrize("name", NATIVE)
+@pytest.mark.parametrize(
+    ("tamper", "error", "match"),
+    [
+        (_set("iteration", -5), ValueError, r"state\['iteration'\]: expected an integer >= 0, got -5"),
+        (_set("iteration", 2.7), TypeError, r"state\['iteration'\]: expected an integer"),
+        (_set("evaluations", True), TypeError, r"state\['evaluations'\]: expected an integer"),
+        (_set("diagnostics", {"kl": "x"}), TypeError, r"state\['diagnostics'\]\['kl'\]: expected a number"),
+        (_drop("rng"), ValueError, "state: expected the key 'rng' of a"),
+        (_drop("config"), ValueError, "state: expected the key 'config' of a"),
+    ],
+)
+def test_a_tampered_state_is_refused_naming_the_key(name, tamper, error, match):
+    state = _trained_state(name)
+    tamper(state)
+    with pytest.raises(error, match=match):
+        restore_optimizer(name, state)
+
+
+@pytest.mark.parametrize("name", NATIVE)
+def test_a_pending_batch_of_the_wrong_shape_or_values_is_refused(name):
+    optimizer = make_optimizer(name, 4, 1, 0)
+    optimizer.ask(np.zeros((6, 1)))
+    for key, value, match in (
+        ("pending_contexts", np.full((6, 1), np.nan), r"state\['pending_contexts'\]: expected finite values"),
+        ("pending_params", np.zeros((6, 3)), r"state\['pending_params'\]: expected shape \(6, 4\)"),
+    ):
+        state = optimizer.state_dict()
+        state[key] = value
+        with pytest.raises(ValueError, match=match):
+            restore_optimizer(name, state)
+
+
+@pytest.mark.parametrize("name", NATIVE)
+def test_finite_returns_near_the_float_limit_still_checkpoint(tmp_path, name):
+    """Their sum overflows; the recorded mean return must not (else the checkpoint would not load)."""
+    optimizer = make_optimizer(name, 2, 1, 0)
+    contexts = np.linspace(0, 1, 12)[:, None]
+    optimizer.tell(contexts, optimizer.ask(contexts), 1.5e308 - np.arange(12) * 1e295)
+    restored = type(optimizer).load(optimizer.save(tmp_path / "ckpt.npz"))
+    assert np.isfinite(restored.mean_returns).all() and restored.mean_returns == optimizer.mean_returns
+
+
+def test_a_state_of_another_registered_name_of_the_same_class_is_refused():
+    state = make_optimizer("creps-cma-csa", 3, 1, 0).state_dict()
+    with pytest.raises(ValueError, match=r"state: expected a state of 'creps-cma-old'.*'step_size': 'csa'"):
+        restore_optimizer("creps-cma-old", state)
+    assert type(restore_optimizer("creps-cma-csa", state)).__name__ == "CREPSCMA"
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        (b"", "expected a creps_gym checkpoint \\(.npz\\)"),
+        (b"PK\x03\x04 truncated", "expected a creps_gym checkpoint \\(.npz\\)"),
+    ],
+)
+def test_a_damaged_checkpoint_file_raises_value_error_naming_the_path(tmp_path, content, match):
+    path = tmp_path / "ckpt.npz"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=f"path: {match}"):
+        load_state(path)
+
+
+def test_a_single_array_or_a_non_object_document_is_not_a_checkpoint(tmp_path):
+    np.save(tmp_path / "array.npy", np.zeros(3))
+    with pytest.raises(ValueError, match="got a single array"):
+        load_state(tmp_path / "array.npy")
+    good = make_optimizer("creps", 2, 1, 0).save(tmp_path / "good.npz")
+    key = next(k for k in np.load(good).files if k.endswith(".json"))
+    np.savez(tmp_path / "list.npz", **{key: np.frombuffer(b"[1, 2]", np.uint8)})
+    with pytest.raises(ValueError, match="a JSON list, not an object"):
+        load_state(tmp_path / "list.npz")
+    assert save_state({"x": np.ones(2)}, tmp_path / "x.npz").exists()
+
+
+@pytest.mark.parametrize("name", NATIVE)
+def test_the_coefficients_property_is_a_read_only_view(name):
+    optimizer = make_optimizer(name, 3, 1, 0)
+    with pytest.raises(ValueError, match="read-only"):
+        optimizer.coefficients[0, 0] = np.nan
+    assert np.isfinite(optimizer.ask(np.zeros((4, 1)))).all()
+
+
+@pytest.mark.parametrize("name", NATIVE)
+@pytest.mark.parametrize("option", ["initial_mean", "initial_cov"])
+def test_a_python_int_beyond_the_float_range_is_named(name, option):
+    with pytest.raises(ValueError, match=f"{option}: expected finite values, got an integer beyond"):
+        make_optimizer(name, 3, 1, 0, **{option: 10**400})
+
+
+def test_recommended_batch_size_checks_its_arguments():
+    from creps_gym.optimizers.ccmaes import recommended_batch_size
+
+    assert recommended_batch_size(15, 1) == 24
+    cases = (((0, 1), ValueError), ((3, -1), ValueError), ((True, 1), TypeError), ((3.0, 1), TypeError))
+    for args, error in cases:
+        with pytest.raises(error, match=r"n_params|n_context_dims"):
+            recommended_batch_size(*args)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+import zipfile
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from pathlib import Path
@@ -32,7 +33,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_bool
+from creps_gym._validation import as_float_array, check_bool, check_positive_int
 
 __all__ = [
     "AskTellOptimizer",
@@ -98,6 +99,13 @@ def _decode_non_finite(value: Any) -> Any:
     return value
 
 
+def _number(value: Any, key: Any) -> float:
+    """A diagnostic of a state dict as a float (inf allowed: e.g. η of uniform weights), or a TypeError."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"state['diagnostics'][{key!r}]: expected a number, got {type(value).__name__}")
+    return float(value)
+
+
 def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
     """Write a state dict atomically to ``path`` (``.npz``): arrays as entries, the rest as one JSON document.
 
@@ -126,12 +134,32 @@ def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
 
 
 def load_state(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Read a state dict written by :func:`save_state` (never unpickles anything)."""
-    with np.load(Path(path), allow_pickle=False) as data:
+    """Read a state dict written by :func:`save_state` (never unpickles anything).
+
+    A file that is not such a checkpoint (truncated, empty, a ``.npy``, a JSON document that is not an
+    object, an unknown non-finite marker) raises ``ValueError`` naming ``path``; a missing one
+    ``FileNotFoundError``.
+    """
+    try:
+        data = np.load(Path(path), allow_pickle=False)
+    except FileNotFoundError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"path: expected a creps_gym checkpoint (.npz), got {path} ({exc})") from None
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise ValueError(f"path: expected a creps_gym checkpoint (.npz), got a single array in {path}")
+    with data:
         if JSON_KEY not in data.files:
             raise ValueError(f"path: expected a creps_gym checkpoint with a {JSON_KEY!r} entry, got {path}")
-        state: dict[str, Any] = _decode_non_finite(json.loads(data[JSON_KEY].tobytes().decode()))
-        state.update({k: data[k].copy() for k in data.files if k != JSON_KEY})
+        try:
+            document = json.loads(data[JSON_KEY].tobytes().decode())
+            if not isinstance(document, dict):
+                raise ValueError(f"a JSON {type(document).__name__}, not an object")
+            state: dict[str, Any] = _decode_non_finite(document)
+            state.update({k: data[k].copy() for k in data.files if k != JSON_KEY})
+        except (ValueError, KeyError, UnicodeDecodeError, OSError, zipfile.BadZipFile) as exc:
+            why = f"got a damaged {path} ({exc!r})"
+            raise ValueError(f"path: expected a creps_gym checkpoint, {why}") from None
     return state
 
 
@@ -248,16 +276,27 @@ class ContextualOptimizer(ABC):
 
     @classmethod
     def from_state_dict(cls, state: Mapping[str, Any]) -> ContextualOptimizer:
-        """Rebuild an optimiser from :meth:`state_dict` output."""
+        """Rebuild an optimiser from :meth:`state_dict` output.
+
+        A state that is not one (a missing key, a counter that is not an int >= 0, a pending batch of the
+        wrong shape or with non-finite values, ...) raises ``ValueError`` or ``TypeError`` naming the key.
+        """
         if state.get("kind") != cls.kind:
             raise ValueError(f"state: expected a {cls.kind!r} checkpoint, got {state.get('kind')!r}")
-        optimizer = cls._from_state(state)
-        optimizer.iteration = int(state["iteration"])
-        optimizer.evaluations = int(state["evaluations"])
-        optimizer._diagnostics = {k: float(v) for k, v in dict(state["diagnostics"]).items()}
-        if "pending_contexts" in state:
-            contexts = np.array(state["pending_contexts"], dtype=np.float64)
-            optimizer._set_pending(contexts, np.array(state["pending_params"], dtype=np.float64))
+        try:
+            optimizer = cls._from_state(state)
+            for counter in ("iteration", "evaluations"):
+                value = check_positive_int(state[counter], f"state[{counter!r}]", minimum=0)
+                setattr(optimizer, counter, value)
+            optimizer._diagnostics = {str(k): _number(v, k) for k, v in dict(state["diagnostics"]).items()}
+            if "pending_contexts" in state:
+                contexts = optimizer._check_contexts(state["pending_contexts"], "state['pending_contexts']")
+                shape = (contexts.shape[0], optimizer.n_params)
+                params = as_float_array(state["pending_params"], "state['pending_params']", shape)
+                optimizer._set_pending(contexts, params)
+        except KeyError as exc:
+            missing = exc.args[0]
+            raise ValueError(f"state: expected the key {missing!r} of a {cls.kind!r} checkpoint") from None
         return optimizer
 
     def save(self, path: str | os.PathLike[str]) -> Path:

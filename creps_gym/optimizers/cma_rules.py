@@ -72,6 +72,8 @@ def cma_constants(
         Keep the negative weights (scaled so C stays positive definite in expectation) or zero them.
     overrides : mapping, optional
         ``c_sigma``, ``d_sigma``, ``c_c``, ``c_1``, ``c_mu`` values replacing the defaults (None keeps one).
+        When only one of ``c_1`` and ``c_mu`` is given, the other's default is capped so that they sum to at
+        most 1 (the active weights' scale needs 1 − c_1 − c_mu ≥ 0).
     """
     positive = raw_weights > 0
     weights = np.where(positive, raw_weights, 0.0) / raw_weights[positive].sum()
@@ -83,7 +85,11 @@ def cma_constants(
     }
     rates["c_mu"] = min(1.0 - rates["c_1"], 2.0 * (mu_eff - 2.0 + 1.0 / mu_eff) / ((n + 2.0) ** 2 + mu_eff))
     rates["d_sigma"] = 1.0 + 2.0 * max(0.0, math.sqrt((mu_eff - 1.0) / (n + 1.0)) - 1.0) + rates["c_sigma"]
-    rates.update({k: float(v) for k, v in (overrides or {}).items() if v is not None})
+    given = {k: float(v) for k, v in (overrides or {}).items() if v is not None}
+    rates.update(given)
+    for rate, other in (("c_1", "c_mu"), ("c_mu", "c_1")):  # a default yields to a given rate
+        if rate in given and other not in given:
+            rates[other] = min(rates[other], 1.0 - rates[rate])
     negative = raw_weights < 0
     if active and negative.any() and rates["c_mu"] > 0:
         raw_negative = raw_weights[negative]
@@ -178,8 +184,13 @@ def stagnation_window(n_params: int, n_samples: int, configured: int | None) -> 
 
 
 def record_mean_return(history: Sequence[float], returns: Array, window: int) -> list[float]:
-    """The batch's mean return appended to ``history``, which keeps only the last ``window`` entries."""
-    return [*history, float(np.mean(returns))][-window:]
+    """The batch's mean return appended to ``history``, which keeps only the last ``window`` entries.
+
+    The mean is taken of the returns scaled by their largest magnitude, so that finite returns near the
+    float limit (whose sum overflows) still give a finite mean.
+    """
+    scale = float(np.abs(returns).max()) or 1.0
+    return [*history, float(np.mean(returns / scale)) * scale][-window:]
 
 
 def stagnated(mean_returns: Sequence[float], window: int) -> bool:

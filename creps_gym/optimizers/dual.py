@@ -22,12 +22,15 @@ is returned, with KL < ε. η is bounded to [``ETA_MIN``, ``ETA_MAX``] in normal
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import special
 from scipy.linalg.lapack import dposv
+
+from creps_gym._validation import as_float_array, check_positive_int, check_real, check_real_in_range
 
 __all__ = ["DUAL_KL_TOL", "ETA_MAX", "ETA_MIN", "DualSolution", "kl_to_uniform", "solve_dual"]
 
@@ -191,6 +194,13 @@ def solve_dual(
         Weights (N,) with KL(d ‖ uniform) = ε within ``DUAL_KL_TOL`` (or < ε at ``ETA_MIN``, see module
         docstring); all-equal returns, or returns fully explained by the baseline, give uniform weights.
     """
+    returns = as_float_array(returns, "returns", (None,))
+    baseline_features = as_float_array(baseline_features, "baseline_features", (returns.shape[0], None))
+    if returns.shape[0] < 2:
+        raise ValueError(f"returns: expected at least 2 samples, got {returns.shape[0]}")
+    epsilon = check_real_in_range(epsilon, "epsilon", 0.0, math.log(returns.shape[0]), high_inclusive=False)
+    eta0 = check_real(eta0, "eta0", strict=True)
+    max_iter = check_positive_int(max_iter, "max_iter")
     with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
         # Trial points near the non-smooth η → 0 limit may overflow; they are rejected by finiteness checks.
         return _solve_dual(returns, baseline_features, epsilon, eta0, max_iter)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -195,8 +196,14 @@ class RBFFeatures(FeatureMap):
         bandwidth = self.bandwidth
         if isinstance(bandwidth, (bool, np.bool_)) or not isinstance(bandwidth, (int, float, np.number)):
             raise TypeError(f"bandwidth: expected a finite number > 0, got {type(bandwidth).__name__}")
-        if not (np.isfinite(bandwidth) and bandwidth > 0):
-            raise ValueError(f"bandwidth: expected a finite number > 0, got {bandwidth!r}")
+        try:
+            width = np.float64(bandwidth)
+        except OverflowError:  # a Python int beyond the float range
+            width = np.float64(np.inf)
+        with np.errstate(over="ignore", under="ignore"):
+            usable = bool(np.isfinite(width) and 0.0 < 2.0 * width**2 < np.inf)
+        if not usable:  # the logits divide by 2 h², which must be a positive finite number
+            raise ValueError(f"bandwidth: expected a finite number > 0 whose 2 h² is too, got {bandwidth!r}")
         centres.setflags(write=False)
         object.__setattr__(self, "centres", centres)
         object.__setattr__(self, "bandwidth", float(bandwidth))
@@ -209,7 +216,7 @@ class RBFFeatures(FeatureMap):
         centres = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
         if bandwidth is None:
             bandwidth = float(np.max(high - low)) / max(per_dim - 1, 1)
-        return cls(context_dim=low.shape[0], centres=centres, bandwidth=float(bandwidth))
+        return cls(context_dim=low.shape[0], centres=centres, bandwidth=bandwidth)
 
     @property
     def n_features(self) -> int:
@@ -262,6 +269,8 @@ def make_features(spec: str | dict[str, Any] | FeatureMap, context_dim: int) -> 
     """
     if isinstance(spec, FeatureMap):
         feature_map = spec
+    elif not isinstance(spec, (str, Mapping)):
+        raise TypeError(f"features: expected a name, a spec dict or a FeatureMap, got {type(spec).__name__}")
     else:
         kwargs = {"name": spec} if isinstance(spec, str) else dict(spec)
         name = kwargs.pop("name", None)

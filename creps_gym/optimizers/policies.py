@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from creps_gym._validation import as_float_array
+from creps_gym._validation import as_float_array, check_positive_int
 from creps_gym.optimizers.cma_rules import record_mean_return, stagnated, stagnation_window
 from creps_gym.optimizers.features import FeatureMap
 
@@ -264,14 +264,18 @@ class PolicyAccess:
     def recommended_batch_size(n_params: int, n_context_dims: int) -> int:
         """CMA-ES's population 4 + ⌊3 ln p⌋ per mean feature of ϕ(s) = [1, s], so (4 + ⌊3 ln p⌋)·(1 + z),
         and at least 2k + 2 for the k features of a full quadratic in s (the baselines are regressions)."""
+        n_params = check_positive_int(n_params, "n_params")
+        n_context_dims = check_positive_int(n_context_dims, "n_context_dims", minimum=0)
         population = 4 + int(3 * math.log(n_params))
         quadratic = 1 + n_context_dims + n_context_dims * (n_context_dims + 1) // 2
         return max(population * (1 + n_context_dims), 2 * quadratic + 2)
 
     @property
     def coefficients(self) -> Array:
-        """The mean coefficients A, shape (k, p)."""
-        return self.policy.coefficients
+        """The mean coefficients A, shape (k, p), as a read-only view."""
+        view = self.policy.coefficients.view()
+        view.flags.writeable = False
+        return view
 
     @property
     def cov(self) -> Array:

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
 __all__ = [
@@ -175,9 +175,27 @@ def recommended_samples(optimizer: str | Any, n_params: int, n_context_dims: int
 
 
 def restore_optimizer(name: str, state: Mapping[str, Any]) -> Any:
-    """Rebuild a registered optimiser from its ``state_dict()``."""
-    return optimizer_class(name).from_state_dict(state)
+    """Rebuild a registered optimiser from its ``state_dict()``; the state must be one of ``name``'s (a
+    ``creps-cma-csa`` state is not a ``creps-cma-old`` one, although both are ``CREPSCMA``).
 
+    Every option that some name of the same class fixes must have ``name``'s value: its fixed one, else the
+    config's default.
+    """
+    entry = _entry(name)
+    optimizer = entry.load_class().from_state_dict(state)
+    config = getattr(optimizer, "config", None)
+    if config is None or not is_dataclass(config):
+        return optimizer
+    defaults = {f.name: f.default for f in fields(config)}
+    keys = {key for other in _REGISTRY.values() if other.target == entry.target for key in other.fixed}
+    expected = {key: entry.fixed.get(key, defaults.get(key, _MISSING)) for key in sorted(keys)}
+    got = {key: getattr(config, key, _MISSING) for key in expected}
+    if got != expected:
+        raise ValueError(f"state: expected a state of {name!r}, with {expected}, got one with {got}")
+    return optimizer
+
+
+_MISSING = object()
 
 _DEFAULTS = (
     ("creps", "Contextual REPS: KL-bounded weights, weighted ML mean and covariance (premature convergence)",

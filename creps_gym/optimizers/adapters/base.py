@@ -86,8 +86,10 @@ def _initial_mean(initial_mean: Any, n_params: int) -> Array:
 def _resolve_seed(seed: Any) -> int:
     if seed is None:
         return int(np.random.SeedSequence().generate_state(1)[0])
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise TypeError(f"seed: expected a non-negative int or None, got {type(seed).__name__} {seed!r}")
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"seed: expected an int in [0, 2**32) or None, got {type(seed).__name__} {seed!r}")
+    if not 0 <= seed < 2**32:  # the libraries seed numpy's legacy RandomState, which takes 32 bits
+        raise ValueError(f"seed: expected an int in [0, 2**32) or None, got {seed}")
     return int(seed)
 
 

@@ -64,8 +64,10 @@ class NevergradAdapter(MinimizerAdapter):
         (iterations × samples, at most ``max_episodes``) unless it is given; ``NGOpt`` and other portfolio
         optimisers need it when the adapter is used directly.
 
-    Call :meth:`close` (or use the adapter as a context manager) when done, to stop the threads of recast
-    optimisers such as ``"Powell"``; the runner does it for the optimisers it builds.
+    Optimisers that nevergrad runs one candidate at a time (``no_parallelization``, e.g. the recast
+    ``"Powell"`` and ``"Cobyla"``) are refused: every tell holds a batch of at least 2. Call :meth:`close`
+    (or use the adapter as a context manager) when done, to stop the threads an optimiser may start; the
+    runner does it for the optimisers it builds.
     """
 
     kind: ClassVar[str] = "nevergrad"
@@ -79,6 +81,11 @@ class NevergradAdapter(MinimizerAdapter):
         registry = import_optional("nevergrad").optimizers.registry
         if name not in registry:
             raise ValueError(f"optimizer: expected a name in nevergrad.optimizers.registry, got {name!r}")
+        if getattr(registry[name], "no_parallelization", False):  # e.g. the recast "Powell", "Cobyla"
+            raise ValueError(
+                f"optimizer: expected a nevergrad optimiser that evaluates batches (a tell needs at least 2 "
+                f"samples), got {name!r}, which nevergrad runs one candidate at a time"
+            )
         budget = options.get("budget")
         if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int) or budget < 1):
             raise ValueError(f"budget: expected a positive int or None, got {budget!r}")

@@ -19,6 +19,11 @@ Array = NDArray[np.float64]
 _MANAGED = ("seed", "randn", "CMA_stds", "verbose", "verb_log", "verb_disp")
 
 
+def _plain(value: Any) -> Any:
+    """A numpy scalar as the Python number it holds (JSON-serialisable); anything else as is."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
 class CMAAdapter(MinimizerAdapter):
     """pycma's ``CMAEvolutionStrategy`` behind the ask/tell protocol (contexts are ignored).
 
@@ -36,7 +41,10 @@ class CMAAdapter(MinimizerAdapter):
         (for example ``tolfun=1e-12``, or ``--opt tolfun=1e-12`` on the command line); the names are checked
         against ``cma.CMAOptions()``. ``popsize``, if given, must equal the batch size (the runner's samples
         per iteration). ``seed``, ``randn``, ``CMA_stds`` and the verbosity options are set by the adapter.
-        The nested form ``cma_options={...}`` of earlier versions is still accepted.
+        The nested form ``cma_options={...}`` of earlier versions is still accepted. pycma sees normalised
+        coordinates u = (θ − initial_mean) / initial_std, so options on positions, such as ``bounds``, are
+        in u: ``bounds=[-2, 2]`` keeps θ within initial_mean ± 2 initial_std. Numpy scalars are stored as
+        the Python numbers they hold (the options are saved as JSON).
     """
 
     kind: ClassVar[str] = "cma"
@@ -49,7 +57,7 @@ class CMAAdapter(MinimizerAdapter):
         twice = sorted(set(nested) & set(options))
         if twice:
             raise ValueError(f"options: expected each pycma option once, got {twice} flat and in cma_options")
-        merged = {**nested, **options}
+        merged = {key: _plain(value) for key, value in {**nested, **options}.items()}
         managed = sorted(set(merged) & set(_MANAGED))
         if managed:
             raise ValueError(

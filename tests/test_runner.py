@@ -457,10 +457,26 @@ def test_a_module_prefixed_id_runs_as_gymnasium_make_takes_it():
 
 
 def test_a_start_no_batch_size_can_learn_from_names_the_initial_distribution():
-    with pytest.raises(ValueError, match="initial_mean, initial_std: expected a start 'creps' can learn"):
-        run("creps", SPHERE, 2, 10, 0, initial_mean=1e300)
-    with pytest.raises(ValueError, match="samples: expected a batch size that 'creps' can learn from, got 3"):
-        run("creps", SPHERE, 2, 3, 0)
+    """check_batch_size blames ``samples`` only if a batch four times as large is learnt from."""
+    from creps_gym.runner.checks import check_batch_size
+
+    class Refusing:
+        def __init__(self, smallest):
+            self.smallest = smallest
+
+        def ask(self, contexts):
+            return np.zeros((contexts.shape[0], 2))
+
+        def tell(self, contexts, params, returns):
+            if contexts.shape[0] < self.smallest:
+                raise ValueError("Eigenvalues did not converge")
+
+    contexts = np.zeros((5, 1))
+    check_batch_size(lambda: Refusing(5), contexts, {}, "'x'")  # accepted: no error
+    with pytest.raises(ValueError, match=r"samples: expected a batch size that 'x' can learn from, got 5"):
+        check_batch_size(lambda: Refusing(12), contexts, {}, "'x'")
+    with pytest.raises(ValueError, match="initial_mean, initial_std: expected a start 'x' can learn from"):
+        check_batch_size(lambda: Refusing(10**9), contexts, {}, "'x'")
 
 
 def test_more_workers_than_samples_are_capped_at_the_samples():

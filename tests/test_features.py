@@ -69,6 +69,42 @@ def test_user_feature_maps_can_be_registered(monkeypatch):
     np.testing.assert_array_equal(make_features("cubic-test", 2)(CONTEXTS)[0], [1, 1, 8])
     with pytest.raises(TypeError, match="expected a FeatureMap subclass"):
         register_feature_map(dict)
+    register_feature_map(Cubic)  # the same class again: allowed
+
+    class Impostor(FeatureMap):
+        name = "affine"
+
+    with pytest.raises(ValueError, match="cls: expected a feature map name not yet registered, got 'affine'"):
+        register_feature_map(Impostor)
+    assert make_features("affine", 1).__class__.__name__ == "AffineFeatures"
+
+
+def test_a_registered_feature_map_with_fields_of_its_own_round_trips(tmp_path, monkeypatch):
+    """Through a checkpoint: its spec holds every constructor field."""
+    from dataclasses import dataclass
+
+    from creps_gym.optimizers import CREPS, features
+
+    monkeypatch.setattr(features, "_REGISTRY", dict(features._REGISTRY))
+
+    @dataclass(frozen=True)
+    class Scaled(FeatureMap):
+        name = "scaled-test"
+        constant_column = 0
+        scale: float = 1.0
+
+        @property
+        def n_features(self):
+            return 1 + self.context_dim
+
+        def __call__(self, contexts):
+            return np.column_stack([np.ones(len(contexts)), self.scale * contexts])
+
+    register_feature_map(Scaled)
+    optimizer = CREPS(2, 1, seed=0, mean_features=Scaled(1, scale=10.0), initial_mean=np.ones((2, 2)))
+    restored = CREPS.load(optimizer.save(tmp_path / "ckpt.npz"))
+    assert restored.config.mean_map == Scaled(1, scale=10.0)
+    np.testing.assert_array_equal(restored.recommend([[1.0]]), optimizer.recommend([[1.0]]))
 
 
 @pytest.mark.parametrize(

@@ -252,3 +252,16 @@ def test_recommended_batch_size_checks_its_arguments():
     for args, error in cases:
         with pytest.raises(error, match=r"n_params|n_context_dims"):
             recommended_batch_size(*args)
+
+
+@pytest.mark.parametrize("name", NATIVE)
+def test_contexts_whose_features_overflow_are_refused_and_change_nothing(name):
+    """Contexts pass the magnitude check (|s| <= 1e100) but a degree-4 polynomial of 1e90 overflows."""
+    optimizer = make_optimizer(name, 2, 1, 0, mean_features={"name": "polynomial", "degree": 4})
+    before = optimizer.state_dict()
+    for method in (optimizer.ask, optimizer.recommend):
+        with pytest.raises(ValueError, match="contexts: expected contexts whose mean features are finite"):
+            method(np.array([[1e90]]))
+    after = optimizer.state_dict()
+    assert all(np.array_equal(after[key], value) for key, value in before.items())
+    assert np.isfinite(optimizer.ask(np.ones((3, 1)))).all()

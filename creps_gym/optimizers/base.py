@@ -195,7 +195,17 @@ class ContextualOptimizer(ABC):
         ndarray, shape (n, p)
         """
         contexts = self._check_contexts(contexts, "contexts")
-        params = self._sample(contexts)
+        generator = getattr(self, "rng", None)
+        state = None if generator is None else generator.bit_generator.state
+        with np.errstate(over="ignore", invalid="ignore"):
+            params = self._sample(contexts)
+        if not np.isfinite(params).all():  # e.g. a high-degree polynomial of contexts near 1e100
+            if state is not None:
+                generator.bit_generator.state = state  # a rejected ask changes nothing
+            raise ValueError(
+                "contexts: expected contexts whose mean features are finite (smaller magnitudes), got values "
+                f"up to {float(np.abs(contexts).max()):.3g} that make the sampled parameters non-finite"
+            )
         self._set_pending(contexts.copy(), params.copy())
         return params
 

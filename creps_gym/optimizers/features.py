@@ -18,7 +18,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar
 
 import numpy as np
@@ -75,8 +75,14 @@ class FeatureMap:
         return coefficients
 
     def spec(self) -> dict[str, Any]:
-        """JSON-serialisable description, inverse of :func:`make_features`."""
-        return {"name": self.name, "context_dim": int(self.context_dim)}
+        """JSON-serialisable description, inverse of :func:`make_features`: the name and every constructor
+        field (arrays as nested lists), so a registered subclass with fields of its own is rebuilt."""
+        data: dict[str, Any] = {"name": self.name}
+        for item in fields(self):
+            if item.init:
+                value = getattr(self, item.name)
+                data[item.name] = value.tolist() if isinstance(value, (np.ndarray, np.generic)) else value
+        return data
 
 
 @dataclass(frozen=True)
@@ -148,9 +154,6 @@ class PolynomialFeatures(FeatureMap):
     def __call__(self, contexts: Array) -> Array:
         columns = [np.prod(contexts[:, list(term)], axis=1) for term in self.monomials]
         return np.stack(columns, axis=1)
-
-    def spec(self) -> dict[str, Any]:
-        return {**super().spec(), "degree": self.degree}
 
 
 @dataclass(frozen=True)
@@ -233,9 +236,6 @@ class RBFFeatures(FeatureMap):
         # Normalised RBFs sum to one, so equal rows give a constant mean.
         return np.tile(mean, (self.n_features, 1))
 
-    def spec(self) -> dict[str, Any]:
-        return {**super().spec(), "centres": self.centres.tolist(), "bandwidth": float(self.bandwidth)}
-
     def __eq__(
         self, other: object
     ) -> bool:  # by value: centres are an array, which dataclass eq cannot compare
@@ -252,9 +252,16 @@ _REGISTRY: dict[str, type[FeatureMap]] = {
 
 
 def register_feature_map(cls: type[FeatureMap]) -> type[FeatureMap]:
-    """Register a user :class:`FeatureMap` subclass (by its ``name``) so checkpoints can rebuild it."""
+    """Register a user :class:`FeatureMap` subclass (by its ``name``) so checkpoints can rebuild it.
+
+    A name already taken by another class (a built-in such as ``"affine"`` included) raises ``ValueError``;
+    registering the same class again (a reloaded module) is allowed.
+    """
     if not (isinstance(cls, type) and issubclass(cls, FeatureMap)):
         raise TypeError(f"cls: expected a FeatureMap subclass, got {cls!r}")
+    taken = _REGISTRY.get(cls.name)
+    if taken is not None and (taken.__module__, taken.__qualname__) != (cls.__module__, cls.__qualname__):
+        raise ValueError(f"cls: expected a feature map name not yet registered, got {cls.name!r} ({taken})")
     _REGISTRY[cls.name] = cls
     return cls
 

@@ -288,8 +288,16 @@ class PolicyAccess:
         return self.policy.step_size
 
     def recommend(self, contexts: Any) -> Array:
-        """The mean policy Aᵀϕ(s) for contexts (n, z): shape (n, p)."""
-        return self.policy.mean(self._check_contexts(contexts, "contexts"))  # type: ignore[attr-defined]
+        """The mean policy Aᵀϕ(s) for contexts (n, z): shape (n, p); ``ValueError`` where it is not finite."""
+        checked = self._check_contexts(contexts, "contexts")  # type: ignore[attr-defined]
+        with np.errstate(over="ignore", invalid="ignore"):
+            mean = self.policy.mean(checked)
+        if not np.isfinite(mean).all():
+            raise ValueError(
+                "contexts: expected contexts whose mean features are finite (smaller magnitudes), got values "
+                f"up to {float(np.abs(checked).max()):.3g} that make the mean policy non-finite"
+            )
+        return mean
 
     def _sample(self, contexts: Array) -> Array:
         return self.policy.sample(contexts, self.rng)

@@ -333,3 +333,47 @@ def test_every_registered_optimizer_rejects_returns_whose_spread_overflows(name)
     assert all(np.array_equal(after[key], value) for key, value in before.items())
     optimizer.tell(contexts, params, -np.sum(params**2, axis=1))  # the pending ask still stands
     assert optimizer.iteration == 1
+
+
+def _played(name):
+    adapter = registry.make_optimizer(name, 2, 0, 3)
+    contexts = np.zeros((6, 0))
+    for _ in range(3):
+        params = adapter.ask(contexts)
+        adapter.tell(contexts, params, -(params**2).sum(axis=1))
+    return adapter.state_dict()
+
+
+def _truncate_events(state):
+    state["adapter"] = {**state["adapter"], "events": state["adapter"]["events"][:2]}
+
+
+def _negative_index(state):
+    state["told_index"] = state["told_index"].copy()
+    state["told_index"][0] = -1
+
+
+def _nan_loss(state):
+    state["told_losses"] = state["told_losses"].copy()
+    state["told_losses"][1] = np.nan
+
+
+def _zero_event(state):
+    state["adapter"] = {**state["adapter"], "events": [0, *state["adapter"]["events"]]}
+
+
+@pytest.mark.parametrize("name", marked(sorted(ADAPTERS)))
+@pytest.mark.parametrize(
+    ("tamper", "match"),
+    [
+        (_truncate_events, r"state\['adapter'\]\['events'\]: expected asks and tells of 18 and 18 rows"),
+        (_negative_index, r"state\['told_index'\]: expected rows of the last ask \(0 to 5\)"),
+        (_nan_loss, r"state\['told_losses'\]: expected finite values"),
+        (_zero_event, r"state\['adapter'\]\['events'\]: expected a list of non-zero ints"),
+    ],
+)
+def test_a_tampered_adapter_record_is_refused_before_replay(name, tamper, match):
+    state = _played(name)
+    tamper(state)
+    with pytest.raises(ValueError, match=match):
+        registry.restore_optimizer(name, state)

@@ -270,13 +270,23 @@ class MinimizerAdapter(ContextualOptimizer):
             seed=config["seed"],
             **config["options"],
         )
-        adapter._replay(config["events"], state["asked"], state["told_index"], state["told_losses"])
+        events = _checked_events(config["events"], state)
+        adapter._replay(events, state["asked"], state["told_index"], state["told_losses"])
         return adapter
 
     def _replay(self, events: list[int], asked: Array, told_index: Array, told_losses: Array) -> None:
         """Re-run the recorded asks and tells; every ask must reproduce the recorded rows bit for bit."""
         a = t = 0
+        last_ask = 0
         for k, event in enumerate(events):
+            if event < 0:
+                indices = np.asarray(told_index[t : t - event])
+                if indices.size and not (indices.min() >= 0 and indices.max() < last_ask):
+                    raise ValueError(
+                        f"state['told_index']: expected rows of the last ask (0 to {last_ask - 1}) at event "
+                        f"{k}, got {indices.tolist()}"
+                    )
+            last_ask = event if event > 0 else last_ask
             if event > 0:
                 y = self._raw_ask(event)
                 if not np.array_equal(y, asked[a : a + event]):
@@ -290,3 +300,26 @@ class MinimizerAdapter(ContextualOptimizer):
                 indices = np.asarray(told_index[t : t + m], dtype=np.int64)
                 self._raw_tell(indices, np.asarray(told_losses[t : t + m], dtype=np.float64))
                 t += m
+
+
+def _checked_events(events: Any, state: Mapping[str, Any]) -> list[int]:
+    """The recorded events (asks > 0, tells < 0) checked against the recorded arrays and counters."""
+    valid = isinstance(events, list) and all(isinstance(e, int) and not isinstance(e, bool) for e in events)
+    if not valid or 0 in events:
+        raise ValueError(f"state['adapter']['events']: expected a list of non-zero ints, got {events!r}")
+    asked = as_float_array(state["asked"], "state['asked']", (None, None))
+    told = np.asarray(state["told_index"])
+    losses = as_float_array(state["told_losses"], "state['told_losses']", (told.shape[0],))
+    if told.dtype.kind not in "iu":
+        raise TypeError(f"state['told_index']: expected integers, got dtype {told.dtype}")
+    counts = (sum(e for e in events if e > 0), -sum(e for e in events if e < 0))
+    if counts != (asked.shape[0], losses.shape[0]):
+        raise ValueError(
+            f"state['adapter']['events']: expected asks and tells of {asked.shape[0]} and {losses.shape[0]} "
+            f"rows (the recorded arrays), got {counts[0]} and {counts[1]}"
+        )
+    tells = sum(e < 0 for e in events)
+    if "iteration" in state and tells != state["iteration"]:
+        got = state["iteration"]
+        raise ValueError(f"state['iteration']: expected {tells} (the recorded tells), got {got!r}")
+    return events

@@ -39,6 +39,7 @@ __all__ = [
     "AskTellOptimizer",
     "ContextualOptimizer",
     "load_state",
+    "overflowing_contexts",
     "save_state",
 ]
 
@@ -97,6 +98,14 @@ def _decode_non_finite(value: Any) -> Any:
     if isinstance(value, list):
         return [_decode_non_finite(v) for v in value]
     return value
+
+
+def overflowing_contexts(contexts: NDArray[np.float64], what: str) -> ValueError:
+    """The error for contexts that pass the magnitude check but make ``what`` non-finite."""
+    return ValueError(
+        "contexts: expected contexts whose mean features are finite (smaller magnitudes), got values up to "
+        f"{float(np.abs(contexts).max()):.3g} that make {what} non-finite"
+    )
 
 
 def _number(value: Any, key: Any) -> float:
@@ -202,10 +211,7 @@ class ContextualOptimizer(ABC):
         if not np.isfinite(params).all():  # e.g. a high-degree polynomial of contexts near 1e100
             if state is not None:
                 generator.bit_generator.state = state  # a rejected ask changes nothing
-            raise ValueError(
-                "contexts: expected contexts whose mean features are finite (smaller magnitudes), got values "
-                f"up to {float(np.abs(contexts).max()):.3g} that make the sampled parameters non-finite"
-            )
+            raise overflowing_contexts(contexts, "the sampled parameters")
         self._set_pending(contexts.copy(), params.copy())
         return params
 

@@ -23,6 +23,7 @@ __all__ = [
     "inverse_sqrt",
     "rank_weights",
     "record_mean_return",
+    "scaled_mean",
     "stagnated",
     "stagnation_window",
     "update_paths_and_cov",
@@ -184,13 +185,15 @@ def stagnation_window(n_params: int, n_samples: int, configured: int | None) -> 
 
 
 def record_mean_return(history: Sequence[float], returns: Array, window: int) -> list[float]:
-    """The batch's mean return appended to ``history``, which keeps only the last ``window`` entries.
+    """The batch's mean return appended to ``history``, which keeps only the last ``window`` entries."""
+    return [*history, scaled_mean(returns)][-window:]
 
-    The mean is taken of the returns scaled by their largest magnitude, so that finite returns near the
-    float limit (whose sum overflows) still give a finite mean.
-    """
-    scale = float(np.abs(returns).max()) or 1.0
-    return [*history, float(np.mean(returns / scale)) * scale][-window:]
+
+def scaled_mean(returns: Array) -> float:
+    """The mean of ``returns`` taken in units of their largest magnitude, so that finite returns near the
+    float limit (whose sum overflows) still give a finite mean; 0 for all-zero returns."""
+    magnitude = float(np.abs(returns).max())
+    return float(np.mean(returns / magnitude) * magnitude) if magnitude > 0 else 0.0
 
 
 def stagnated(mean_returns: Sequence[float], window: int) -> bool:

@@ -26,7 +26,7 @@ from scipy import linalg
 
 from creps_gym._validation import as_float_array, check_positive_int, check_real_in_range, check_seed
 from creps_gym.optimizers.base import ContextualOptimizer
-from creps_gym.optimizers.cma_rules import stagnation_window
+from creps_gym.optimizers.cma_rules import scaled_mean, stagnation_window
 from creps_gym.optimizers.dual import DUAL_KL_TOL, DualSolution, solve_dual
 from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import (
@@ -270,7 +270,6 @@ class CREPS(PolicyAccess, ContextualOptimizer):
         return dict(self._diagnostics)
 
     def _describe(self, dual: DualSolution, returns: Array, interpolation: float, repaired: bool) -> dict:
-        magnitude = float(np.abs(returns).max())
         return {
             "eta": dual.eta * dual.return_scale,  # in return units (inf for uniform weights)
             "kl": dual.kl,
@@ -278,7 +277,7 @@ class CREPS(PolicyAccess, ContextualOptimizer):
             "interpolation": float(interpolation),
             "logdet_cov": 2.0 * float(np.log(np.diag(self.policy.chol)).sum())
             + 2.0 * self.n_params * float(np.log(self.policy.step_size)),
-            "mean_return": float(np.mean(returns / magnitude) * magnitude) if magnitude > 0 else 0.0,
+            "mean_return": scaled_mean(returns),
             "dual_iterations": float(dual.iterations),
             "cov_repaired": float(repaired),
         }

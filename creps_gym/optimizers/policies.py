@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from scipy import linalg
 
 from creps_gym._validation import as_float_array, check_positive_int
+from creps_gym.optimizers.base import overflowing_contexts
 from creps_gym.optimizers.cma_rules import record_mean_return, stagnated, stagnation_window
 from creps_gym.optimizers.features import FeatureMap
 
@@ -293,10 +294,7 @@ class PolicyAccess:
         with np.errstate(over="ignore", invalid="ignore"):
             mean = self.policy.mean(checked)
         if not np.isfinite(mean).all():
-            raise ValueError(
-                "contexts: expected contexts whose mean features are finite (smaller magnitudes), got values "
-                f"up to {float(np.abs(checked).max()):.3g} that make the mean policy non-finite"
-            )
+            raise overflowing_contexts(checked, "the mean policy")
         return mean
 
     def _sample(self, contexts: Array) -> Array:

@@ -13,7 +13,12 @@ from creps_gym.envs.evaluation import contextual_model
 from creps_gym.optimizers import CCMAES, CREPSCMA, make_optimizer
 from creps_gym.optimizers.ccmaes import recommended_batch_size
 from creps_gym.optimizers.cma_rules import cma_constants, inverse_sqrt, rank_weights
-from creps_gym.optimizers.contextual import coefficient_shift, context_advantages, contextual_mean
+from creps_gym.optimizers.contextual import (
+    coefficient_shift,
+    context_advantages,
+    contextual_mean,
+    local_advantages,
+)
 from creps_gym.optimizers.features import make_features
 
 STEP_SIZE_OPTIMIZERS = {
@@ -175,15 +180,76 @@ def test_mean_repulsion_converges_slower_on_a_sphere_and_restores_bit_identicall
     plain, repelled = (CCMAES(5, 1, initial_mean=2.0, seed=0, mean_repulsion=a) for a in (0.0, 1.0))
     counts = [_iterations_to_solve(optimizer) for optimizer in (plain, repelled)]
     assert counts[1] <= 400 and counts[1] > 1.5 * counts[0], counts
-    repelled.save(tmp_path / "ckpt.npz")
-    restored = CCMAES.load(tmp_path / "ckpt.npz")
-    assert restored.config.mean_repulsion == 1.0
+    assert _restored_twin(repelled, tmp_path).config.mean_repulsion == 1.0
+
+
+def _restored_twin(optimizer, folder):
+    """A save/load copy of ``optimizer``; asserts that both ask and tell one more batch identically."""
+    optimizer.save(folder / "ckpt.npz")
+    restored = CCMAES.load(folder / "ckpt.npz")
     contexts = np.linspace(0, 3, 5)[:, None]
-    params = repelled.ask(contexts)
+    params = optimizer.ask(contexts)
     np.testing.assert_array_equal(params, restored.ask(contexts))
-    for optimizer in (repelled, restored):
-        optimizer.tell(contexts, params, _sphere_returns(contexts, params))
-    np.testing.assert_array_equal(repelled.policy.coefficients, restored.policy.coefficients)
+    for twin in (optimizer, restored):
+        twin.tell(contexts, params, _sphere_returns(contexts, params))
+    np.testing.assert_array_equal(optimizer.policy.coefficients, restored.policy.coefficients)
+    return restored
+
+
+def _weighted_median(values, weights):
+    """The smallest value whose cumulative weight (values ascending) reaches half the total."""
+    for value in np.sort(values):
+        if weights[values <= value].sum() >= 0.5 * weights.sum():
+            return value
+    raise AssertionError("unreachable")
+
+
+def test_the_local_baseline_is_the_kernel_weighted_median_of_the_recent_returns():
+    rng = np.random.default_rng(4)
+    past_contexts, contexts = rng.uniform(0, 3, (30, 2)), rng.uniform(0, 3, (12, 2))
+    past_returns, returns = rng.standard_normal(30), rng.standard_normal(12)
+    advantages, _ = local_advantages(contexts, returns, 0.4, past_contexts, past_returns)
+    every_context = np.concatenate([past_contexts, contexts])
+    every_return = np.concatenate([past_returns, returns])
+    scaled = every_context / every_context.std(axis=0)
+    for k in range(12):
+        kernel = np.exp(-0.5 * ((scaled - scaled[30 + k]) ** 2).sum(axis=1) / 0.4**2)
+        assert advantages[k] == pytest.approx(returns[k] - _weighted_median(every_return, kernel), abs=1e-12)
+
+
+def test_the_local_baseline_follows_a_cliff_that_a_robust_quadratic_cannot():
+    """Returns = the samples' quality, except that every sample beyond s = 11 "falls" (−100, graded by a
+    small severity). The local V ranks the falls among themselves by severity, around zero advantage; the
+    Huber quadratic puts them all at the bottom, whatever their severity."""
+    rng = np.random.default_rng(5)
+    contexts = rng.uniform(3.0, 12.0, (200, 1))
+    quality = rng.standard_normal(200)
+    fell = contexts[:, 0] > 11.0
+    returns = np.where(fell, -100.0 + 0.1 * quality, quality)
+    local, explained = local_advantages(contexts, returns, 0.1)
+    huber, _ = context_advantages(contexts, returns, degree=2, ridge=1e-10, loss="huber")
+    assert explained > 0.9
+    away = np.abs(contexts[:, 0] - 11.0) > 0.5  # the kernel mixes both sides only at the cliff's edge
+    assert np.corrcoef(local[away], quality[away])[0, 1] > 0.9
+    assert np.corrcoef(local[fell & away], quality[fell & away])[0, 1] > 0.9
+    assert (local[fell] > 0).sum() >= 0.3 * fell.sum()  # the best falls get positive weights
+    assert (huber[fell] < np.sort(huber)[fell.sum()]).all()  # the Huber fit: every fall ranks last
+
+
+def test_the_local_baseline_scales_shifts_and_transforms_with_the_returns():
+    rng = np.random.default_rng(6)
+    contexts, returns = rng.uniform(0, 3, (25, 1)), rng.standard_normal(25)
+    plain, _ = local_advantages(contexts, returns, 0.5)
+    affine, _ = local_advantages(contexts, 3.0 * returns - 7.0, 0.5)
+    np.testing.assert_allclose(affine, 3.0 * plain, atol=1e-12)
+    cubed, _ = local_advantages(contexts, returns**3, 0.5)
+    np.testing.assert_allclose(returns**3 - cubed, (returns - plain) ** 3, atol=1e-12)  # V(g(R)) = g(V(R))
+
+
+def test_a_local_baseline_still_solves_the_contextual_sphere_and_restores_bit_identically(tmp_path):
+    local = CCMAES(5, 1, initial_mean=2.0, seed=0, baseline_bandwidth=0.3)
+    assert _iterations_to_solve(local) <= 400
+    assert _restored_twin(local, tmp_path).config.baseline_bandwidth == 0.3
 
 
 def test_a_mean_learning_rate_below_one_still_converges_and_damps_the_mean_under_random_returns():
@@ -429,6 +495,14 @@ def test_recommended_batch_size_grows_with_dimension_and_context():
             ValueError,
             "mean_repulsion: expected 0 with active=False",
         ),
+        ({"baseline_bandwidth": -0.5}, ValueError, r"baseline_bandwidth: expected .*, got -0.5"),
+        ({"baseline_bandwidth": float("inf")}, ValueError, "baseline_bandwidth"),
+        (
+            {"baseline_bandwidth": 0.3, "baseline_loss": "huber"},
+            ValueError,
+            "baseline_loss: expected False and 'squared' with baseline_bandwidth > 0, got False and 'huber'",
+        ),
+        ({"baseline_bandwidth": 0.3, "standardise_advantages": True}, ValueError, "standardise_advantages"),
         ({"tolx": -1.0}, ValueError, "tolx"),
         ({"tolupsigma": 0.5}, ValueError, "tolupsigma"),
         ({"max_condition": 0.0}, ValueError, "max_condition"),

@@ -1,4 +1,4 @@
-"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0, KickFlexibility-v0/v1/v2)."""
+"""Tests of the MuJoCo humanoid kick tasks (creps_gym/KickPrecision-v0/v1, KickFlexibility-v0/v1/v2)."""
 
 from __future__ import annotations
 
@@ -222,6 +222,12 @@ def test_context_changes_flexibility_outcome(flexibility):
         ),
         ({"rolling_friction": "0.003"}, TypeError, "rolling_friction: expected a real number, got str"),
         ({"fall_penalty": -1.0}, ValueError, "fall_penalty: expected a finite value >= 0, got -1.0"),
+        (
+            {"fall_grading": -2.0},
+            ValueError,
+            r"fall_grading: expected a finite value in \[0.0, 1000000.0\], got -2.0",
+        ),
+        ({"fall_grading": float("nan")}, ValueError, "fall_grading"),
         ({"num_threads": -1}, ValueError, "num_threads: expected an integer >= 0, got -1"),
         ({"fixed_base": "yes"}, TypeError, "fixed_base: expected a bool, got str"),
         ({"width": 0}, ValueError, "width: expected an integer >= 1, got 0"),
@@ -408,6 +414,27 @@ def test_flexibility_v2_scores_a_miss_by_how_close_the_foot_came():
         gym.make("creps_gym/KickFlexibility-v2", miss_weight=-1.0)
     v1.close()
     v2.close()
+
+
+def test_precision_v1_grades_a_fall_by_how_far_the_robot_went_down(precision):
+    """v1 = v0 for standing kicks; a fall scores v0's fall return minus 30 × (1 − uprightness), with the
+    uprightness the lowest min(height ratio, cos tilt) while watched: 1 for a kick that stands, and
+    samples that all fall get different returns, ordered by how far each went down."""
+    v1 = gym.make("creps_gym/KickPrecision-v1", num_threads=1).unwrapped
+    rng = np.random.default_rng(0)
+    contexts = np.full((24, 1), 12.0)
+    params = np.clip(REFERENCE_KICK + 0.05 * rng.standard_normal((24, 25)), -1, 1)
+    r0, info = precision.evaluate(contexts, params)
+    r1, info1 = v1.evaluate(contexts, params)
+    fell, upright = info["fell"], info["uprightness"]
+    np.testing.assert_array_equal(info1["uprightness"], upright)
+    assert 4 <= fell.sum() <= 20  # both kinds in the batch
+    np.testing.assert_array_equal(r1[~fell], r0[~fell])
+    np.testing.assert_allclose(r1[fell], r0[fell] - 30.0 * (1.0 - np.clip(upright[fell], -1, 1)))
+    assert np.unique(r0[fell]).size == 1 and np.unique(r1[fell]).size == fell.sum()
+    assert (upright[~fell] >= 0.5).all() and (upright[~fell] <= 1.0).all()  # never below the fall lines
+    assert "v1: a fall's return is graded" in type(v1).__doc__
+    v1.close()
 
 
 @pytest.mark.slow

@@ -127,12 +127,14 @@ def test_the_selection_probe_sees_a_baseline_that_cannot_follow_the_returns(
 
 def test_run_files_that_name_no_env_ran_on_the_legacy_one() -> None:
     legacy = {"setting": {"features": "rbf", "options": {}, "samples": 20}}
-    assert study.stored_setting(legacy, "precision")["env"] == study.ENV_IDS["precision"]  # still current
+    assert study.stored_setting(legacy, "precision")["env"] == "creps_gym/KickPrecision-v0"
+    assert study.ENV_IDS["precision"] == "creps_gym/KickPrecision-v1"  # so v0 runs are computed again
     assert study.stored_setting(legacy, "flexibility")["env"] == "creps_gym/KickFlexibility-v1"
     assert study.ENV_IDS["flexibility"] == "creps_gym/KickFlexibility-v2"  # so v1 runs are computed again
     record = {"budget_episodes": 26, "episodes": 26, "population": 13}
-    assert oracle._reusable(record, "precision", 26) and not oracle._reusable(record, "flexibility", 26)
-    assert oracle._reusable({**record, "env": study.ENV_IDS["flexibility"]}, "flexibility", 26)
+    for experiment in ("precision", "flexibility"):
+        assert not oracle._reusable(record, experiment, 26)
+        assert oracle._reusable({**record, "env": study.ENV_IDS[experiment]}, experiment, 26)
 
 
 def test_trial_indices_pick_the_trials_one_process_runs() -> None:

@@ -52,7 +52,7 @@ __all__ = [
 
 TARGETS = np.linspace(3.0, 12.0, 10)  # precision: the 10 evaluation targets (m)
 GRID_X, GRID_Y = np.linspace(0.15, 0.30, 4), np.linspace(-0.15, 0.15, 7)  # flexibility: the ball grid (m)
-ENV_IDS = {"precision": "creps_gym/KickPrecision-v0", "flexibility": "creps_gym/KickFlexibility-v2"}
+ENV_IDS = {"precision": "creps_gym/KickPrecision-v1", "flexibility": "creps_gym/KickFlexibility-v2"}
 #: The env of each experiment in run and oracle files that do not name theirs (written before they did).
 LEGACY_ENV_IDS = {"precision": "creps_gym/KickPrecision-v0", "flexibility": "creps_gym/KickFlexibility-v1"}
 EVAL_EVERY = 50  # iterations between evaluations of the mean policy (the learning curves)

@@ -55,6 +55,7 @@ from creps_gym.optimizers.contextual import (
     coefficient_shift,
     context_advantages,
     contextual_mean,
+    local_advantages,
     recent_samples,
 )
 from creps_gym.optimizers.features import FeatureMap, make_features
@@ -106,6 +107,8 @@ class CCMAESConfig:
     standardise_advantages : bool   divide a_k by a context-dependent scale fitted like V (C1).
     baseline_loss : str             ``"squared"`` (least squares) or ``"huber"`` (Huber's M-estimate, robust
         to a few outlying returns such as falls) for the fit of V (C1).
+    baseline_bandwidth : float      0: the polynomial V above; h > 0: a local V, the kernel-weighted median of
+        the recent returns with a Gaussian bandwidth of h context standard deviations (C1'').
     ridge, baseline_ridge : float   relative ridges of the mean fit (C3) and of the baseline (C1).
     c_sigma, d_sigma, c_c, c_1, c_mu : float or None   learning rates; None = the tutorial's defaults.
     c_m : float                     the mean's learning rate in (0, 1] (C3'): A ← A + c_m (A_fit − A);
@@ -129,6 +132,7 @@ class CCMAESConfig:
     baseline_batches: int = 3
     standardise_advantages: bool = False
     baseline_loss: str = "squared"
+    baseline_bandwidth: float = 0.0
     restarts: int = 3
     step_size_signal: str = "mean"
     ridge: float = 1e-8
@@ -176,6 +180,7 @@ class CCMAESConfig:
             ("tolupsigma", 1.0, 1e300),
             ("max_condition", 1.0, 1e300),
             ("mean_repulsion", 0.0, 1.0),
+            ("baseline_bandwidth", 0.0, 1e3),
         ):
             value = check_real_in_range(getattr(self, name), name, low, high, low_inclusive=low == 0.0)
             object.__setattr__(self, name, value)
@@ -185,6 +190,11 @@ class CCMAESConfig:
         object.__setattr__(self, "c_m", check_real_in_range(self.c_m, "c_m", 0.0, 1.0))
         if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
             raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
+        if self.baseline_bandwidth > 0.0 and (self.standardise_advantages or self.baseline_loss != "squared"):
+            raise ValueError(  # the local baseline is a median: nothing to standardise or make robust
+                "standardise_advantages, baseline_loss: expected False and 'squared' with"
+                f" baseline_bandwidth > 0, got {self.standardise_advantages} and {self.baseline_loss!r}"
+            )
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
         object.__setattr__(self, "seed", check_seed(self.seed))
@@ -260,10 +270,13 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
     def _update(self, contexts: Array, params: Array, returns: Array) -> None:
         config = self.config
         past = (self.past_contexts, self.past_returns)
-        advantages, explained = context_advantages(  # Eq. (C1)
-            contexts, returns, config.baseline_degree, config.baseline_ridge, *past,
-            config.standardise_advantages, config.baseline_loss,
-        )  # fmt: skip
+        if config.baseline_bandwidth > 0.0:  # Eq. (C1'')
+            advantages, explained = local_advantages(contexts, returns, config.baseline_bandwidth, *past)
+        else:
+            advantages, explained = context_advantages(  # Eq. (C1)
+                contexts, returns, config.baseline_degree, config.baseline_ridge, *past,
+                config.standardise_advantages, config.baseline_loss,
+            )  # fmt: skip
         constants = self.config.constants(returns.shape[0])
         order = np.argsort(-advantages, kind="stable")
         weights = np.empty_like(constants.weights)

@@ -19,6 +19,7 @@ __all__ = [
     "coefficient_shift",
     "context_advantages",
     "contextual_mean",
+    "local_advantages",
     "recent_samples",
     "robust_refit",
 ]
@@ -100,6 +101,51 @@ def context_advantages(
         ]
         advantages = advantages / np.sqrt(np.maximum(variance[-n:], 0.01 * squares.mean()))
     return advantages, explained
+
+
+def local_advantages(
+    contexts: Array,
+    returns: Array,
+    bandwidth: float,
+    past_contexts: Array | None = None,
+    past_returns: Array | None = None,
+) -> tuple[Array, float]:
+    """a_k = R_k − V(s_k) with a local V, Eq. (C1''), and the fraction of the returns' variance V explains.
+
+    V(s_k) is the median of the returns of the batch (and of the reused earlier samples), each weighted by
+    the Gaussian kernel exp(−‖(s_k − s_j)/d‖² / (2h²)), with d the contexts' standard deviations and h the
+    ``bandwidth``. A median follows a cliff in the returns over the contexts (a region where every sample
+    falls) that a polynomial cannot, and a few outlying returns do not move it. V scales and shifts with the
+    returns, and a strictly increasing transformation of the returns transforms it alike (it is always one
+    of the returns).
+
+    Parameters
+    ----------
+    contexts : ndarray, shape (N, z)
+    returns : ndarray, shape (N,)
+    bandwidth : float
+        h > 0, in context standard deviations.
+    past_contexts, past_returns : ndarray, shape (M, z) and (M,), optional
+        Samples of earlier batches that V also weighs (the advantages are the current batch's only).
+    """
+    n = returns.shape[0]
+    all_contexts, all_returns = contexts, returns
+    if past_returns is not None and past_returns.size:
+        all_contexts = np.concatenate([past_contexts, contexts])
+        all_returns = np.concatenate([past_returns, returns])
+    spread = all_contexts.std(axis=0)
+    scaled = all_contexts / np.where(spread > 0, spread, 1.0)
+    squared_distances = ((scaled[-n:, None, :] - scaled[None, :, :]) ** 2).sum(axis=2)
+    kernel = np.exp(-0.5 * squared_distances / bandwidth**2)  # (N, M + N); each sample weighs itself 1
+    order = np.argsort(all_returns, kind="stable")
+    cumulative = np.cumsum(kernel[:, order], axis=1)
+    median_rank = (cumulative < 0.5 * cumulative[:, -1:]).sum(axis=1)
+    scale = float(np.abs(all_returns).max()) or 1.0  # differences of returns near 1e308 would overflow
+    residuals = returns / scale - all_returns[order][median_rank] / scale
+    scaled_returns = returns / scale
+    total = float(np.sum((scaled_returns - scaled_returns.mean()) ** 2))
+    explained = 1.0 - float(residuals @ residuals) / total if total > 0 else 0.0
+    return residuals * scale, explained
 
 
 def robust_refit(

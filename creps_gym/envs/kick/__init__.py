@@ -7,6 +7,8 @@ Registered ids
 --------------
 ``creps_gym/KickPrecision-v0``
     Kick a fixed ball to a target distance s in [3, 12] m; return -(x - s)² - y², a fall -s² - 1.
+``creps_gym/KickPrecision-v1``
+    As v0, and a fall's return is lowered by 30 times its severity (1 - the robot's lowest uprightness).
 ``creps_gym/KickFlexibility-v0``
     Kick a ball placed at (x_B, y_B) as far as possible; return x² - y² (the paper's).
 ``creps_gym/KickFlexibility-v1``
@@ -29,6 +31,12 @@ REGISTRATIONS: list[dict[str, Any]] = [
         "entry_point": f"{_TASKS}:KickPrecisionEnv",
         "vector_entry_point": f"{_TASKS}:KickPrecisionVectorEnv",
         "kwargs": {"rolling_friction": 0.003, "fall_penalty": 1.0},
+    },
+    {
+        "id": "creps_gym/KickPrecision-v1",
+        "entry_point": f"{_TASKS}:KickPrecisionEnv",
+        "vector_entry_point": f"{_TASKS}:KickPrecisionVectorEnv",
+        "kwargs": {"rolling_friction": 0.003, "fall_penalty": 1.0, "fall_grading": 30.0},
     },
     {
         "id": "creps_gym/KickFlexibility-v0",

@@ -47,6 +47,7 @@ class KickEnv(ContextualEpisodicEnv):
         *,
         rolling_friction: float = 0.003,
         fall_penalty: float = 1.0,
+        fall_grading: float = 0.0,
         num_threads: int = 0,
         fixed_base: bool = False,
         render_mode: str | None = None,
@@ -55,6 +56,7 @@ class KickEnv(ContextualEpisodicEnv):
     ) -> None:
         rolling = check_real_in_range(rolling_friction, "rolling_friction", 0.0, 1.0)
         self.fall_penalty = check_real(fall_penalty, "fall_penalty")
+        self.fall_grading = check_real_in_range(fall_grading, "fall_grading", 0.0, 1e6, low_inclusive=True)
         threads = check_positive_int(num_threads, "num_threads", minimum=0)
         fixed = check_bool(fixed_base, "fixed_base")
         self.width = check_positive_int(width, "width")
@@ -121,11 +123,18 @@ class KickEnv(ContextualEpisodicEnv):
         """Return of a fall: the 'ball not moved' return minus ``fall_penalty``, shape (n,)."""
         return self.task_returns(contexts, np.zeros((contexts.shape[0], 2))) - self.fall_penalty
 
+    def fall_severity(self, result: SimulationResult) -> Array:
+        """How far each robot went down, ``1 - uprightness`` clipped to [0, 2], shape (n,): about 0.2 for a
+        stumble caught while still falling, 0.5 or more once the torso is below 0.6 of its height or over."""
+        return 1.0 - np.clip(result.uprightness, -1.0, 1.0)
+
     def episode_returns(self, contexts: Array, result: SimulationResult) -> Array:
-        """Returns (n,) of simulated episodes: the task's, or the fall return for a fall."""
-        return np.where(
-            result.fell, self.fallen_returns(contexts), self.task_returns(contexts, result.displacement)
-        )
+        """Returns (n,) of simulated episodes: the task's, or the fall return for a fall, lowered by
+        ``fall_grading`` times its :meth:`fall_severity`."""
+        fallen = self.fallen_returns(contexts)
+        if self.fall_grading > 0.0:
+            fallen = fallen - self.fall_grading * self.fall_severity(result)
+        return np.where(result.fell, fallen, self.task_returns(contexts, result.displacement))
 
     # -- evaluation ----------------------------------------------------------------------------------------
     def simulate(self, contexts: Array, params: Array, frame_steps: int = 0) -> SimulationResult:
@@ -149,7 +158,8 @@ class KickEnv(ContextualEpisodicEnv):
         returns : ndarray, shape (n,)
         info : dict
             ``fell`` (n,) bool, ``ball_displacement`` (n, 2) m, ``kick_distance`` (n,) m,
-            ``min_foot_ball_distance`` (n,) m, ``launch_speed`` (n,) m/s, ``mirrored`` (n,) bool.
+            ``min_foot_ball_distance`` (n,) m, ``launch_speed`` (n,) m/s, ``uprightness`` (n,) (the lowest
+            min(torso height / standing height, cos tilt) while watched), ``mirrored`` (n,) bool.
         """
         contexts = self.check_contexts(contexts, "contexts")
         params = self.check_params(params, "params")
@@ -165,6 +175,7 @@ class KickEnv(ContextualEpisodicEnv):
             "kick_distance": np.linalg.norm(result.displacement, axis=1),
             "min_foot_ball_distance": result.min_foot_ball_distance.copy(),
             "launch_speed": result.launch_speed.copy(),
+            "uprightness": result.uprightness.copy(),
             "mirrored": self.ball_positions(contexts)[1],
         }
         return returns, info

@@ -98,6 +98,9 @@ class SimulationResult:
         1 m; negative while a foot penetrates the ball, as MuJoCo's contact distance is).
     launch_speed : ndarray, shape (n,)
         Highest ball speed (m/s) during phase 1.
+    uprightness : ndarray, shape (n,)
+        Lowest value during the watch of min(torso height / standing height, cosine of the torso's tilt):
+        1 for a robot that stays upright, below ``FALL_HEIGHT`` or cos ``FALL_TILT`` for most falls.
     sim_time : ndarray, shape (n,)
         Simulated episode time (s), both phases.
     phase1_time : ndarray, shape (n,)
@@ -110,6 +113,7 @@ class SimulationResult:
     fell: NDArray[np.bool_]
     min_foot_ball_distance: Array
     launch_speed: Array
+    uprightness: Array
     sim_time: Array
     phase1_time: Array
     frames: list[Array] = field(default_factory=list)
@@ -178,6 +182,7 @@ class KickSimulator:
             fell=np.zeros(n, dtype=bool),
             min_foot_ball_distance=np.full(n, np.inf),
             launch_speed=np.zeros(n),
+            uprightness=np.ones(n),
             sim_time=np.zeros(n),
             phase1_time=np.zeros(n),
             frames=[[] for _ in range(n)] if frame_steps else [],
@@ -233,6 +238,9 @@ class KickSimulator:
             )
             watched = times[None, :] <= done_motion[active, None]
             down = (torso[:, :, 2] < height_min) | (up[:, :, 2] < np.cos(FALL_TILT))
+            upright = np.minimum(torso[:, :, 2] / self.models.stand_height, up[:, :, 2])
+            upright = np.where(watched, upright, np.inf).min(axis=1)
+            res.uprightness[active] = np.minimum(res.uprightness[active], upright)
             fell = res.fell[active] | (down & watched).any(axis=1)
             settled = now >= done_motion[active] - 1e-9
             first = settled & ~checked[active]  # end of the watch: a fall still in progress counts

@@ -61,12 +61,17 @@ _MANUAL = """{summary}
     drops below 0.6 of its standing height or tilts over 60° before that: a fall scores as "ball not moved"
     minus ``fall_penalty`` (a falling body can pinch the ball and launch it, which is not a kick).
     ``info`` holds ``context``, ``fell``, ``ball_displacement`` (x, y in m), ``kick_distance``,
-    ``min_foot_ball_distance`` (m, during the kick), ``launch_speed`` (m/s) and ``mirrored``.
+    ``min_foot_ball_distance`` (m, during the kick), ``launch_speed`` (m/s), ``uprightness`` and
+    ``mirrored``.
 
     ## Arguments
     * ``rolling_friction`` (0.003): the ball's rolling friction, which sets the distance scale (calibrated
       so that a strong kick, launched at about 4.5 m/s, rolls 12-14 m; pinned by a test).
     * ``fall_penalty`` (1.0): subtracted from the "ball not moved" return when the robot falls.
+    * ``fall_grading`` (0.0; 30.0 in ``KickPrecision-v1``): a fall's return is also lowered by this times
+      its severity ``1 - uprightness`` (in [0, 2]; ``info["uprightness"]`` is the lowest min(torso height /
+      standing height, cosine of the tilt) while watched), so that a search can tell a stumble from a
+      collapse where every sample falls.
     * ``forward_only``, ``miss_weight`` (flexibility only): see Return and Version History.
     * ``num_threads`` (0 = all CPUs): threads of the batched simulation; results do not depend on it.
     * ``fixed_base`` (False): debug option that welds the torso to the world; not a benchmark setting.
@@ -110,7 +115,12 @@ class KickPrecisionEnv(KickEnv):
         """    ``Box(3, 12, (1,), float64)``: the target distance ``s`` in metres, uniform by default;
     ``reset(options={"context": [s]})`` sets it. The context is the observation and ``info["context"]``.""",
         """    ``-(x - s)² - y²``, with x, y the ball's displacement (m) forward and to the left.
-    A fall returns ``-s² - fall_penalty``.""",
+    A fall returns ``-s² - fall_penalty`` (v0), minus ``fall_grading`` times the fall's severity in [0, 2]
+    (v1: ``fall_grading=30``, which outweighs the ``-s²`` term's change of about 24 per metre at 12 m).""",
+        version_history="""    * v1: a fall's return is graded by its severity (``fall_grading=30``). Where
+      every sample falls, as near the 12 m target, v0 gives them all the same return and a search has no
+      direction back to a kick that stands (``benchmarks/kick/README.md``).
+    * v0: initial version.""",
     )
 
     def __init__(self, **kwargs: Any) -> None:

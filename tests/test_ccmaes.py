@@ -246,6 +246,27 @@ def test_the_local_baseline_scales_shifts_and_transforms_with_the_returns():
     np.testing.assert_allclose(returns**3 - cubed, (returns - plain) ** 3, atol=1e-12)  # V(g(R)) = g(V(R))
 
 
+@pytest.mark.parametrize("bandwidth", [0.0, -0.3, float("nan"), 1e-300])
+def test_the_local_baseline_rejects_a_bandwidth_that_weighs_nothing(bandwidth):
+    with pytest.raises(ValueError, match=r"bandwidth: expected a finite value >= 0\.001"):
+        local_advantages(np.zeros((3, 1)), np.zeros(3), bandwidth)
+
+
+def test_an_overflowing_local_advantage_is_rejected_and_leaves_the_optimiser_unchanged():
+    """Past returns near −1e308 and new ones near +1e308: R − V overflows; tell raises, nothing changes."""
+    optimizer = CCMAES(1, 1, seed=0, baseline_bandwidth=0.3)
+    contexts = np.linspace(0, 3, 4)[:, None]
+    optimizer.tell(contexts, optimizer.ask(contexts), np.full(4, -1e308))
+    params = optimizer.ask(contexts)
+    before = optimizer.state_dict()
+    with pytest.raises(ValueError, match="returns: expected advantages R_k - V"):
+        optimizer.tell(contexts, params, np.array([0.85e308, 0.9e308, 0.8e308, 0.95e308]))
+    after = optimizer.state_dict()
+    assert before.keys() == after.keys()
+    for key in before:
+        np.testing.assert_array_equal(np.asarray(before[key]), np.asarray(after[key]), err_msg=key)
+
+
 def test_a_local_baseline_still_solves_the_contextual_sphere_and_restores_bit_identically(tmp_path):
     local = CCMAES(5, 1, initial_mean=2.0, seed=0, baseline_bandwidth=0.3)
     assert _iterations_to_solve(local) <= 400
@@ -498,11 +519,18 @@ def test_recommended_batch_size_grows_with_dimension_and_context():
         ({"baseline_bandwidth": -0.5}, ValueError, r"baseline_bandwidth: expected .*, got -0.5"),
         ({"baseline_bandwidth": float("inf")}, ValueError, "baseline_bandwidth"),
         (
+            {"baseline_bandwidth": 1e-300},
+            ValueError,
+            "baseline_bandwidth: expected 0 or >= 0.001, got 1e-300",
+        ),
+        (
             {"baseline_bandwidth": 0.3, "baseline_loss": "huber"},
             ValueError,
-            "baseline_loss: expected False and 'squared' with baseline_bandwidth > 0, got False and 'huber'",
+            r"with baseline_bandwidth > 0, got \(False, 'huber', 2, 1e-10\)",
         ),
         ({"baseline_bandwidth": 0.3, "standardise_advantages": True}, ValueError, "standardise_advantages"),
+        ({"baseline_bandwidth": 0.3, "baseline_degree": 4}, ValueError, "baseline_degree"),
+        ({"baseline_bandwidth": 0.3, "baseline_ridge": 0.5}, ValueError, "baseline_ridge"),
         ({"tolx": -1.0}, ValueError, "tolx"),
         ({"tolupsigma": 0.5}, ValueError, "tolupsigma"),
         ({"max_condition": 0.0}, ValueError, "max_condition"),

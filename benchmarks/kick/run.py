@@ -1,7 +1,8 @@
 """Reproduce the paper's humanoid kick experiments (section 5.3) through the generic path: Fig. 5c and Fig. 7.
 
-* precision (Fig. 5c): C-CMA-ES, CREPS-CMA (old mean) and CREPS on ``creps_gym/KickPrecision-v0``, 20 samples
-  per iteration; the mean policy's distance to the target, averaged over 10 targets in [3, 12] m.
+* precision (Fig. 5c): C-CMA-ES, CREPS-CMA (old mean) and CREPS on ``creps_gym/KickPrecision-v1`` (falls
+  graded by severity), 20 samples per iteration; the mean policy's distance to the target, averaged over
+  10 targets in [3, 12] m.
   Paper: 0.34 ± 0.11 m after 1,000 iterations.
 * flexibility (Fig. 7): CREPS, CREPS-CMA (old mean) and C-CMA-ES on ``creps_gym/KickFlexibility-v2``
   (forward distance only; a miss scores its foot-ball distance), 100 samples per iteration; the mean

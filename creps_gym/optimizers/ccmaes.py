@@ -9,7 +9,8 @@ in ``docs/algorithms.md``.
 One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N(Aᵀϕ(s), σ²C):
 
 1. Advantages (C1): a_k = R_k − V(s_k), with V a ridge least-squares fit of the returns on a full quadratic in
-   s (cross terms included); smaller batches fall back to an affine or a constant baseline.
+   s (cross terms included); smaller batches fall back to an affine or a constant baseline. Optionally
+   (C1'') V is a local, kernel-weighted median of the recent returns (``baseline_bandwidth``).
 2. Weights (C2): CMA-ES rank weights on the advantages, positive for the best ⌊N/2⌋, negative for the rest
    (active CMA, ``active=True``).
 3. Mean (C3): A = weighted least squares of θ on ϕ(s) over the positively weighted samples; optionally
@@ -51,6 +52,7 @@ from creps_gym.optimizers.cma_rules import (
 )
 from creps_gym.optimizers.contextual import (
     LOSSES,
+    MIN_BANDWIDTH,
     baseline_features,
     coefficient_shift,
     context_advantages,
@@ -77,6 +79,7 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+UNUSED_BY_LOCAL_BASELINE = (False, "squared", 2, 1e-10)  # the defaults of the options C1'' ignores
 SIGNALS = ("coefficients", "mean")
 
 recommended_batch_size = PolicyAccess.recommended_batch_size
@@ -190,10 +193,15 @@ class CCMAESConfig:
         object.__setattr__(self, "c_m", check_real_in_range(self.c_m, "c_m", 0.0, 1.0))
         if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
             raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
-        if self.baseline_bandwidth > 0.0 and (self.standardise_advantages or self.baseline_loss != "squared"):
-            raise ValueError(  # the local baseline is a median: nothing to standardise or make robust
-                "standardise_advantages, baseline_loss: expected False and 'squared' with"
-                f" baseline_bandwidth > 0, got {self.standardise_advantages} and {self.baseline_loss!r}"
+        if 0.0 < self.baseline_bandwidth < MIN_BANDWIDTH:
+            raise ValueError(
+                f"baseline_bandwidth: expected 0 or >= {MIN_BANDWIDTH}, got {self.baseline_bandwidth}"
+            )
+        unused = (self.standardise_advantages, self.baseline_loss, self.baseline_degree, self.baseline_ridge)
+        if self.baseline_bandwidth > 0.0 and unused != UNUSED_BY_LOCAL_BASELINE:  # options of C1's fit
+            raise ValueError(
+                "standardise_advantages, baseline_loss, baseline_degree, baseline_ridge: expected"
+                f" {UNUSED_BY_LOCAL_BASELINE} with baseline_bandwidth > 0, got {unused}"
             )
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")

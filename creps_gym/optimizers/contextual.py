@@ -15,6 +15,7 @@ from creps_gym.optimizers.features import FeatureMap, PolynomialFeatures
 from creps_gym.optimizers.policies import weighted_ml_fit
 
 __all__ = [
+    "MIN_BANDWIDTH",
     "baseline_features",
     "coefficient_shift",
     "context_advantages",
@@ -25,6 +26,7 @@ __all__ = [
 ]
 
 LOSSES = ("squared", "huber")
+MIN_BANDWIDTH = 1e-3  # the local baseline's smallest bandwidth: below it the kernel weighs nothing but s_k
 HUBER_K = 1.345  # the Huber threshold in robust standard deviations: 95 % efficiency for Gaussian residuals
 
 Array = NDArray[np.float64]
@@ -112,22 +114,42 @@ def local_advantages(
 ) -> tuple[Array, float]:
     """a_k = R_k − V(s_k) with a local V, Eq. (C1''), and the fraction of the returns' variance V explains.
 
-    V(s_k) is the median of the returns of the batch (and of the reused earlier samples), each weighted by
-    the Gaussian kernel exp(−‖(s_k − s_j)/d‖² / (2h²)), with d the contexts' standard deviations and h the
-    ``bandwidth``. A median follows a cliff in the returns over the contexts (a region where every sample
-    falls) that a polynomial cannot, and a few outlying returns do not move it. V scales and shifts with the
-    returns, and a strictly increasing transformation of the returns transforms it alike (it is always one
-    of the returns).
+    V(s_k) is the lower weighted median of the returns of the batch (and of the reused earlier samples), each
+    weighted by the Gaussian kernel exp(−‖(s_k − s_j)/d‖² / (2h²)), with d the contexts' standard deviations
+    and h the ``bandwidth``. A median follows a cliff in the returns over the contexts (a region where every
+    sample falls) that a polynomial cannot, and a few outlying returns do not move it. V shifts with the
+    returns and scales with a positive factor, and a strictly increasing transformation of the returns
+    transforms it alike (it is always one of the returns).
+
+    Each sample is in its own median with weight 1, the kernel's largest, which shrinks its advantage
+    towards 0. A sample with little kernel weight from others (h small against the spacing of the
+    contexts, as for z ≥ 2 with few samples) is its own median: its advantage is exactly 0, ties are
+    ranked in batch order and the R² is inflated, so choose h to give each sample many neighbours. The
+    kernel matrix takes N·(M + N)·z floats.
 
     Parameters
     ----------
     contexts : ndarray, shape (N, z)
     returns : ndarray, shape (N,)
     bandwidth : float
-        h > 0, in context standard deviations.
+        h ≥ :data:`MIN_BANDWIDTH`, in context standard deviations.
     past_contexts, past_returns : ndarray, shape (M, z) and (M,), optional
         Samples of earlier batches that V also weighs (the advantages are the current batch's only).
+
+    Returns
+    -------
+    advantages : ndarray, shape (N,)
+    explained : float
+        1 − Σ a_k² / Σ (R_k − R̄)² over the batch.
+
+    Raises
+    ------
+    ValueError
+        If ``bandwidth`` is not finite and ≥ :data:`MIN_BANDWIDTH`, or if an advantage overflows (returns of
+        opposite signs near the largest float): rescale the returns.
     """
+    if not (np.isfinite(bandwidth) and bandwidth >= MIN_BANDWIDTH):
+        raise ValueError(f"bandwidth: expected a finite value >= {MIN_BANDWIDTH}, got {bandwidth}")
     n = returns.shape[0]
     all_contexts, all_returns = contexts, returns
     if past_returns is not None and past_returns.size:
@@ -145,7 +167,14 @@ def local_advantages(
     scaled_returns = returns / scale
     total = float(np.sum((scaled_returns - scaled_returns.mean()) ** 2))
     explained = 1.0 - float(residuals @ residuals) / total if total > 0 else 0.0
-    return residuals * scale, explained
+    with np.errstate(over="ignore"):
+        advantages = residuals * scale
+    if not np.isfinite(advantages).all():
+        raise ValueError(
+            "returns: expected advantages R_k - V(s_k) within the float range, got an overflow (returns near"
+            f" ±{scale:.3g} against a local baseline of the opposite sign); rescale the returns"
+        )
+    return advantages, explained
 
 
 def robust_refit(

@@ -124,8 +124,9 @@ class KickEnv(ContextualEpisodicEnv):
         return self.task_returns(contexts, np.zeros((contexts.shape[0], 2))) - self.fall_penalty
 
     def fall_severity(self, result: SimulationResult) -> Array:
-        """How far each robot went down, ``1 - uprightness`` clipped to [0, 2], shape (n,): about 0.2 for a
-        stumble caught while still falling, 0.5 or more once the torso is below 0.6 of its height or over."""
+        """``1 - uprightness`` clipped to [0, 2], shape (n,): how far each robot had gone down when its
+        episode stopped (for a fall, up to 0.12 s after it crossed a fall line; see ``SimulationResult``).
+        Above 0.4 once the torso is below 0.6 of its height, above 0.5 once it tilts past 60°."""
         return 1.0 - np.clip(result.uprightness, -1.0, 1.0)
 
     def episode_returns(self, contexts: Array, result: SimulationResult) -> Array:

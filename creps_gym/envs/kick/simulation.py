@@ -99,8 +99,10 @@ class SimulationResult:
     launch_speed : ndarray, shape (n,)
         Highest ball speed (m/s) during phase 1.
     uprightness : ndarray, shape (n,)
-        Lowest value during the watch of min(torso height / standing height, cosine of the torso's tilt):
-        1 for a robot that stays upright, below ``FALL_HEIGHT`` or cos ``FALL_TILT`` for most falls.
+        Lowest value during the watch of min(torso height / standing height, cosine of the torso's tilt),
+        at least 0.5 for a kick that stands (a kicking robot leans and crouches: 0.58-0.87 measured). A fallen
+        episode stops at the end of the ``CHUNK`` of steps in which the fall was detected, so for a fall it is
+        the pose up to 0.12 s after the torso crossed a fall line: it depends on where in the chunk that was.
     sim_time : ndarray, shape (n,)
         Simulated episode time (s), both phases.
     phase1_time : ndarray, shape (n,)

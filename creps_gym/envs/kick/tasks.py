@@ -59,7 +59,8 @@ _MANUAL = """{summary}
     after the swing ends and the ball is 0.8 m away or at rest; the ball's roll is then finished on a
     ball-only model until it is slower than 0.02 m/s (at most 16 s). The robot has *fallen* if its torso
     drops below 0.6 of its standing height or tilts over 60° before that: a fall scores as "ball not moved"
-    minus ``fall_penalty`` (a falling body can pinch the ball and launch it, which is not a kick).
+    minus ``fall_penalty`` and minus ``fall_grading`` times its severity (a falling body can pinch the ball
+    and launch it, which is not a kick).
     ``info`` holds ``context``, ``fell``, ``ball_displacement`` (x, y in m), ``kick_distance``,
     ``min_foot_ball_distance`` (m, during the kick), ``launch_speed`` (m/s), ``uprightness`` and
     ``mirrored``.
@@ -157,7 +158,7 @@ class KickFlexibilityEnv(KickEnv):
     and to the left, so only forward distance pays and a backward kick is penalised.
     v0 (``forward_only=False``): the paper's ``x² - y²``, which pays a backward kick as much as the
     mirrored forward one.
-    A fall returns ``-fall_penalty``.
+    A fall returns ``-fall_penalty`` (minus ``fall_grading`` times its severity if given).
     v2 (``miss_weight=1``) subtracts ``miss_weight · d`` from the v1 return, with d in [0, 1] the smallest
     distance (m) between a foot and the ball during the kick (``info["min_foot_ball_distance"]`` clipped to
     [0, 1]: the info is MuJoCo's signed distance, negative while a foot presses into the ball), and
@@ -197,7 +198,7 @@ class KickFlexibilityEnv(KickEnv):
 
 
 class KickPrecisionVectorEnv(KickVectorEnv):
-    """Native vector env of ``creps_gym/KickPrecision-v0`` (batched, multi-threaded)."""
+    """Native vector env of ``creps_gym/KickPrecision-v0`` and ``-v1`` (batched, multi-threaded)."""
 
     single_env_class: ClassVar[type[KickEnv]] = KickPrecisionEnv
 

@@ -41,6 +41,22 @@ def baseline_features(n_samples: int, context_dim: int, degree: int) -> Polynomi
     return PolynomialFeatures(context_dim, 0)
 
 
+def _with_past(
+    contexts: Array, returns: Array, past_contexts: Array | None, past_returns: Array | None
+) -> tuple[Array, Array]:
+    """The reused samples followed by the batch: contexts (M + N, z) and returns (M + N,)."""
+    if past_returns is None or not past_returns.size:
+        return contexts, returns
+    return np.concatenate([past_contexts, contexts]), np.concatenate([past_returns, returns])
+
+
+def _explained(scaled_returns: Array, scaled_residuals: Array) -> float:
+    """1 − Σ r_k² / Σ (R_k − R̄)², both in units of the largest |R| (squares of returns near 1e155 would
+    overflow); 0 for flat returns."""
+    total = float(np.sum((scaled_returns - scaled_returns.mean()) ** 2))
+    return 1.0 - float(scaled_residuals @ scaled_residuals) / total if total > 0 else 0.0
+
+
 def context_advantages(
     contexts: Array,
     returns: Array,
@@ -76,10 +92,7 @@ def context_advantages(
     if loss not in LOSSES:
         raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
     n, z = contexts.shape
-    all_contexts, all_returns = contexts, returns
-    if past_returns is not None and past_returns.size:
-        all_contexts = np.concatenate([past_contexts, contexts])
-        all_returns = np.concatenate([past_returns, returns])
+    all_contexts, all_returns = _with_past(contexts, returns, past_contexts, past_returns)
     features = baseline_features(all_returns.shape[0], z, degree)
     if features.degree == 0:
         return returns - all_returns.mean(), 0.0
@@ -93,9 +106,7 @@ def context_advantages(
         fit = robust_refit(phi, all_returns / scale, fit, ridge, features.constant_column)
     residuals = all_returns / scale - (phi @ fit)[:, 0]
     advantages = residuals[-n:] * scale
-    scaled = returns / scale  # R² in the scaled units: squares of returns near 1e155 would overflow
-    total = float(np.sum((scaled - scaled.mean()) ** 2))
-    explained = 1.0 - float(residuals[-n:] @ residuals[-n:]) / total if total > 0 else 0.0
+    explained = _explained(returns / scale, residuals[-n:])
     if standardise and residuals.any():  # all zero (flat returns): nothing to rank, nothing to scale
         squares = residuals**2
         variance = (phi @ weighted_ml_fit(phi, squares[:, None], uniform, ridge, features.constant_column))[
@@ -151,10 +162,7 @@ def local_advantages(
     if not (np.isfinite(bandwidth) and bandwidth >= MIN_BANDWIDTH):
         raise ValueError(f"bandwidth: expected a finite value >= {MIN_BANDWIDTH}, got {bandwidth}")
     n = returns.shape[0]
-    all_contexts, all_returns = contexts, returns
-    if past_returns is not None and past_returns.size:
-        all_contexts = np.concatenate([past_contexts, contexts])
-        all_returns = np.concatenate([past_returns, returns])
+    all_contexts, all_returns = _with_past(contexts, returns, past_contexts, past_returns)
     spread = all_contexts.std(axis=0)
     scaled = all_contexts / np.where(spread > 0, spread, 1.0)
     squared_distances = ((scaled[-n:, None, :] - scaled[None, :, :]) ** 2).sum(axis=2)
@@ -164,9 +172,7 @@ def local_advantages(
     median_rank = (cumulative < 0.5 * cumulative[:, -1:]).sum(axis=1)
     scale = float(np.abs(all_returns).max()) or 1.0  # differences of returns near 1e308 would overflow
     residuals = returns / scale - all_returns[order][median_rank] / scale
-    scaled_returns = returns / scale
-    total = float(np.sum((scaled_returns - scaled_returns.mean()) ** 2))
-    explained = 1.0 - float(residuals @ residuals) / total if total > 0 else 0.0
+    explained = _explained(returns / scale, residuals)
     with np.errstate(over="ignore"):
         advantages = residuals * scale
     if not np.isfinite(advantages).all():

@@ -79,7 +79,8 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-UNUSED_BY_LOCAL_BASELINE = (False, "squared", 2, 1e-10)  # the defaults of the options C1'' ignores
+#: The options of C1's polynomial fit, which the local baseline (C1'') ignores: they must keep their defaults.
+UNUSED_BY_LOCAL_BASELINE = ("standardise_advantages", "baseline_loss", "baseline_degree", "baseline_ridge")
 SIGNALS = ("coefficients", "mean")
 
 recommended_batch_size = PolicyAccess.recommended_batch_size
@@ -197,11 +198,13 @@ class CCMAESConfig:
             raise ValueError(
                 f"baseline_bandwidth: expected 0 or >= {MIN_BANDWIDTH}, got {self.baseline_bandwidth}"
             )
-        unused = (self.standardise_advantages, self.baseline_loss, self.baseline_degree, self.baseline_ridge)
-        if self.baseline_bandwidth > 0.0 and unused != UNUSED_BY_LOCAL_BASELINE:  # options of C1's fit
+        defaults = {option.name: option.default for option in fields(self)}
+        expected = tuple(defaults[name] for name in UNUSED_BY_LOCAL_BASELINE)
+        unused = tuple(getattr(self, name) for name in UNUSED_BY_LOCAL_BASELINE)
+        if self.baseline_bandwidth > 0.0 and unused != expected:
             raise ValueError(
-                "standardise_advantages, baseline_loss, baseline_degree, baseline_ridge: expected"
-                f" {UNUSED_BY_LOCAL_BASELINE} with baseline_bandwidth > 0, got {unused}"
+                f"{', '.join(UNUSED_BY_LOCAL_BASELINE)}: expected {expected} with baseline_bandwidth > 0,"
+                f" got {unused}"
             )
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")

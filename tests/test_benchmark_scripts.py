@@ -615,6 +615,29 @@ def test_ccmaes_study_renders_the_remedies_from_the_cached_runs(tmp_path: Path) 
     assert "neither at z = 3: 0" in text and "both (the default) at z = 3" not in text
 
 
+def test_ccmaes_signal_table_sets_each_signal_beside_the_default_and_counts_the_lower_medians() -> None:
+    from benchmarks.ccmaes import report
+
+    def runs(*hits: int | None, samples: int = 50) -> list[dict]:
+        return [{"hit": h, "spec": {"seed": i, "samples": samples}} for i, h in enumerate(hits)]
+
+    cells = {
+        ("Sphere", 1, "c-cma-es"): runs(400, 600),
+        ("Sphere", 1, "c-cma-es-coef"): runs(300, 500),
+        ("Sphere", 1, "c-cma-es-rec"): runs(200, 200, samples=24),
+        ("Sphere", 1, "c-cma-es-rec-coef"): runs(None, None, samples=24),
+        ("Rosenbrock", 1, "c-cma-es"): runs(None, None),
+        ("Rosenbrock", 1, "c-cma-es-coef"): runs(None, None),
+    }
+    text = report.signal_table(cells, [("Sphere", 1), ("Rosenbrock", 1)], 1000, 2)
+    assert "| Sphere | 1 | 500 (2/2) | 400 (2/2) | 200 (2/2), N = 24 | >1,000 (0/2), N = 24 |" in text
+    assert "| Rosenbrock | 1 | >1,000 (0/2) | >1,000 (0/2) | – | – |" in text
+    # Sphere at N = 50 is lower, at the recommended N higher; Rosenbrock never got there, and has no
+    # recommended-N runs: 1 of 2 pairs compared.
+    assert "The coefficients' median is lower in 1 of the 2 (cell, batch size) pairs" in text
+    assert "**Partial: runs cached of 2 seeds: c-cma-es-rec at Rosenbrock, z = 1: 0;" in text
+
+
 def test_ccmaes_cells_count_a_run_that_ended_early_under_a_smaller_budget() -> None:
     from benchmarks.ccmaes import run
 

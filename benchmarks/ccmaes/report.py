@@ -32,6 +32,7 @@ __all__ = [
     "plot_curves",
     "remedies_table",
     "seed_table",
+    "signal_table",
     "target_met",
 ]
 
@@ -87,6 +88,17 @@ BATCH_SWEEP = tuple(
     Column(f"c-cma-es-n{n}", "c-cma-es", n, f"N = {n}", "0.4") for n in (12, 16, 20, 24, 32, 40)
 )
 SWEEP_FUNCTION = "Sphere"
+#: C-CMA-ES with the coefficients' step-size signal (C4') instead of the default (C4), at N = 50 and at the
+#: recommended N, in every cell with the headline seeds; the default's runs are those of :data:`COLUMNS`.
+COEFFICIENTS = (("step_size_signal", "coefficients"),)
+SIGNAL_COLUMNS = (
+    Column("c-cma-es-coef", "c-cma-es", 50, "coefficients, N = 50", "0.4", COEFFICIENTS),
+    Column(
+        "c-cma-es-rec-coef", "c-cma-es", "recommended", "coefficients, recommended N", "0.4", COEFFICIENTS
+    ),
+)
+#: (default column, coefficients column) of :func:`signal_table`, per batch size.
+SIGNAL_PAIRS = (("c-cma-es", "c-cma-es-coef"), ("c-cma-es-rec", "c-cma-es-rec-coef"))
 #: The columns of the headline table (run with the headline seeds).
 HEADLINE = ("creps-cma-old", "c-cma-es", "c-cma-es-rec", "cma-fixed")
 #: Issue 12's targets for C-CMA-ES at N = 50: (function, z) -> (most episodes, least fraction of seeds).
@@ -229,6 +241,37 @@ def sweep_table(cells: Cells, budget: int, seeds: int) -> str:
         ]
         lines += ["", f"Batch sizes that meet the target: {', '.join(meeting) or 'none'}."]
     missing = [f"{c.label}: {len(r)}" for c, r in zip(BATCH_SWEEP, runs, strict=True) if len(r) < seeds]
+    if missing:
+        lines += ["", _partial_line(missing, seeds)]
+    return "\n".join(lines) + "\n"
+
+
+def signal_table(cells: Cells, rows: Sequence[tuple[str, int]], budget: int, seeds: int) -> str:
+    """C-CMA-ES's default step-size signal (``mean``, C4) beside ``coefficients`` (C4'), at N = 50 and at the
+    recommended N, one row per (function, z); then in how many (cell, batch size) pairs the coefficients'
+    median is lower, and a line naming the cells with fewer than ``seeds`` runs cached."""
+    lines = [
+        "| function | z | mean, N = 50 | coefficients, N = 50 | mean, recommended N "
+        "| coefficients, recommended N |",
+        "|---" * 6 + "|",
+    ]
+    compared = lower = 0
+    missing = []
+    for name, z in rows:
+        texts = []
+        for default, coefficients in SIGNAL_PAIRS:
+            runs = [cells.get((name, z, column), []) for column in (default, coefficients)]
+            texts += [_episodes_text(r, budget) + (_batch_text(r) if "rec" in c else "") for r, c in
+                      zip(runs, (default, coefficients), strict=True)]  # fmt: skip
+            medians = [median_episodes(r) for r in runs]
+            if None not in medians and not all(math.isinf(m) for m in medians):
+                compared += 1
+                lower += medians[1] < medians[0]
+            missing += [f"{c} at {name}, z = {z}: {len(r)}" for c, r in
+                        zip((default, coefficients), runs, strict=True) if len(r) < seeds]  # fmt: skip
+        lines.append(f"| {name} | {z} | " + " | ".join(texts) + " |")
+    lines += ["", f"The coefficients' median is lower in {lower} of the {compared} (cell, batch size) pairs "
+              "where either reached the target."]  # fmt: skip
     if missing:
         lines += ["", _partial_line(missing, seeds)]
     return "\n".join(lines) + "\n"

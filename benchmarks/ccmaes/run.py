@@ -39,6 +39,7 @@ from benchmarks.ccmaes.report import (
     HEADLINE,
     REMEDIES,
     REMEDY_FUNCTION,
+    SIGNAL_COLUMNS,
     SWEEP_FUNCTION,
     Column,
     csa_text,
@@ -46,6 +47,7 @@ from benchmarks.ccmaes.report import (
     plot_curves,
     remedies_table,
     seed_table,
+    signal_table,
     sweep_table,
 )
 from benchmarks.study_runner import (
@@ -62,9 +64,10 @@ HERE = Path(__file__).resolve().parent
 FUNCTIONS = ("Sphere", "Rosenbrock", "ShiftedRotatedElliptic")
 #: The issue's setting: N = 50 samples per iteration, 100 test contexts, mean U[-5, 5]^p with σ0 = 1.
 SAMPLES, EVAL_CONTEXTS, INITIAL = 50, 100, "uniform5"
-#: Every column: the methods', then the remedies' variants of C-CMA-ES (on Rosenbrock, headline seeds) and
-#: its batch sizes (on the Sphere at z = 1, headline seeds).
-ALL_COLUMNS = COLUMNS + tuple(c for c in REMEDIES if c.name not in {m.name for m in COLUMNS}) + BATCH_SWEEP
+#: Every column: the methods', then the remedies' variants of C-CMA-ES (on Rosenbrock, headline seeds), its
+#: batch sizes (on the Sphere at z = 1, headline seeds) and step-size signals (every cell, headline seeds).
+REMEDY_VARIANTS = tuple(c for c in REMEDIES if c.name not in {m.name for m in COLUMNS})
+ALL_COLUMNS = COLUMNS + REMEDY_VARIANTS + BATCH_SWEEP + SIGNAL_COLUMNS
 PRESETS = {
     "quick": {"seeds": 2, "headline_seeds": 2, "budget": 100_000},
     "full": {"seeds": 5, "headline_seeds": 20, "budget": 200_000},
@@ -131,9 +134,10 @@ def column_specs(args: argparse.Namespace, log: Any = print) -> list[tuple[str, 
         if column.batch == "recommended" and recommended_batch(args.dim, 1) is None:
             log(f"skipped column {column.name!r}: creps_gym.optimizers.ccmaes has no recommended_batch_size")
             continue
-        seeds = max(args.seeds, args.headline_seeds) if column.name in HEADLINE else args.seeds
+        headline = column.name in HEADLINE or column in SIGNAL_COLUMNS
+        seeds = max(args.seeds, args.headline_seeds) if headline else args.seeds
         functions, dims = args.functions, args.context_dims
-        if column not in COLUMNS:  # a remedy or a batch size: on its function only, with the headline seeds
+        if column in REMEDY_VARIANTS + BATCH_SWEEP:  # on its function only, with the headline seeds
             only = SWEEP_FUNCTION if column in BATCH_SWEEP else REMEDY_FUNCTION
             functions = [name for name in functions if name == only]
             dims = [z for z in dims if z == 1] if column in BATCH_SWEEP else dims
@@ -227,7 +231,8 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
 
 
 def extra_sections(args: argparse.Namespace, documents: list[dict]) -> list[str]:
-    """The remedies and batch-size sections of ``results.md`` (each empty without its runs in the study)."""
+    """The remedies, batch-size and step-size-signal sections of ``results.md`` (each empty without its runs
+    in the study)."""
     names = {column for column, _ in args.pairs}
     seeds = max(args.seeds, args.headline_seeds)
     cells = group(args.pairs, documents)
@@ -243,6 +248,13 @@ def extra_sections(args: argparse.Namespace, documents: list[dict]) -> list[str]
             f"## {SWEEP_FUNCTION}, z = 1: C-CMA-ES's batch size ({seeds} seed(s))",
             "",
             sweep_table(cells, args.budget, seeds),
+        ]
+    if names & {c.name for c in SIGNAL_COLUMNS}:
+        rows = [(name, z) for name in args.functions for z in args.context_dims]
+        text += [
+            f"## C-CMA-ES's step-size signal ({seeds} seed(s))",
+            "",
+            signal_table(cells, rows, args.budget, seeds),
         ]
     return text
 

@@ -44,6 +44,7 @@ from creps_gym.optimizers.cma_rules import (
     CMAConstants,
     cma_constants,
     csa_step,
+    distribution_stops,
     expected_norm,
     inverse_sqrt,
     rank_weights,
@@ -52,8 +53,8 @@ from creps_gym.optimizers.cma_rules import (
 )
 from creps_gym.optimizers.contextual import (
     LOSSES,
-    MIN_BANDWIDTH,
     baseline_features,
+    check_local_baseline,
     coefficient_shift,
     context_advantages,
     contextual_mean,
@@ -64,6 +65,7 @@ from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import (
     LinearGaussianPolicy,
     PolicyAccess,
+    check_option_names,
     initial_coefficients,
     initial_covariance,
     split_step_size,
@@ -80,7 +82,7 @@ __all__ = [
 
 Array = NDArray[np.float64]
 #: The options of C1's polynomial fit, which the local baseline (C1'') ignores: they must keep their defaults.
-UNUSED_BY_LOCAL_BASELINE = ("standardise_advantages", "baseline_loss", "baseline_degree", "baseline_ridge")
+UNUSED = ("standardise_advantages", "baseline_loss", "baseline_degree", "baseline_ridge")
 SIGNALS = ("coefficients", "mean")
 
 recommended_batch_size = PolicyAccess.recommended_batch_size
@@ -194,18 +196,8 @@ class CCMAESConfig:
         object.__setattr__(self, "c_m", check_real_in_range(self.c_m, "c_m", 0.0, 1.0))
         if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
             raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
-        if 0.0 < self.baseline_bandwidth < MIN_BANDWIDTH:
-            raise ValueError(
-                f"baseline_bandwidth: expected 0 or >= {MIN_BANDWIDTH}, got {self.baseline_bandwidth}"
-            )
         defaults = {option.name: option.default for option in fields(self)}
-        expected = tuple(defaults[name] for name in UNUSED_BY_LOCAL_BASELINE)
-        unused = tuple(getattr(self, name) for name in UNUSED_BY_LOCAL_BASELINE)
-        if self.baseline_bandwidth > 0.0 and unused != expected:
-            raise ValueError(
-                f"{', '.join(UNUSED_BY_LOCAL_BASELINE)}: expected {expected} with baseline_bandwidth > 0,"
-                f" got {unused}"
-            )
+        check_local_baseline(self.baseline_bandwidth, {n: (getattr(self, n), defaults[n]) for n in UNUSED})
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
         object.__setattr__(self, "seed", check_seed(self.seed))
@@ -247,10 +239,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
     kind: ClassVar[str] = "c-cma-es"
 
     def __init__(self, n_params: int, n_context_dims: int, **options: Any) -> None:
-        valid = {f.name for f in fields(CCMAESConfig) if f.init} - {"n_params", "n_context_dims"}
-        unknown = set(options) - valid
-        if unknown:
-            raise TypeError(f"options: expected names in {sorted(valid)}, got unknown {sorted(unknown)}")
+        check_option_names(CCMAESConfig, options)
         self._init_from_config(CCMAESConfig(n_params=n_params, n_context_dims=n_context_dims, **options))
 
     def _init_from_config(self, config: CCMAESConfig) -> None:
@@ -365,19 +354,13 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
     def stop(self) -> dict[str, Any]:
         """pycma-like criteria that are met: tolx, tolupsigma, max_condition, tolstagnation and
         tolflatfitness (empty before the first update)."""
-        met: dict[str, Any] = {}
-        diagnostics = self.diagnostics
-        if not diagnostics:
-            return met
-        sigma, config = self.step_size, self.config
-        stds = sigma * np.sqrt(np.diag(self.policy.cov))
-        if stds.max() < config.tolx and sigma * np.abs(self.path_cov).max() < config.tolx:
-            met["tolx"] = float(stds.max())
-        growth = sigma / config.initial_step_size
-        if growth > config.tolupsigma * diagnostics["max_std"] / sigma:  # σ/σ0 > tolupsigma·√λ_max(C)
-            met["tolupsigma"] = growth
-        if diagnostics["cond_cov"] > config.max_condition:
-            met["max_condition"] = diagnostics["cond_cov"]
+        if not self._diagnostics:
+            return {}
+        config = self.config
+        met: dict[str, Any] = distribution_stops(
+            self.step_size, config.initial_step_size, (np.diag(self.policy.cov), self._eigen()[0]),
+            self.path_cov, config.tolx, config.tolupsigma, config.max_condition,
+        )  # fmt: skip
         met.update(self._no_signal_stops())
         return met
 

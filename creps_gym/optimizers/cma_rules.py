@@ -19,6 +19,7 @@ __all__ = [
     "CMAConstants",
     "cma_constants",
     "csa_step",
+    "distribution_stops",
     "expected_norm",
     "inverse_sqrt",
     "rank_weights",
@@ -177,6 +178,36 @@ def csa_step(sigma: float, path_sigma: Array, constants: CMAConstants) -> float:
     """
     ratio = float(np.linalg.norm(path_sigma)) / expected_norm(path_sigma.size)
     return sigma * math.exp(min(1.0, constants.c_sigma / constants.d_sigma * (ratio - 1.0)))
+
+
+def distribution_stops(
+    step_size: float,
+    initial_step_size: float,
+    cov: tuple[Array, Array],
+    path_cov: Array,
+    tolx: float,
+    tolupsigma: float,
+    max_condition: float,
+) -> dict[str, float]:
+    """pycma's criteria on the search distribution σ²C that are met: ``tolx`` (every σ·√C_ii and σ·|p_c|
+    below it), ``tolupsigma`` (σ/σ0 > tolupsigma·√λ_max(C)) and ``max_condition`` (cond C above it).
+
+    ``cov`` is (C's diagonal (p,), C's eigenvalues (p,) in ascending order).
+    """
+    diagonal, eigenvalues = cov
+    met: dict[str, float] = {}
+    if (
+        step_size * math.sqrt(float(diagonal.max())) < tolx
+        and step_size * float(np.abs(path_cov).max()) < tolx
+    ):
+        met["tolx"] = step_size * math.sqrt(float(diagonal.max()))
+    growth = step_size / initial_step_size
+    if growth > tolupsigma * math.sqrt(float(eigenvalues[-1])):
+        met["tolupsigma"] = growth
+    condition = float(eigenvalues[-1] / max(eigenvalues[0], 1e-300))
+    if condition > max_condition:
+        met["max_condition"] = condition
+    return met
 
 
 def stagnation_window(n_params: int, n_samples: int, configured: int | None) -> int:

@@ -7,6 +7,9 @@ Evolutionary Strategies", IJCAI 2017; the equation tags (C1)–(C4') are those o
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -17,6 +20,7 @@ from creps_gym.optimizers.policies import weighted_ml_fit
 __all__ = [
     "MIN_BANDWIDTH",
     "baseline_features",
+    "check_local_baseline",
     "coefficient_shift",
     "context_advantages",
     "contextual_mean",
@@ -114,6 +118,19 @@ def context_advantages(
         ]
         advantages = advantages / np.sqrt(np.maximum(variance[-n:], 0.01 * squares.mean()))
     return advantages, explained
+
+
+def check_local_baseline(bandwidth: float, polynomial_options: Mapping[str, tuple[Any, Any]]) -> None:
+    """Raise ``ValueError`` unless ``bandwidth`` is 0 (the polynomial V, C1) or >= :data:`MIN_BANDWIDTH` (the
+    local V, C1''), and, for a local V, every option of the polynomial fit (name -> (value, default)) keeps
+    its default: the local V ignores them, so another value would be silently without effect."""
+    if 0.0 < bandwidth < MIN_BANDWIDTH:
+        raise ValueError(f"baseline_bandwidth: expected 0 or >= {MIN_BANDWIDTH}, got {bandwidth}")
+    names = ", ".join(polynomial_options)
+    given = tuple(value for value, _ in polynomial_options.values())
+    expected = tuple(default for _, default in polynomial_options.values())
+    if bandwidth > 0.0 and given != expected:
+        raise ValueError(f"{names}: expected {expected} with baseline_bandwidth > 0, got {given}")
 
 
 def local_advantages(

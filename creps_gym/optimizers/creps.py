@@ -32,6 +32,7 @@ from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import (
     LinearGaussianPolicy,
     PolicyAccess,
+    check_option_names,
     initial_coefficients,
     initial_covariance,
     spd_factor,
@@ -172,10 +173,7 @@ class CREPS(PolicyAccess, ContextualOptimizer):
     config_class: ClassVar[type[CREPSConfig]] = CREPSConfig
 
     def __init__(self, n_params: int, n_context_dims: int, **options: Any) -> None:
-        valid = {f.name for f in fields(self.config_class) if f.init} - {"n_params", "n_context_dims"}
-        unknown = set(options) - valid
-        if unknown:
-            raise TypeError(f"options: expected names in {sorted(valid)}, got unknown {sorted(unknown)}")
+        check_option_names(self.config_class, options)
         self._init_from_config(self.config_class(n_params=n_params, n_context_dims=n_context_dims, **options))
 
     @classmethod

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import fields
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,7 @@ from creps_gym.optimizers.features import FeatureMap
 __all__ = [
     "LinearGaussianPolicy",
     "PolicyAccess",
+    "check_option_names",
     "initial_coefficients",
     "initial_covariance",
     "spd_factor",
@@ -85,6 +87,15 @@ def weighted_ml_fit(
     coefficients[others] = slopes
     coefficients[constant_column] = mean_params - centre @ slopes
     return coefficients
+
+
+def check_option_names(config_class: type, options: Mapping[str, Any]) -> None:
+    """Raise ``TypeError`` naming the valid options when ``options`` has a name that is not an init field of
+    the dataclass ``config_class`` (other than ``n_params`` and ``n_context_dims``)."""
+    valid = {f.name for f in fields(config_class) if f.init} - {"n_params", "n_context_dims"}
+    unknown = set(options) - valid
+    if unknown:
+        raise TypeError(f"options: expected names in {sorted(valid)}, got unknown {sorted(unknown)}")
 
 
 def spd_factor(cov: Array, floor: float = 1e-12) -> tuple[Array, Array, bool]:

@@ -12,7 +12,7 @@ import pytest
 from creps_gym.envs.evaluation import contextual_model
 from creps_gym.optimizers import CCMAES, CREPSCMA, make_optimizer
 from creps_gym.optimizers.ccmaes import recommended_batch_size
-from creps_gym.optimizers.cma_rules import cma_constants, inverse_sqrt, rank_weights
+from creps_gym.optimizers.cma_rules import cma_constants, distribution_stops, inverse_sqrt, rank_weights
 from creps_gym.optimizers.contextual import (
     coefficient_shift,
     context_advantages,
@@ -584,6 +584,25 @@ def test_contextual_cma_es_stops_on_tolx_and_tolupsigma():
     optimizer = CCMAES(3, 1, initial_cov=1.0, seed=0, tolupsigma=10.0, restarts=0)
     _drive(optimizer, lambda s, th, rng: th[:, 0], 12, 20)
     assert "tolupsigma" in optimizer.stop()
+
+
+def test_distribution_stops_apply_each_threshold_at_its_boundary():
+    diagonal, eigenvalues, path_cov = np.array([1.0, 4.0]), np.array([0.5, 4.0]), np.array([0.0, 1e-3])
+    limits = {"tolx": 1e-11, "tolupsigma": 1e20, "max_condition": 1e14}
+
+    def stops(step_size: float, **overrides: float) -> dict[str, float]:
+        options = {**limits, **overrides}
+        return distribution_stops(step_size, 1.0, (diagonal, eigenvalues), path_cov, **options)
+
+    assert stops(1.0) == {}
+    # tolx: the largest σ·√C_ii (2σ) and the largest σ·|p_c| (1e-3·σ) must both fall below it.
+    assert stops(1e-3, tolx=2e-3) == {} and stops(1e-3, tolx=2.1e-3) == {"tolx": 2e-3}
+    path_cov[1] = 10.0  # σ·|p_c| = 1e-2: the mean still moves
+    assert stops(1e-3, tolx=2.1e-3) == {}
+    # tolupsigma: σ/σ0 = 10 against tolupsigma·√λ_max = 2·tolupsigma.
+    assert stops(10.0, tolupsigma=5.0) == {} and stops(10.0, tolupsigma=4.9) == {"tolupsigma": 10.0}
+    # max_condition: λ_max/λ_min = 8.
+    assert stops(1.0, max_condition=8.0) == {} and stops(1.0, max_condition=7.9) == {"max_condition": 8.0}
 
 
 def test_the_runner_and_cli_take_the_recommended_batch_size_when_none_is_given(tmp_path):

@@ -624,18 +624,23 @@ def test_ccmaes_signal_table_sets_each_signal_beside_the_default_and_counts_the_
     cells = {
         ("Sphere", 1, "c-cma-es"): runs(400, 600),
         ("Sphere", 1, "c-cma-es-coef"): runs(300, 500),
-        ("Sphere", 1, "c-cma-es-rec"): runs(200, 200, samples=24),
-        ("Sphere", 1, "c-cma-es-rec-coef"): runs(None, None, samples=24),
+        ("Sphere", 1, "c-cma-es-rec"): runs(None, 300, samples=24),
+        ("Sphere", 1, "c-cma-es-rec-coef"): runs(200, 200, samples=24),
+        ("Sphere", 3, "c-cma-es"): runs(700, 700),
+        ("Sphere", 3, "c-cma-es-coef"): runs(700, 700),
         ("Rosenbrock", 1, "c-cma-es"): runs(None, None),
         ("Rosenbrock", 1, "c-cma-es-coef"): runs(None, None),
     }
-    text = report.signal_table(cells, [("Sphere", 1), ("Rosenbrock", 1)], 1000, 2)
-    assert "| Sphere | 1 | 500 (2/2) | 400 (2/2) | 200 (2/2), N = 24 | >1,000 (0/2), N = 24 |" in text
+    rows = [("Sphere", 1), ("Sphere", 3), ("Rosenbrock", 1)]
+    text = report.signal_table(cells, rows, 1000, 2)
+    assert "| Sphere | 1 | 500 (2/2) | 400 (2/2) | >1,000 (1/2), N = 24 | 200 (2/2), N = 24 |" in text
     assert "| Rosenbrock | 1 | >1,000 (0/2) | >1,000 (0/2) | – | – |" in text
-    # Sphere at N = 50 is lower, at the recommended N higher; Rosenbrock never got there, and has no
-    # recommended-N runs: 1 of 2 pairs compared.
-    assert "The coefficients' median is lower in 1 of the 2 (cell, batch size) pairs" in text
-    assert "**Partial: runs cached of 2 seeds: c-cma-es-rec at Rosenbrock, z = 1: 0;" in text
+    # Lower at both Sphere z = 1 batch sizes (a missed median counts as infinite), a tie at z = 3, and no
+    # pair where neither got there: 2 of 3 pairs compared.
+    assert "The coefficients' median is lower in 2 of the 3 (cell, batch size) pairs" in text
+    assert "**Partial: runs cached of 2 seeds: c-cma-es-rec at Sphere, z = 3: 0;" in text
+    missed = report.signal_table({k: v for k, v in cells.items() if k[0] == "Rosenbrock"}, rows[2:], 1000, 2)
+    assert "No (cell, batch size) pair has a median that reached the target yet." in missed
 
 
 def test_ccmaes_cells_count_a_run_that_ended_early_under_a_smaller_budget() -> None:

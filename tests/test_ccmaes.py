@@ -592,7 +592,7 @@ def test_distribution_stops_apply_each_threshold_at_its_boundary():
 
     def stops(step_size: float, **overrides: float) -> dict[str, float]:
         options = {**limits, **overrides}
-        return distribution_stops(step_size, 1.0, (diagonal, eigenvalues), path_cov, **options)
+        return distribution_stops(step_size, 1.0, diagonal, eigenvalues, path_cov, **options)
 
     assert stops(1.0) == {}
     # tolx: the largest σ·√C_ii (2σ) and the largest σ·|p_c| (1e-3·σ) must both fall below it.

@@ -259,10 +259,9 @@ def signal_table(cells: Cells, rows: Sequence[tuple[str, int]], budget: int, see
     missing = []
     for name, z in rows:
         texts = []
-        for default, coefficients in SIGNAL_PAIRS:
+        for pair, (default, coefficients) in enumerate(SIGNAL_PAIRS):  # pair 1: the recommended N
             runs = [cells.get((name, z, column), []) for column in (default, coefficients)]
-            texts += [_episodes_text(r, budget) + (_batch_text(r) if "rec" in c else "") for r, c in
-                      zip(runs, (default, coefficients), strict=True)]  # fmt: skip
+            texts += [_episodes_text(r, budget) + (_batch_text(r) if pair == 1 else "") for r in runs]
             medians = [median_episodes(r) for r in runs]
             if None not in medians and not all(math.isinf(m) for m in medians):
                 compared += 1
@@ -270,8 +269,14 @@ def signal_table(cells: Cells, rows: Sequence[tuple[str, int]], budget: int, see
             missing += [f"{c} at {name}, z = {z}: {len(r)}" for c, r in
                         zip((default, coefficients), runs, strict=True) if len(r) < seeds]  # fmt: skip
         lines.append(f"| {name} | {z} | " + " | ".join(texts) + " |")
-    lines += ["", f"The coefficients' median is lower in {lower} of the {compared} (cell, batch size) pairs "
-              "where either reached the target."]  # fmt: skip
+    lines.append("")
+    if compared:
+        lines.append(
+            f"The coefficients' median is lower in {lower} of the {compared} (cell, batch size) pairs where "
+            "either reached the target."
+        )
+    else:
+        lines.append("No (cell, batch size) pair has a median that reached the target yet.")
     if missing:
         lines += ["", _partial_line(missing, seeds)]
     return "\n".join(lines) + "\n"

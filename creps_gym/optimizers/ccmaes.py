@@ -82,7 +82,7 @@ __all__ = [
 
 Array = NDArray[np.float64]
 #: The options of C1's polynomial fit, which the local baseline (C1'') ignores: they must keep their defaults.
-UNUSED = ("standardise_advantages", "baseline_loss", "baseline_degree", "baseline_ridge")
+UNUSED_BY_LOCAL_BASELINE = ("standardise_advantages", "baseline_loss", "baseline_degree", "baseline_ridge")
 SIGNALS = ("coefficients", "mean")
 
 recommended_batch_size = PolicyAccess.recommended_batch_size
@@ -197,7 +197,8 @@ class CCMAESConfig:
         if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
             raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
         defaults = {option.name: option.default for option in fields(self)}
-        check_local_baseline(self.baseline_bandwidth, {n: (getattr(self, n), defaults[n]) for n in UNUSED})
+        unused = {name: (getattr(self, name), defaults[name]) for name in UNUSED_BY_LOCAL_BASELINE}
+        check_local_baseline(self.baseline_bandwidth, unused)
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
         object.__setattr__(self, "seed", check_seed(self.seed))
@@ -358,7 +359,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             return {}
         config = self.config
         met: dict[str, Any] = distribution_stops(
-            self.step_size, config.initial_step_size, (np.diag(self.policy.cov), self._eigen()[0]),
+            self.step_size, config.initial_step_size, np.diag(self.policy.cov), self._eigen()[0],
             self.path_cov, config.tolx, config.tolupsigma, config.max_condition,
         )  # fmt: skip
         met.update(self._no_signal_stops())

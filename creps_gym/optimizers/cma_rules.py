@@ -183,24 +183,34 @@ def csa_step(sigma: float, path_sigma: Array, constants: CMAConstants) -> float:
 def distribution_stops(
     step_size: float,
     initial_step_size: float,
-    cov: tuple[Array, Array],
+    diagonal: Array,
+    eigenvalues: Array,
     path_cov: Array,
     tolx: float,
     tolupsigma: float,
     max_condition: float,
 ) -> dict[str, float]:
-    """pycma's criteria on the search distribution σ²C that are met: ``tolx`` (every σ·√C_ii and σ·|p_c|
-    below it), ``tolupsigma`` (σ/σ0 > tolupsigma·√λ_max(C)) and ``max_condition`` (cond C above it).
+    """pycma's criteria on the search distribution σ²C that are met.
 
-    ``cov`` is (C's diagonal (p,), C's eigenvalues (p,) in ascending order).
+    Parameters
+    ----------
+    step_size, initial_step_size : float        σ and σ0.
+    diagonal : ndarray, shape (p,)              C's diagonal.
+    eigenvalues : ndarray, shape (p,)           C's eigenvalues, ascending.
+    path_cov : ndarray, shape (p,)              the evolution path p_c.
+    tolx, tolupsigma, max_condition : float     the thresholds.
+
+    Returns
+    -------
+    dict
+        Each criterion met, with its value: ``"tolx"`` (the largest σ·√C_ii, when it and every σ·|p_c,i| are
+        below ``tolx``), ``"tolupsigma"`` (σ/σ0, when it exceeds tolupsigma·√λ_max(C)) and
+        ``"max_condition"`` (λ_max/λ_min, when it exceeds ``max_condition``).
     """
-    diagonal, eigenvalues = cov
     met: dict[str, float] = {}
-    if (
-        step_size * math.sqrt(float(diagonal.max())) < tolx
-        and step_size * float(np.abs(path_cov).max()) < tolx
-    ):
-        met["tolx"] = step_size * math.sqrt(float(diagonal.max()))
+    largest_std = step_size * math.sqrt(float(diagonal.max()))
+    if largest_std < tolx and step_size * float(np.abs(path_cov).max()) < tolx:
+        met["tolx"] = largest_std
     growth = step_size / initial_step_size
     if growth > tolupsigma * math.sqrt(float(eigenvalues[-1])):
         met["tolupsigma"] = growth

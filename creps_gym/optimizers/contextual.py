@@ -121,9 +121,10 @@ def context_advantages(
 
 
 def check_local_baseline(bandwidth: float, polynomial_options: Mapping[str, tuple[Any, Any]]) -> None:
-    """Raise ``ValueError`` unless ``bandwidth`` is 0 (the polynomial V, C1) or >= :data:`MIN_BANDWIDTH` (the
-    local V, C1''), and, for a local V, every option of the polynomial fit (name -> (value, default)) keeps
-    its default: the local V ignores them, so another value would be silently without effect."""
+    """Raise ``ValueError`` for a ``bandwidth`` in (0, :data:`MIN_BANDWIDTH`), and for a local V (C1'',
+    ``bandwidth`` > 0) when an option of the polynomial fit (name -> (value, default)) is not at its default:
+    the local V ignores them, so another value would silently have no effect. The caller checks that
+    ``bandwidth`` is finite and >= 0."""
     if 0.0 < bandwidth < MIN_BANDWIDTH:
         raise ValueError(f"baseline_bandwidth: expected 0 or >= {MIN_BANDWIDTH}, got {bandwidth}")
     names = ", ".join(polynomial_options)

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import signal
 import subprocess
 import time
-from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
@@ -96,13 +94,14 @@ def test_a_format_2_run_directory_resumes_with_its_own_context_stream(tmp_path):
     assert directory.config().context_draws == "reset"  # its config.json predates the field
     expected = History.from_json(golden / "expected_history.json")  # the old code's uninterrupted run
     resumed = resume(out)
-    recorded = json.loads((golden / "run" / "versions.json").read_text())
-    if all(recorded[name] == version(name) for name in ("numpy", "scipy")):
-        assert resumed.equals(expected) and len(expected) == 9
-    else:  # other numpy/scipy versions (CI's lowest-versions run): the same stream, equal up to rounding
-        assert len(resumed) == len(expected) == 9
-        for name in ("mean_return", "eval_return"):
-            np.testing.assert_allclose(resumed.column(name), expected.column(name), rtol=1e-9)
+    # Equal up to rounding, not bit for bit: the golden run was written on another machine, and OpenBLAS
+    # picks its kernels by CPU (and CI's lowest-versions run has other numpy/scipy versions), so the last bits
+    # may differ. Another context stream would differ in the first digit. Bit-identical resumes on one
+    # machine are the other tests' subject.
+    assert len(resumed) == len(expected) == 9
+    assert resumed.column("episodes").tolist() == expected.column("episodes").tolist()
+    for name in ("mean_return", "eval_return"):
+        np.testing.assert_allclose(resumed.column(name), expected.column(name), rtol=1e-9)
     state = directory.load_checkpoint()[0]
     assert "history" not in state and state["iteration"] == 9  # the final checkpoint has today's format
     assert RunDir.open(out).read_history().equals(resumed)

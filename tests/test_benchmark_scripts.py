@@ -643,6 +643,56 @@ def test_ccmaes_signal_table_sets_each_signal_beside_the_default_and_counts_the_
     assert "No (cell, batch size) pair has a median that reached the target yet." in missed
 
 
+def test_ccmaes_bound_table_sets_faster_step_size_variants_against_both_targets() -> None:
+    from benchmarks.ccmaes import report
+
+    def runs(*hits: int | None, samples: int = 50, dim: int = 15) -> list[dict]:
+        return [{"hit": h, "spec": {"seed": i, "samples": samples, "dim": dim}} for i, h in enumerate(hits)]
+
+    cells = {
+        ("Sphere", 1, "cma-fixed"): runs(1000, 1000),
+        ("Sphere", 1, "c-cma-es-rec"): runs(2500, 2600, samples=24),  # above the bound 2 × 1,000
+        ("Rosenbrock", 3, "c-cma-es"): runs(30_000, 32_000),
+        ("Sphere", 1, "c-cma-es-rec-d08"): runs(1900, 1900, samples=24),
+        ("Rosenbrock", 3, "c-cma-es-d08"): runs(30_000, None),  # a seed missed: fewer than 95 %
+        ("Sphere", 1, "c-cma-es-rec-coef"): runs(1800, 2000, samples=24),
+        ("Rosenbrock", 3, "c-cma-es-coef"): runs(20_000, 22_000),
+    }
+    text = report.bound_table(cells, 100_000, 2)
+    assert "| default | defaults | 2,550 (2/2), N = 24 | 31,000 (2/2) |" in text
+    assert "| d_σ = 0.8 | `d_sigma=0.8` | 1,900 (2/2), N = 24 | >100,000 (1/2) |" in text
+    assert "| target | | ≤ 2,000 (2 × pycma) | ≤ 39,000, ≥ 2/2 seeds |" in text
+    assert "Variants that meet both targets: coefficients." in text
+    assert "pycma on one context" not in text  # no yardstick runs yet
+    assert "**Partial: runs cached of 2 seeds: no sample reuse, Sphere z = 1: 0;" in text
+    cells[("Sphere", 1, "cma-fixed-2p")] = runs(2800, 3000, dim=30)
+    cells[("Sphere", 1, "cma-fixed-batch-2p")] = runs(4400, 4400, samples=24, dim=30)
+    text = report.bound_table(cells, 100_000, 2)
+    assert (
+        "with 2p = 30 parameters (as many as the affine mean's coefficients at z = 1), from a mean "
+        "U[-5, 5]^30 with σ0 = 1: 2,900 (2/2) episodes at its default population, N = 14, and 4,400 (2/2) "
+        "at C-CMA-ES's recommended N = 24." in text
+    )
+
+
+def test_ccmaes_restricted_columns_run_only_in_their_cells_with_the_headline_seeds() -> None:
+    from benchmarks.ccmaes import report, run
+
+    names = [c.name for c in report.BOUND_COLUMNS + report.YARDSTICK] + ["c-cma-es-n12", "c-cma-es-bare"]
+    args = run.parse_args(["--full", "--columns", *names, "--seeds", "1", "--headline-seeds", "2"])
+    cells = {}
+    for column, spec in run.column_specs(args):
+        cells.setdefault(column, set()).add((spec.function, spec.dim, spec.context_dim, spec.samples))
+        assert spec.seed < 2
+    assert cells["c-cma-es-rec-d08"] == {("Sphere", 15, 1, 24)}
+    assert cells["c-cma-es-d08"] == {("Rosenbrock", 15, 3, 50)}
+    assert cells["cma-fixed-2p"] == {("Sphere", 30, 1, 50)}  # pycma's own population; N = 50 in the key
+    assert cells["cma-fixed-batch-2p"] == {("Sphere", 30, 1, 24)}  # p's recommended N, on 2p parameters
+    assert cells["c-cma-es-n12"] == {("Sphere", 15, 1, 12)}
+    assert cells["c-cma-es-bare"] == {("Rosenbrock", 15, 1, 50), ("Rosenbrock", 15, 3, 50)}
+    assert len(run.column_specs(args)) == 2 * (len(cells) + 1)  # 2 seeds each; the bare column in 2 cells
+
+
 def test_ccmaes_cells_count_a_run_that_ended_early_under_a_smaller_budget() -> None:
     from benchmarks.ccmaes import run
 

@@ -26,6 +26,7 @@ __all__ = [
     "REMEDY_FUNCTION",
     "TARGETS",
     "Column",
+    "bound_table",
     "csa_text",
     "headline_table",
     "median_episodes",
@@ -44,7 +45,9 @@ Cells = Mapping[tuple[str, int, str], Sequence[dict[str, Any]]]
 class Column:
     """A method at a batch size: ``batch`` is N, ``"recommended"`` (the optimiser's
     ``recommended_batch_size(p, z)``) or ``"default"`` (pycma's own population, 4 + floor(3 ln p));
-    ``options`` are further options of the optimiser (see :attr:`benchmarks.study_tools.RunSpec.options`)."""
+    ``options`` are further options of the optimiser (see :attr:`benchmarks.study_tools.RunSpec.options`).
+    ``functions`` and ``context_dims`` restrict the column to those cells (empty: every cell); a restricted
+    column runs with the headline seeds. ``dim_factor`` multiplies p (the recommended N stays p's)."""
 
     name: str
     method: str
@@ -52,6 +55,9 @@ class Column:
     label: str
     colour: str
     options: tuple[tuple[str, Any], ...] = ()
+    functions: tuple[str, ...] = ()
+    context_dims: tuple[int, ...] = ()
+    dim_factor: int = 1
 
 
 COLUMNS = (
@@ -64,30 +70,30 @@ COLUMNS = (
 )
 #: Issue 12's remedies for Rosenbrock at z = 3, as variants of C-CMA-ES at N = 50: the columns of the
 #: remedies table, in its order (``c-cma-es``, the default, has both remedies: its runs are the COLUMNS').
-REMEDIES = (
-    Column("c-cma-es-bare", "c-cma-es", 50, "neither", "0.4", (("baseline_batches", 1), ("restarts", 0))),
-    Column("c-cma-es-reuse", "c-cma-es", 50, "sample reuse only", "0.4", (("restarts", 0),)),
-    Column("c-cma-es-restarts", "c-cma-es", 50, "restarts only", "0.4", (("baseline_batches", 1),)),
-    Column("c-cma-es", "c-cma-es", 50, "both (the default)", "tab:red"),
-    Column(
-        "c-cma-es-std",
-        "c-cma-es",
-        50,
-        "default, standardised advantages",
-        "0.4",
-        (("standardise_advantages", True),),
-    ),
-    Column("c-cma-es-passive", "c-cma-es", 50, "default, active = False", "0.4", (("active", False),)),
-    Column("c-cma-es-cubic", "c-cma-es", 50, "default, cubic baseline", "0.4", (("baseline_degree", 3),)),
-)
 #: The function of the remedies table.
 REMEDY_FUNCTION = "Rosenbrock"
+
+
+def _remedy(name: str, label: str, options: tuple[tuple[str, Any], ...]) -> Column:
+    return Column(name, "c-cma-es", 50, label, "0.4", options, functions=(REMEDY_FUNCTION,))
+
+
+REMEDIES = (
+    _remedy("c-cma-es-bare", "neither", (("baseline_batches", 1), ("restarts", 0))),
+    _remedy("c-cma-es-reuse", "sample reuse only", (("restarts", 0),)),
+    _remedy("c-cma-es-restarts", "restarts only", (("baseline_batches", 1),)),
+    Column("c-cma-es", "c-cma-es", 50, "both (the default)", "tab:red"),
+    _remedy("c-cma-es-std", "default, standardised advantages", (("standardise_advantages", True),)),
+    _remedy("c-cma-es-passive", "default, active = False", (("active", False),)),
+    _remedy("c-cma-es-cubic", "default, cubic baseline", (("baseline_degree", 3),)),
+)
+SWEEP_FUNCTION = "Sphere"
 #: C-CMA-ES at fixed batch sizes around its recommended one (24 at p = 15, z = 1), on :data:`SWEEP_FUNCTION`
 #: at z = 1 with the headline seeds: whether any N meets the recommended-N target there.
 BATCH_SWEEP = tuple(
-    Column(f"c-cma-es-n{n}", "c-cma-es", n, f"N = {n}", "0.4") for n in (12, 16, 20, 24, 32, 40)
+    Column(f"c-cma-es-n{n}", "c-cma-es", n, f"N = {n}", "0.4", functions=(SWEEP_FUNCTION,), context_dims=(1,))
+    for n in (12, 16, 20, 24, 32, 40)
 )
-SWEEP_FUNCTION = "Sphere"
 #: C-CMA-ES with the coefficients' step-size signal (C4') instead of the default (C4), at N = 50 and at the
 #: recommended N, in every cell with the headline seeds; the default's runs are those of :data:`COLUMNS`.
 COEFFICIENTS = (("step_size_signal", "coefficients"),)
@@ -99,6 +105,45 @@ SIGNAL_COLUMNS = (
 )
 #: (default column, coefficients column) of :func:`signal_table`, per batch size.
 SIGNAL_PAIRS = (("c-cma-es", "c-cma-es-coef"), ("c-cma-es-rec", "c-cma-es-rec-coef"))
+#: The two cells whose targets pull C-CMA-ES's step-size control apart: the Sphere at z = 1 at the
+#: recommended N (the bound of twice pycma's episodes) and Rosenbrock at z = 3 at N = 50 (≥ 95 % of the
+#: seeds). Each row is a variant with its column in each cell; columns that other tables run reuse their runs.
+BOUND_CELLS = (("Sphere", 1, "recommended"), ("Rosenbrock", 3, 50))
+NO_REUSE = (("baseline_batches", 1),)
+FAST_DAMPING = (("d_sigma", 0.8),)
+BOUND_ROWS = (
+    ("default", (), ("c-cma-es-rec", "c-cma-es")),
+    ("no sample reuse", NO_REUSE, ("c-cma-es-rec-bb1", "c-cma-es-restarts")),
+    ("coefficients", COEFFICIENTS, ("c-cma-es-rec-coef", "c-cma-es-coef")),
+    ("coefficients, no reuse", NO_REUSE + COEFFICIENTS, ("c-cma-es-rec-coef-bb1", "c-cma-es-coef-bb1")),
+    ("d_σ = 0.8", FAST_DAMPING, ("c-cma-es-rec-d08", "c-cma-es-d08")),
+    (
+        "coefficients, no reuse, d_σ = 0.8",
+        NO_REUSE + FAST_DAMPING + COEFFICIENTS,
+        ("c-cma-es-rec-coef-bb1-d08", "c-cma-es-coef-bb1-d08"),
+    ),
+)
+#: pycma on one context of a Sphere with 2p parameters, as many as C-CMA-ES's affine mean has coefficients
+#: at z = 1, at its default population and at C-CMA-ES's recommended N: what learning 2p numbers costs CMA-ES.
+YARDSTICK = (
+    Column("cma-fixed-2p", "cma-fixed", "default", "pycma, 2p, default N", "0.25", (), ("Sphere",), (1,), 2),
+    Column("cma-fixed-batch-2p", "cma-fixed-batch", "recommended", "pycma, 2p, recommended N", "0.55", (),
+           ("Sphere",), (1,), 2),
+)  # fmt: skip
+
+
+def _bound_columns() -> tuple[Column, ...]:
+    """The columns of :data:`BOUND_ROWS` that no other table runs, each restricted to its cell."""
+    elsewhere = {c.name for c in COLUMNS + REMEDIES + SIGNAL_COLUMNS}
+    columns = []
+    for label, options, names in BOUND_ROWS:
+        for (function, z, batch), name in zip(BOUND_CELLS, names, strict=True):
+            if name not in elsewhere:
+                columns.append(Column(name, "c-cma-es", batch, label, "0.4", options, (function,), (z,)))
+    return tuple(columns)
+
+
+BOUND_COLUMNS = _bound_columns()
 #: The columns of the headline table (run with the headline seeds).
 HEADLINE = ("creps-cma-old", "c-cma-es", "c-cma-es-rec", "cma-fixed")
 #: Issue 12's targets for C-CMA-ES at N = 50: (function, z) -> (most episodes, least fraction of seeds).
@@ -277,6 +322,46 @@ def signal_table(cells: Cells, rows: Sequence[tuple[str, int]], budget: int, see
         )
     else:
         lines.append("No (cell, batch size) pair has a median that reached the target yet.")
+    if missing:
+        lines += ["", _partial_line(missing, seeds)]
+    return "\n".join(lines) + "\n"
+
+
+def bound_table(cells: Cells, budget: int, seeds: int) -> str:
+    """:data:`BOUND_ROWS` in the two :data:`BOUND_CELLS` against their targets, the variants that meet both,
+    the :data:`YARDSTICK` line, and a line naming the cells with fewer than ``seeds`` runs cached."""
+    reference = median_episodes(cells.get(("Sphere", 1, "cma-fixed"), []))
+    bound = None if reference is None or math.isinf(reference) else RECOMMENDED_FACTOR * reference
+    most, fraction = TARGETS[BOUND_CELLS[1][:2]]
+    targets = [(bound, 0.0), (most, fraction)]
+    lines = [
+        "| C-CMA-ES | options | Sphere, z = 1, recommended N | Rosenbrock, z = 3, N = 50 |",
+        "|---" * 4 + "|",
+    ]
+    meeting, missing = [], []
+    for label, options, names in BOUND_ROWS:
+        runs = [cells.get((f, z, name), []) for (f, z, _), name in zip(BOUND_CELLS, names, strict=True)]
+        texts = [_episodes_text(runs[0], budget) + _batch_text(runs[0]), _episodes_text(runs[1], budget)]
+        shown = ", ".join(f"`{k}={v}`" for k, v in options) or "defaults"
+        lines.append(f"| {label} | {shown} | " + " | ".join(texts) + " |")
+        met = [t[0] is not None and target_met(r, *t) == "met" for r, t in zip(runs, targets, strict=True)]
+        meeting += [label] if all(met) else []
+        missing += [f"{label}, {f} z = {z}: {len(r)}" for (f, z, _), r in zip(BOUND_CELLS, runs, strict=True)
+                    if len(r) < seeds]  # fmt: skip
+    sphere_target = "–" if bound is None else f"≤ {bound:,.0f} (2 × pycma)"
+    lines.append(f"| target | | {sphere_target} | {_target_text(most, fraction, seeds)} |")
+    lines += ["", f"Variants that meet both targets: {', '.join(meeting) or 'none'}."]
+    yardstick = [cells.get(("Sphere", 1, c.name), []) for c in YARDSTICK]
+    if all(yardstick):
+        dim = yardstick[0][0]["spec"]["dim"]
+        lines += [
+            "",
+            f"pycma on one context of a Sphere with 2p = {dim} parameters (as many as the affine mean's "
+            f"coefficients at z = 1), from a mean U[-5, 5]^{dim} with σ0 = 1: "
+            f"{_episodes_text(yardstick[0], budget)} episodes at its default population, "
+            f"N = {4 + int(3 * math.log(dim))}, and {_episodes_text(yardstick[1], budget)} at C-CMA-ES's "
+            f"recommended{_batch_text(yardstick[1])[1:]}.",
+        ]
     if missing:
         lines += ["", _partial_line(missing, seeds)]
     return "\n".join(lines) + "\n"

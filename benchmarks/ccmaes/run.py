@@ -35,13 +35,16 @@ matplotlib.use("Agg")
 from benchmarks.baselines import BASELINES
 from benchmarks.ccmaes.report import (
     BATCH_SWEEP,
+    BOUND_COLUMNS,
     COLUMNS,
     HEADLINE,
     REMEDIES,
     REMEDY_FUNCTION,
     SIGNAL_COLUMNS,
     SWEEP_FUNCTION,
+    YARDSTICK,
     Column,
+    bound_table,
     csa_text,
     headline_table,
     plot_curves,
@@ -64,10 +67,11 @@ HERE = Path(__file__).resolve().parent
 FUNCTIONS = ("Sphere", "Rosenbrock", "ShiftedRotatedElliptic")
 #: The issue's setting: N = 50 samples per iteration, 100 test contexts, mean U[-5, 5]^p with σ0 = 1.
 SAMPLES, EVAL_CONTEXTS, INITIAL = 50, 100, "uniform5"
-#: Every column: the methods', then the remedies' variants of C-CMA-ES (on Rosenbrock, headline seeds), its
-#: batch sizes (on the Sphere at z = 1, headline seeds) and step-size signals (every cell, headline seeds).
+#: Every column: the methods', then the remedies' variants of C-CMA-ES (on Rosenbrock), its batch sizes (on
+#: the Sphere at z = 1), its step-size signals (every cell), the bound table's variants (each in its cell) and
+#: pycma on the Sphere with 2p parameters (at z = 1); all but the methods' with the headline seeds.
 REMEDY_VARIANTS = tuple(c for c in REMEDIES if c.name not in {m.name for m in COLUMNS})
-ALL_COLUMNS = COLUMNS + REMEDY_VARIANTS + BATCH_SWEEP + SIGNAL_COLUMNS
+ALL_COLUMNS = COLUMNS + REMEDY_VARIANTS + BATCH_SWEEP + SIGNAL_COLUMNS + BOUND_COLUMNS + YARDSTICK
 PRESETS = {
     "quick": {"seeds": 2, "headline_seeds": 2, "budget": 100_000},
     "full": {"seeds": 5, "headline_seeds": 20, "budget": 200_000},
@@ -134,14 +138,11 @@ def column_specs(args: argparse.Namespace, log: Any = print) -> list[tuple[str, 
         if column.batch == "recommended" and recommended_batch(args.dim, 1) is None:
             log(f"skipped column {column.name!r}: creps_gym.optimizers.ccmaes has no recommended_batch_size")
             continue
-        headline = column.name in HEADLINE or column in SIGNAL_COLUMNS
+        restricted = bool(column.functions or column.context_dims)
+        headline = column.name in HEADLINE or column in SIGNAL_COLUMNS or restricted
         seeds = max(args.seeds, args.headline_seeds) if headline else args.seeds
-        functions, dims = args.functions, args.context_dims
-        if column in REMEDY_VARIANTS + BATCH_SWEEP:  # on its function only, with the headline seeds
-            only = SWEEP_FUNCTION if column in BATCH_SWEEP else REMEDY_FUNCTION
-            functions = [name for name in functions if name == only]
-            dims = [z for z in dims if z == 1] if column in BATCH_SWEEP else dims
-            seeds = max(args.seeds, args.headline_seeds)
+        functions = [f for f in args.functions if not column.functions or f in column.functions]
+        dims = [z for z in args.context_dims if not column.context_dims or z in column.context_dims]
         for name, z, seed in itertools.product(functions, dims, range(seeds)):
             pairs.append((column.name, make_spec(column, name, args.dim, z, seed, args.budget)))
     return pairs
@@ -151,12 +152,12 @@ def make_spec(column: Column, function: str, dim: int, z: int, seed: int, budget
     """The run of ``column`` in the study's setting (the ``"default"`` batch keeps N = 50 in the key:
     ``cma-fixed`` uses pycma's own population whatever ``samples`` is)."""
     if column.batch == "recommended":
-        samples = recommended_batch(dim, z)
+        samples = recommended_batch(dim, z)  # p's, also for a column with dim_factor > 1
     else:
         samples = SAMPLES if column.batch == "default" else column.batch
     return RunSpec(
         function,
-        dim,
+        dim * column.dim_factor,
         z,
         column.method,
         seed,
@@ -248,6 +249,12 @@ def extra_sections(args: argparse.Namespace, documents: list[dict]) -> list[str]
             f"## {SWEEP_FUNCTION}, z = 1: C-CMA-ES's batch size ({seeds} seed(s))",
             "",
             sweep_table(cells, args.budget, seeds),
+        ]
+    if names & {c.name for c in BOUND_COLUMNS + YARDSTICK}:
+        text += [
+            f"## Sphere at z = 1 against Rosenbrock at z = 3: faster step-size control ({seeds} seed(s))",
+            "",
+            bound_table(cells, args.budget, seeds),
         ]
     if names & {c.name for c in SIGNAL_COLUMNS}:
         rows = [(name, z) for name in args.functions for z in args.context_dims]

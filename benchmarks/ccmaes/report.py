@@ -68,8 +68,6 @@ COLUMNS = (
     Column("cma-fixed-batch", "cma-fixed-batch", 50, "pycma, 1 context, N = 50", "0.55"),
     Column("cma-fixed", "cma-fixed", "default", "pycma, 1 context, default N", "0.25"),
 )
-#: Issue 12's remedies for Rosenbrock at z = 3, as variants of C-CMA-ES at N = 50: the columns of the
-#: remedies table, in its order (``c-cma-es``, the default, has both remedies: its runs are the COLUMNS').
 #: The function of the remedies table.
 REMEDY_FUNCTION = "Rosenbrock"
 
@@ -78,6 +76,8 @@ def _remedy(name: str, label: str, options: tuple[tuple[str, Any], ...]) -> Colu
     return Column(name, "c-cma-es", 50, label, "0.4", options, functions=(REMEDY_FUNCTION,))
 
 
+#: Issue 12's remedies for Rosenbrock at z = 3, as variants of C-CMA-ES at N = 50: the columns of the
+#: remedies table, in its order (``c-cma-es``, the default, has both remedies: its runs are the COLUMNS').
 REMEDIES = (
     _remedy("c-cma-es-bare", "neither", (("baseline_batches", 1), ("restarts", 0))),
     _remedy("c-cma-es-reuse", "sample reuse only", (("restarts", 0),)),
@@ -125,11 +125,13 @@ BOUND_ROWS = (
 )
 #: pycma on one context of a Sphere with 2p parameters, as many as C-CMA-ES's affine mean has coefficients
 #: at z = 1, at its default population and at C-CMA-ES's recommended N: what learning 2p numbers costs CMA-ES.
-YARDSTICK = (
-    Column("cma-fixed-2p", "cma-fixed", "default", "pycma, 2p, default N", "0.25", (), ("Sphere",), (1,), 2),
-    Column("cma-fixed-batch-2p", "cma-fixed-batch", "recommended", "pycma, 2p, recommended N", "0.55", (),
-           ("Sphere",), (1,), 2),
-)  # fmt: skip
+YARDSTICK = tuple(
+    Column(name, method, batch, label, "0.5", functions=("Sphere",), context_dims=(1,), dim_factor=2)
+    for name, method, batch, label in (
+        ("cma-fixed-2p", "cma-fixed", "default", "pycma, 2p, default N"),
+        ("cma-fixed-batch-2p", "cma-fixed-batch", "recommended", "pycma, 2p, recommended N"),
+    )
+)
 
 
 def _bound_columns() -> tuple[Column, ...]:

@@ -269,13 +269,19 @@ def remedies_table(cells: Cells, dims: Sequence[int], budget: int, seeds: int) -
     return "\n".join(lines) + "\n"
 
 
+def _recommended_bound(cells: Cells, function: str) -> float | None:
+    """:data:`RECOMMENDED_FACTOR` × pycma's median episodes for one context on ``function`` at z = 1 (None
+    without runs, or when the median run missed)."""
+    reference = median_episodes(cells.get((function, 1, "cma-fixed"), []))
+    return None if reference is None or math.isinf(reference) else RECOMMENDED_FACTOR * reference
+
+
 def sweep_table(cells: Cells, budget: int, seeds: int) -> str:
     """:data:`BATCH_SWEEP` on :data:`SWEEP_FUNCTION` at z = 1: median episodes (seeds that got there / seeds)
     per batch size, the recommended-N target (:data:`RECOMMENDED_FACTOR` × pycma's episodes for one context at
     its default population) and the batch sizes that meet it."""
     runs = [cells.get((SWEEP_FUNCTION, 1, c.name), []) for c in BATCH_SWEEP]
-    reference = median_episodes(cells.get((SWEEP_FUNCTION, 1, "cma-fixed"), []))
-    bound = None if reference is None or math.isinf(reference) else RECOMMENDED_FACTOR * reference
+    bound = _recommended_bound(cells, SWEEP_FUNCTION)
     lines = [
         "| " + " | ".join(c.label for c in BATCH_SWEEP) + " | target |",
         "|---" * (len(BATCH_SWEEP) + 1) + "|",
@@ -332,8 +338,7 @@ def signal_table(cells: Cells, rows: Sequence[tuple[str, int]], budget: int, see
 def bound_table(cells: Cells, budget: int, seeds: int) -> str:
     """:data:`BOUND_ROWS` in the two :data:`BOUND_CELLS` against their targets, the variants that meet both,
     the :data:`YARDSTICK` line, and a line naming the cells with fewer than ``seeds`` runs cached."""
-    reference = median_episodes(cells.get(("Sphere", 1, "cma-fixed"), []))
-    bound = None if reference is None or math.isinf(reference) else RECOMMENDED_FACTOR * reference
+    bound = _recommended_bound(cells, BOUND_CELLS[0][0])
     most, fraction = TARGETS[BOUND_CELLS[1][:2]]
     targets = [(bound, 0.0), (most, fraction)]
     lines = [
@@ -353,15 +358,17 @@ def bound_table(cells: Cells, budget: int, seeds: int) -> str:
     sphere_target = "–" if bound is None else f"≤ {bound:,.0f} (2 × pycma)"
     lines.append(f"| target | | {sphere_target} | {_target_text(most, fraction, seeds)} |")
     lines += ["", f"Variants that meet both targets: {', '.join(meeting) or 'none'}."]
-    yardstick = [cells.get(("Sphere", 1, c.name), []) for c in YARDSTICK]
+    yardstick = [cells.get((BOUND_CELLS[0][0], 1, c.name), []) for c in YARDSTICK]
     if all(yardstick):
+        from creps_gym.optimizers.ccmaes import recommended_batch_size  # at z = 0: CMA-ES's population
+
         dim = yardstick[0][0]["spec"]["dim"]
         lines += [
             "",
             f"pycma on one context of a Sphere with 2p = {dim} parameters (as many as the affine mean's "
             f"coefficients at z = 1), from a mean U[-5, 5]^{dim} with σ0 = 1: "
             f"{_episodes_text(yardstick[0], budget)} episodes at its default population, "
-            f"N = {4 + int(3 * math.log(dim))}, and {_episodes_text(yardstick[1], budget)} at C-CMA-ES's "
+            f"N = {recommended_batch_size(dim, 0)}, and {_episodes_text(yardstick[1], budget)} at C-CMA-ES's "
             f"recommended{_batch_text(yardstick[1])[1:]}.",
         ]
     if missing:

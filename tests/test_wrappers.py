@@ -15,6 +15,7 @@ from helpers import EXTRAS, make_or_skip, python_blocks
 import creps_gym
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv, initial_distribution
 from creps_gym.wrappers import (
+    BetaContexts,
     FixedContexts,
     FixedContextsVector,
     GaussianContexts,
@@ -72,6 +73,27 @@ def test_gaussian_sampler_moments_and_clipping():
     assert diag.std() == pytest.approx(0.5, rel=0.03)
 
 
+def test_beta_sampler_weights_the_ends_of_the_box_as_the_arcsine_law_says():
+    arcsine = BetaContexts([3.0, -1.0], [12.0, 1.0], 0.5)
+    draws = arcsine(np.random.default_rng(0), 200_000)
+    assert draws.shape == (200_000, 2)
+    assert (draws >= [3.0, -1.0]).all() and (draws <= [12.0, 1.0]).all()
+    u = (draws - [3.0, -1.0]) / [9.0, 2.0]
+    # Arcsine CDF (2/π)·asin(√u): a third of the draws in each outer quarter, 15.1 % in each outer 1/18.
+    for side in (u, 1.0 - u):
+        np.testing.assert_allclose((side < 0.25).mean(axis=0), 1 / 3, atol=0.005)
+        np.testing.assert_allclose(
+            (side < 1 / 18).mean(axis=0), 2 / np.pi * np.arcsin(np.sqrt(1 / 18)), atol=0.004
+        )
+    skewed = BetaContexts([0.0], [1.0], 2.0, 6.0)(np.random.default_rng(1), 100_000)
+    assert skewed.mean() == pytest.approx(0.25, abs=0.003)  # a / (a + b)
+    assert skewed.var() == pytest.approx(2 * 6 / (8**2 * 9), rel=0.03)  # ab / ((a + b)²(a + b + 1))
+    np.testing.assert_array_equal(draws, arcsine(np.random.default_rng(0), 200_000))
+    assert "a=0.5, b=0.5" in repr(arcsine)
+    with pytest.raises(TypeError, match="a: expected a real number"):
+        BetaContexts([0.0], [1.0], "0.5")
+
+
 @pytest.mark.parametrize(
     ("make", "message"),
     [
@@ -81,6 +103,9 @@ def test_gaussian_sampler_moments_and_clipping():
         (lambda: GaussianContexts([0.0], 1.0, low=[0.0]), "both or neither"),
         (lambda: UniformContexts([1.0], [0.0]), "low <= high"),
         (lambda: UniformContexts([0.0, np.nan], [1.0, 1.0]), "finite"),
+        (lambda: BetaContexts([1.0], [0.0], 0.5), "low <= high"),
+        (lambda: BetaContexts([0.0], [1.0], 0.0), "a: expected a finite value > 0"),
+        (lambda: BetaContexts([0.0], [1.0], 0.5, np.inf), "b: expected a finite value > 0"),
     ],
 )
 def test_sampler_bad_inputs(make, message):

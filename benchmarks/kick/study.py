@@ -6,11 +6,13 @@ deviation (0.02 of the normalised range), so every optimiser starts from the env
 exactly as ``creps-gym run`` does. The ridge of a contextual mean fit then pulls the policy towards the
 reference kick (see ``docs/wrappers.md``).
 
-A run is (experiment, optimiser, trial). Its contexts at iteration ``t`` come from
-``default_rng([seed, key, trial, t])`` and its optimiser's seed from ``SeedSequence([seed, key, trial])``,
-where ``key`` is a CRC-32 of ``"<experiment>/<name>"``, so adding a method never changes another one's
-numbers. The optimiser's checkpoint (``.npz``) holds its own generator, and the history (``.history.json``) is
-written with it, so a resumed run is bit-identical to an uninterrupted one.
+A run is (experiment, optimiser, trial). Its training contexts at iteration ``t`` are drawn from
+``default_rng([seed, key, trial, t])``, uniformly in the env's context box (the env's own draw) or from
+Beta(½, ½) scaled into it (``contexts="arcsine"``, :class:`~creps_gym.wrappers.BetaContexts`), and its
+optimiser's seed comes from ``SeedSequence([seed, key, trial])``, where ``key`` is a CRC-32 of
+``"<experiment>/<name>"``, so adding a method never changes another one's numbers. The optimiser's
+checkpoint (``.npz``) holds its own generator, and the history (``.history.json``) is written with it, so a
+resumed run is bit-identical to an uninterrupted one.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import creps_gym  # noqa: F401  (registers the ids)
 from creps_gym.envs.base import initial_distribution
 from creps_gym.optimizers.features import RBFFeatures
 from creps_gym.optimizers.registry import make_optimizer, optimizer_class
-from creps_gym.wrappers import OffsetParams
+from creps_gym.wrappers import BetaContexts, OffsetParams
 
 __all__ = [
     "ENV_IDS",
@@ -38,7 +40,9 @@ __all__ = [
     "GRID_Y",
     "LEGACY_ENV_IDS",
     "TARGETS",
+    "TRAINING_CONTEXTS",
     "RunSpec",
+    "context_sampler",
     "episode_metric",
     "evaluate",
     "evaluation_contexts",
@@ -56,11 +60,15 @@ ENV_IDS = {"precision": "creps_gym/KickPrecision-v1", "flexibility": "creps_gym/
 #: The env of each experiment in run and oracle files that do not name theirs (written before they did).
 LEGACY_ENV_IDS = {"precision": "creps_gym/KickPrecision-v0", "flexibility": "creps_gym/KickFlexibility-v1"}
 EVAL_EVERY = 50  # iterations between evaluations of the mean policy (the learning curves)
+#: How a run draws its training contexts: the shape parameter a = b of a Beta(a, b) scaled into the env's
+#: context box, or None for the env's own (uniform) draw. Run files that name none drew "uniform".
+TRAINING_CONTEXTS = {"uniform": None, "arcsine": 0.5}
 
 
 @dataclass(frozen=True)
 class RunSpec:
-    """One optimiser on one experiment: registry name, mean features, options, budget."""
+    """One optimiser on one experiment: registry name, mean features, options, budget, training contexts
+    (a key of ``TRAINING_CONTEXTS``)."""
 
     experiment: str
     name: str
@@ -68,6 +76,11 @@ class RunSpec:
     iterations: int
     features: str = "rbf"
     options: dict[str, Any] = field(default_factory=dict)
+    contexts: str = "uniform"
+
+    def __post_init__(self) -> None:
+        if self.contexts not in TRAINING_CONTEXTS:
+            raise ValueError(f"contexts: expected one of {sorted(TRAINING_CONTEXTS)}, got {self.contexts!r}")
 
     @property
     def key(self) -> int:
@@ -86,6 +99,15 @@ class RunSpec:
 def make_env(experiment: str, threads: int) -> OffsetParams:
     """The experiment's env behind :class:`OffsetParams` (centre and scale: the env-declared distribution)."""
     return OffsetParams(gym.make(ENV_IDS[experiment], num_threads=threads))
+
+
+def context_sampler(spec: RunSpec, env: OffsetParams) -> Any:
+    """``sampler(rng, n) -> (n, z)``: the training contexts of ``spec`` in the env's context box."""
+    shape = TRAINING_CONTEXTS[spec.contexts]
+    if shape is None:
+        return env.unwrapped.sample_contexts
+    box = env.unwrapped.observation_space
+    return BetaContexts(box.low, box.high, shape)
 
 
 def evaluate(env: OffsetParams, contexts: np.ndarray, offsets: np.ndarray) -> tuple[Any, Any]:
@@ -148,8 +170,9 @@ def write_json(path: Path, document: Any) -> None:
 
 
 def stored_setting(document: dict[str, Any], experiment: str) -> dict[str, Any]:
-    """The ``setting`` of a run file, with the env it ran on (``LEGACY_ENV_IDS`` if the file does not say)."""
-    return {"env": LEGACY_ENV_IDS[experiment], **document.get("setting", {})}
+    """The ``setting`` of a run file, with the env it ran on (``LEGACY_ENV_IDS`` if the file does not say)
+    and its training contexts ("uniform" if it does not say)."""
+    return {"env": LEGACY_ENV_IDS[experiment], "contexts": "uniform", **document.get("setting", {})}
 
 
 def train_run(
@@ -166,8 +189,8 @@ def train_run(
     folder.mkdir(parents=True, exist_ok=True)
     stem = folder / f"{spec.name}-trial{trial}"
     result_path, ckpt, history_path = (stem.with_suffix(s) for s in (".json", ".npz", ".history.json"))
-    setting = {"env": ENV_IDS[spec.experiment], "features": spec.features, "options": spec.options,
-               "samples": spec.samples}  # fmt: skip
+    setting = {"env": ENV_IDS[spec.experiment], "contexts": spec.contexts, "features": spec.features,
+               "options": spec.options, "samples": spec.samples}  # fmt: skip
     if result_path.exists():
         done = json.loads(result_path.read_text())
         if done["budget_iterations"] == spec.iterations and stored_setting(done, spec.experiment) == setting:
@@ -182,10 +205,11 @@ def train_run(
     # The history is written before the checkpoint, so after a kill it may run ahead of it: cut it back.
     history["batch"] = history["batch"][: opt.iteration]
     history["evaluations"] = [e for e in history["evaluations"] if e[0] <= opt.iteration]
+    draw_contexts = context_sampler(spec, env)
     start = time.perf_counter()
     while opt.iteration < spec.iterations and not opt.stop():
         rng = np.random.default_rng([*base_seed, opt.iteration])
-        contexts = env.unwrapped.sample_contexts(rng, spec.samples)
+        contexts = draw_contexts(rng, spec.samples)
         offsets = opt.ask(contexts)
         returns, info = evaluate(env, contexts, offsets)
         opt.tell(contexts, offsets, returns)

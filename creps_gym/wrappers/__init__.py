@@ -23,7 +23,13 @@ from creps_gym.wrappers.controllers import (
 )
 from creps_gym.wrappers.episodic import EpisodicEnv, EpisodicVectorEnv
 from creps_gym.wrappers.offset import OffsetParams
-from creps_gym.wrappers.samplers import ContextSampler, GaussianContexts, UniformContexts, context_splits
+from creps_gym.wrappers.samplers import (
+    BetaContexts,
+    ContextSampler,
+    GaussianContexts,
+    UniformContexts,
+    context_splits,
+)
 from creps_gym.wrappers.vector import (
     FixedContextsVector,
     HideContextVector,
@@ -32,6 +38,7 @@ from creps_gym.wrappers.vector import (
 )
 
 __all__ = [
+    "BetaContexts",
     "ContextAccess",
     "ContextSampler",
     "Controller",

@@ -10,6 +10,8 @@ ContextSampler
     The protocol: ``__call__(rng, n) -> (n, z)``.
 UniformContexts
     Uniform in a box ``[low, high]``.
+BetaContexts
+    Beta(a, b) in every dimension, scaled into a box; ``a = b < 1`` weights the box's ends.
 GaussianContexts
     Gaussian ``N(mean, cov)``, optionally clipped into a box.
 
@@ -27,9 +29,9 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_positive_int
+from creps_gym._validation import as_float_array, check_positive_int, check_real
 
-__all__ = ["ContextSampler", "GaussianContexts", "UniformContexts", "context_splits"]
+__all__ = ["BetaContexts", "ContextSampler", "GaussianContexts", "UniformContexts", "context_splits"]
 
 Array = NDArray[np.float64]
 
@@ -75,6 +77,38 @@ class UniformContexts:
 
     def __repr__(self) -> str:
         return f"UniformContexts(low={self.low.tolist()}, high={self.high.tolist()})"
+
+
+class BetaContexts:
+    """Contexts ``low + (high - low) · u`` with every coordinate of ``u`` drawn from Beta(a, b).
+
+    ``a = b = 1`` is the uniform box. ``a = b = 0.5`` (the arcsine law) puts a third of the draws in each
+    outer quarter of the range (uniform draws: a quarter), and 2.7 times as many as uniform draws in each
+    outer eighteenth: the ends, where a policy that is affine in the context is least determined by the
+    draws in between, are trained on more often.
+
+    Parameters
+    ----------
+    low, high : array_like, shape (z,)
+        Finite bounds with ``low <= high``.
+    a : float
+        First shape parameter, finite and > 0.
+    b : float, optional
+        Second shape parameter, finite and > 0; default ``a`` (symmetric about the box's centre).
+    """
+
+    def __init__(self, low: Any, high: Any, a: float, b: float | None = None) -> None:
+        self.low, self.high = _check_box(low, high)
+        self.a = check_real(a, "a", strict=True)
+        self.b = self.a if b is None else check_real(b, "b", strict=True)
+
+    def __call__(self, rng: np.random.Generator, n: int) -> Array:
+        """Draw ``n`` contexts, shape (n, z)."""
+        n = check_positive_int(n, "n")
+        return self.low + (self.high - self.low) * rng.beta(self.a, self.b, size=(n, self.low.shape[0]))
+
+    def __repr__(self) -> str:
+        return f"BetaContexts(low={self.low.tolist()}, high={self.high.tolist()}, a={self.a}, b={self.b})"
 
 
 def _covariance_factor(cov: Any, dim: int) -> Array:

@@ -16,6 +16,7 @@ pytest.importorskip("mujoco")
 pytest.importorskip("cma")
 
 from benchmarks.kick import oracle, report, run, study
+from creps_gym.wrappers import BetaContexts
 
 pytestmark = pytest.mark.extras
 FULL = Path(run.__file__).resolve().parent / "results" / "full"
@@ -51,6 +52,35 @@ def test_a_finished_run_is_read_back_and_the_seed_changes_it(precision_env, tmp_
     assert recomputed["values"] != [-1.0] * 10 and recomputed["setting"]["options"] == {"ridge": 1e-3}
     other = study.train_run(spec, precision_env, 1, 0, tmp_path / "trial1", checkpoint_every=1)
     assert other["history"]["batch"] != first["history"]["batch"]
+
+
+def test_training_contexts_follow_the_spec_and_a_change_of_them_is_computed_again(
+    precision_env, tmp_path: Path
+) -> None:
+    uniform = study.RunSpec("precision", "c-cma-es", samples=6, iterations=2, features="affine")
+    arcsine = study.RunSpec("precision", "c-cma-es", 6, 2, "affine", contexts="arcsine")
+    draws = {spec.contexts: study.context_sampler(spec, precision_env)(np.random.default_rng(0), 50_000)
+             for spec in (uniform, arcsine)}  # fmt: skip
+    np.testing.assert_array_equal(
+        draws["arcsine"], BetaContexts([3.0], [12.0], 0.5)(np.random.default_rng(0), 50_000)
+    )
+    np.testing.assert_array_equal(draws["uniform"], precision_env.unwrapped.sample_contexts(
+        np.random.default_rng(0), 50_000))  # fmt: skip
+    far = {name: float(np.mean(s[:, 0] > 11.5)) for name, s in draws.items()}
+    assert far["uniform"] == pytest.approx(0.5 / 9, abs=0.005)  # 1 in 18 in the last half metre
+    assert far["arcsine"] == pytest.approx(2 / np.pi * np.arcsin(np.sqrt(0.5 / 9)), abs=0.005)  # 15 %
+    first = study.train_run(uniform, precision_env, 0, 0, tmp_path, checkpoint_every=1)
+    assert first["setting"]["contexts"] == "uniform"
+    again = study.train_run(arcsine, precision_env, 0, 0, tmp_path, checkpoint_every=1)
+    assert again["setting"]["contexts"] == "arcsine"
+    assert again["history"]["batch"] != first["history"]["batch"]  # other contexts, so trained again
+    with pytest.raises(ValueError, match="contexts: expected one of"):
+        study.RunSpec("precision", "c-cma-es", 6, 2, contexts="sobol")
+    specs = run.run_specs(run.parse_args(["--full"]))
+    assert {(spec.experiment, spec.contexts) for spec, _ in specs} == {
+        ("precision", "arcsine"),
+        ("flexibility", "uniform"),
+    }
 
 
 def test_the_oracle_learns_one_context_and_caches_it(precision_env, tmp_path: Path) -> None:
@@ -128,6 +158,7 @@ def test_the_selection_probe_sees_a_baseline_that_cannot_follow_the_returns(
 def test_run_files_that_name_no_env_ran_on_the_legacy_one() -> None:
     legacy = {"setting": {"features": "rbf", "options": {}, "samples": 20}}
     assert study.stored_setting(legacy, "precision")["env"] == "creps_gym/KickPrecision-v0"
+    assert study.stored_setting(legacy, "precision")["contexts"] == "uniform"
     assert study.ENV_IDS["precision"] == "creps_gym/KickPrecision-v1"  # so v0 runs are computed again
     assert study.stored_setting(legacy, "flexibility")["env"] == "creps_gym/KickFlexibility-v1"
     assert study.ENV_IDS["flexibility"] == "creps_gym/KickFlexibility-v2"  # so v1 runs are computed again
@@ -212,7 +243,21 @@ def test_results_have_the_issue_shape_and_the_summary_says_what_spreads(tmp_path
     assert document["flexibility"]["oracle"]["position_distances"] == [8.0] * 28
     text = report.summary_text(document)
     assert "1.00 ± 0.50 m" in text  # precision: mean ± std across the two trials
+    assert document["precision"]["c-cma-es"]["training_contexts"] == ["uniform", "uniform"]  # not named
+    assert "| c-cma-es | uniform | 5 × 20 | 2 |" in text
     assert "3.50 ± 0.50 m" in text and "| 0.44 |" in text  # flexibility, and 3.5 / 8.0 of the oracle
+
+
+def test_the_learning_curve_table_averages_the_trials_where_all_were_evaluated() -> None:
+    entries = {
+        "c-cma-es": {"curves": [[[50, 9.0], [100, 1.0], [200, 0.5]], [[50, 9.0], [100, 2.0], [200, 1.0]]]},
+        "creps": {"curves": [[[100, 3.0], [200, 2.0]], [[100, 4.0]]]},  # trial 1 stopped before 200
+        "oracle": {"target_errors": [0.1] * 10},
+    }
+    lines = report._curve_table(entries, "Curves")
+    assert lines[2] == "| method | 100 | 200 |"
+    assert lines[4:6] == ["| c-cma-es | 1.50 | 0.75 |", "| creps | 3.50 | — |"]
+    assert len(lines) == 7 and report._curve_table({"oracle": entries["oracle"]}, "Curves") == []
 
 
 def test_a_finished_run_being_recomputed_under_another_setting_is_in_progress_not_rendered(
@@ -263,3 +308,7 @@ def test_the_committed_summary_is_rendered_from_the_committed_results(mode: str,
     shutil.copy(folder / "results.json", tmp_path / "results.json")
     document = json.loads((tmp_path / "results.json").read_text())
     assert (folder / "summary.md").read_text() == report.summary_text(document)
+    # ... and results.json is what the committed code gathers from the committed run files: a run file
+    # that the current code would compute again (another env or setting) cannot stay in it.
+    gathered = report.collect(folder, mode, run.MODES[mode])
+    assert json.loads(json.dumps(gathered)) == document

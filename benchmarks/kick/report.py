@@ -4,7 +4,8 @@ figures from ``results.json`` alone (a test checks the committed summary against
 ``results.json``::
 
     {"mode": ..., "budgets": {...},
-     "precision": {"<registry name>": {"trial_errors": [...], "target_errors": [[10 per trial]], ...},
+     "precision": {"<registry name>": {"trial_errors": [...], "target_errors": [[10 per trial]],
+                                       "training_contexts": ["arcsine" per trial], ...},
                    "oracle": {"target_errors": [...]}},
      "flexibility": {"<registry name>": {"trial_distances": [...],
                                          "position_distances": [[28 per trial]], ...},
@@ -32,6 +33,11 @@ PAPER = {
     "precision": "0.34 ± 0.11 m (CREPS-CMA, old mean, RBF features; the ± is not defined in the paper)",
     "flexibility": "CREPS-CMA 6.50 ± 2.95 m against CREPS 2.67 ± 2.69 m (10 trials)",
 }
+#: What the training-contexts column's names mean (``study.TRAINING_CONTEXTS``).
+TRAINING_NOTE = (
+    "Training targets: *uniform* in the env's context box (the paper's draw), or *arcsine*, Beta(½, ½) "
+    "scaled into it (a third of the draws in each outer quarter of [3, 12] m)."
+)
 METRIC = {
     "precision": ("trial_errors", "target_errors"),
     "flexibility": ("trial_distances", "position_distances"),
@@ -68,14 +74,15 @@ def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
         ):
             entry = document[experiment].setdefault(run["name"], {
                 per_trial: [], per_point: [], "trials": [], "iterations": [], "stopped": [], "curves": [],
-                "features": run["features"], "options": run["options"], "samples": run["samples"],
-                "budget_iterations": run["budget_iterations"],
+                "training_contexts": [], "features": run["features"], "options": run["options"],
+                "samples": run["samples"], "budget_iterations": run["budget_iterations"],
             })  # fmt: skip
             entry[per_trial].append(float(np.mean(run["values"])))
             entry[per_point].append(run["values"])
             entry["trials"].append(run["trial"])
             entry["iterations"].append(run["iterations"])
             entry["stopped"].append(run["stopped"])
+            entry["training_contexts"].append(stored_setting(run, experiment)["contexts"])
             entry["curves"].append([[i, float(np.mean(v))] for i, v in run["history"]["evaluations"]])
         paths = sorted((out / "runs" / experiment).glob("oracle-*.json"))
         points = [r for p in paths if (r := read_oracle(p, experiment))["env"] == ENV_IDS[experiment]]
@@ -119,7 +126,8 @@ def _method_rows(experiment: str, document: dict[str, Any]) -> list[str]:
         values = entry[per_trial]
         trials = ", ".join(f"{v:.2f}" for v in values)
         stopped = sorted({k for s in entry["stopped"] for k in s}) or ["—"]
-        cells = [name, f"{entry['budget_iterations']} × {entry['samples']}", str(len(values)),
+        budget = f"{entry['budget_iterations']} × {entry['samples']}"
+        cells = [name, ", ".join(sorted(set(entry["training_contexts"]))), budget, str(len(values)),
                  _spread(values), trials, f"{min(entry['iterations'])}–{max(entry['iterations'])}",
                  ", ".join(stopped)]  # fmt: skip
         if experiment == "flexibility":
@@ -143,21 +151,27 @@ def summary_text(document: dict[str, Any]) -> str:
 
 
 def _precision_section(document: dict[str, Any]) -> list[str]:
-    lines = ["## Precision (Fig. 5c)", "", f"Paper: {PAPER['precision']}.", ""]
-    header = "| method | budget (it. × N) | trials | mean error | per trial | iterations | stopped by |"
-    lines += [header, "|---|---|---|---|---|---|---|", *_method_rows("precision", document), ""]
+    lines = ["## Precision (Fig. 5c)", "", f"Paper: {PAPER['precision']}.", "", TRAINING_NOTE, ""]
+    header = (
+        "| method | training targets | budget (it. × N) | trials | mean error | per trial | iterations "
+        "| stopped by |"
+    )
+    lines += [header, "|---" * 8 + "|", *_method_rows("precision", document), ""]
     columns = {  # the oracle once it has every target
         name: np.asarray(entry["target_errors"]).reshape(-1, len(TARGETS))
         for name, entry in document["precision"].items()
         if name != "oracle" or len(entry["target_errors"]) == len(TARGETS)
     }
     if columns:
-        lines += ["Error (m) per target, mean over trials (oracle: pycma on that target alone):", ""]
+        title = "Error (m) per target, mean over trials and (in brackets) the largest trial's error"
+        lines += [f"{title} (oracle: pycma on that target alone):", ""]
         lines += ["| target (m) | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
         for i, target in enumerate(TARGETS):
-            cells = [f"{errors[:, i].mean():.2f}" for errors in columns.values()]
+            cells = [_mean_and_largest(errors[:, i]) for errors in columns.values()]
             lines.append(f"| {target:.0f} | " + " | ".join(cells) + " |")
         lines.append("")
+    title = "Mean policy's error (m) while learning, mean over trials (— once a trial has stopped)"
+    lines += _curve_table(document["precision"], title)
     oracle = document["precision"].get("oracle")
     if oracle:
         errors = np.asarray(oracle["target_errors"])
@@ -169,6 +183,32 @@ def _precision_section(document: dict[str, Any]) -> list[str]:
             "",
         ]
     return lines
+
+
+def _mean_and_largest(values: np.ndarray) -> str:
+    """``"0.64 (1.61)"``: the mean and, over several trials, the largest value; ``"0.07"`` for one."""
+    return f"{values.mean():.2f}" + (f" ({values.max():.2f})" if len(values) > 1 else "")
+
+
+def _curve_table(entries: dict[str, Any], title: str, every: int = 100) -> list[str]:
+    """Learning curves as a table: one row per method, the mean over its trials every ``every`` iterations
+    at which every trial was evaluated ("—" after a trial stopped)."""
+    rows = {}
+    for name, entry in entries.items():
+        curves = [dict(curve) for curve in entry.get("curves", [])]
+        if not curves:  # the oracle
+            continue
+        common = set.intersection(*(set(c) for c in curves)) if curves else set()
+        rows[name] = {i: np.mean([c[i] for c in curves]) for i in common if i % every == 0}
+    iterations = sorted(set().union(*rows.values())) if rows else []
+    if not iterations:
+        return []
+    lines = [f"{title}:", "", "| method | " + " | ".join(str(i) for i in iterations) + " |"]
+    lines.append("|---" * (len(iterations) + 1) + "|")
+    for name, row in rows.items():
+        cells = [f"{row[i]:.2f}" if i in row else "—" for i in iterations]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
 
 
 def _count(n: int, noun: str) -> str:
@@ -194,10 +234,12 @@ def _flexibility_section(document: dict[str, Any]) -> list[str]:
         "",
     ]
     header = (
-        "| method | budget (it. × N) | trials | mean forward distance | per trial | iterations | stopped by "
-        "| fraction of the oracle | balls at x_B = 0.30 m kicked > 0.5 m |"
+        "| method | training positions | budget (it. × N) | trials | mean forward distance | per trial "
+        "| iterations | stopped by | fraction of the oracle | balls at x_B = 0.30 m kicked > 0.5 m |"
     )
-    lines += [header, "|---" * 9 + "|", *_method_rows("flexibility", document), ""]
+    lines += [header, "|---" * 10 + "|", *_method_rows("flexibility", document), ""]
+    title = "Mean policy's forward distance (m) while learning, mean over trials (— once a trial has stopped)"
+    lines += _curve_table(document["flexibility"], title)
     oracle = document["flexibility"].get("oracle")
     if oracle:
         distances = np.asarray(oracle["position_distances"])
@@ -219,20 +261,33 @@ def plot(document: dict[str, Any], out: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    colours = {
+        name: f"C{k}" for k, name in enumerate(sorted({*document["precision"], *document["flexibility"]}))
+    }
     for name, entry in document["precision"].items():
         if name == "oracle" and len(entry["target_errors"]) != len(TARGETS):
             continue
         errors = np.asarray(entry["target_errors"]).reshape(-1, len(TARGETS))
-        axes[0].errorbar(TARGETS, errors.mean(0), errors.std(0), marker="o", capsize=3, label=name)
+        axes[0].errorbar(TARGETS, errors.mean(0), errors.std(0), marker="o", capsize=3, label=name,
+                         color=colours[name])  # fmt: skip
     axes[0].set(xlabel="target distance s [m]", ylabel="distance to target [m]", title="Kick precision")
-    for experiment, ax in zip(("precision", "flexibility"), (axes[1], axes[1].twinx()), strict=True):
+    twin = axes[1].twinx()
+    twin.set_ylabel("flexibility: forward distance [m] (dashed)")
+    for experiment, ax in zip(("precision", "flexibility"), (axes[1], twin), strict=True):
+        style = "-" if experiment == "precision" else "--"
         for name, entry in document[experiment].items():
-            for k, curve in enumerate(entry.get("curves", [])):
-                if curve:
-                    it, value = np.asarray(curve).T
-                    ax.plot(it, value, ls="-" if experiment == "precision" else "--",
-                            label=f"{experiment[:4]} {name}" if k == 0 else None)  # fmt: skip
-    axes[1].set(xlabel="iteration", ylabel="precision error [m] (solid)", title="Mean policy while learning")
+            curves = [np.asarray(curve).T for curve in entry.get("curves", []) if curve]
+            for it, value in curves:  # each trial thin, the mean over the trials (where all ran) bold
+                ax.plot(it, value, ls=style, color=colours[name], alpha=0.25, lw=0.8)
+            common = sorted(set.intersection(*(set(it) for it, _ in curves))) if curves else []
+            if common:
+                mean = [np.mean([v[list(it).index(i)] for it, v in curves]) for i in common]
+                ax.plot(common, mean, ls=style, color=colours[name], lw=2, label=f"{experiment[:4]} {name}")
+    axes[1].set(
+        xlabel="iteration",
+        ylabel="precision error [m] (solid)",
+        title="Mean policy while learning (bold: mean over trials)",
+    )
     fig.legend(fontsize=7, loc="lower center", ncol=4)
     fig.tight_layout(rect=(0, 0.12, 1, 1))
     fig.savefig(out / "precision.png", dpi=110)

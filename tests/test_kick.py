@@ -458,6 +458,27 @@ def test_the_generic_path_learns_from_the_declared_start():
     env.close()
 
 
+def test_no_constant_kick_beats_the_reference_by_more_than_the_context_variance_at_seed_0():
+    """Issue 13's ``--optimizer cma`` line, bounded: a non-contextual optimiser's mean policy is one kick for
+    every target, and a kick whose ball stops at (x, y) scores mean(−(x − s)² − y²) ≤ −var(s) over the test
+    contexts (equality at x = mean(s), y = 0). At ``--seed 0`` the reference kick, where the runner starts
+    pycma, is within 0.13 of that bound, so no constant kick can improve the CLI's evaluation by more."""
+    from creps_gym.envs.evaluation import evaluate_policy, test_contexts
+    from creps_gym.runner import split_seed
+
+    env = gym.make(PRECISION, num_threads=1).unwrapped
+    contexts = test_contexts(env, 16, split_seed(0)[2])  # the CLI's 16 evaluation contexts at --seed 0
+    params = np.repeat(env.reference_params()[None], len(contexts), axis=0)
+    returns, info = env.evaluate(contexts, params)
+    x, y = info["ball_displacement"].T
+    np.testing.assert_allclose(returns, -((x - contexts[:, 0]) ** 2) - y**2)  # the return the bound is of
+    reference = evaluate_policy(env, env.reference_params(), contexts).mean_return
+    assert reference == pytest.approx(returns.mean())
+    headroom = -contexts[:, 0].var() - reference
+    assert 0.0 < headroom < 0.13, headroom  # measured: 0.124 (−5.515 against −5.639)
+    env.close()
+
+
 _VIDEO_SCRIPT = _GL_EPISODE.replace("MODE", "'rgb_array_list'").replace("WIDTH", "96").replace("HEIGHT", "64")
 _VIDEO_SCRIPT += textwrap.dedent(
     """

@@ -105,6 +105,7 @@ def test_beta_sampler_weights_the_ends_of_the_box_as_the_arcsine_law_says():
         (lambda: UniformContexts([0.0, np.nan], [1.0, 1.0]), "finite"),
         (lambda: BetaContexts([1.0], [0.0], 0.5), "low <= high"),
         (lambda: BetaContexts([0.0], [1.0], 0.0), "a: expected a finite value > 0"),
+        (lambda: BetaContexts([-1e308], [1e308], 0.5), "width high - low is finite"),
         (lambda: BetaContexts([0.0], [1.0], 0.5, np.inf), "b: expected a finite value > 0"),
     ],
 )

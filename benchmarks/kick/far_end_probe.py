@@ -1,7 +1,7 @@
 """Why does a precision run miss a target? Sample its final policy there, then search on from its mean alone.
 
 For one finished precision run (``--run c-cma-es-trial1``, a checkpoint under ``--folder``) and one target
-s (``--target``, default 12 m, the far end of the training contexts U[3, 12] m):
+s (``--target``, default 12 m, the far end of the precision task's targets [3, 12] m):
 
 1. whether the run's mean kick Aᵀϕ(s) falls, and its error (m, s + 1 for a fall); then ``--samples`` draws
    from the run's final π(θ|s): their fall rate and the quantiles of the standing kicks' distance (m);

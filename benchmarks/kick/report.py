@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.kick.oracle import read_oracle
-from benchmarks.kick.study import ENV_IDS, GRID_X, GRID_Y, TARGETS, stored_setting
+from benchmarks.kick.study import ENV_IDS, EVAL_EVERY, GRID_X, GRID_Y, TARGETS, stored_setting
 
 __all__ = ["collect", "render", "summary_text"]
 
@@ -127,9 +127,10 @@ def _method_rows(experiment: str, document: dict[str, Any]) -> list[str]:
         trials = ", ".join(f"{v:.2f}" for v in values)
         stopped = sorted({k for s in entry["stopped"] for k in s}) or ["—"]
         budget = f"{entry['budget_iterations']} × {entry['samples']}"
-        cells = [name, ", ".join(sorted(set(entry["training_contexts"]))), budget, str(len(values)),
-                 _spread(values), trials, f"{min(entry['iterations'])}–{max(entry['iterations'])}",
-                 ", ".join(stopped)]  # fmt: skip
+        contexts = ", ".join(sorted(set(entry.get("training_contexts", ["uniform"]))))
+        iterations = f"{min(entry['iterations'])}–{max(entry['iterations'])}"
+        cells = [name, contexts, budget, str(len(values)), _spread(values), trials, iterations]
+        cells.append(", ".join(stopped))
         if experiment == "flexibility":
             complete = oracle is not None and len(oracle["position_distances"]) == len(GRID_X) * len(GRID_Y)
             ratio = np.mean(values) / np.mean(oracle["position_distances"]) if complete else float("nan")
@@ -190,7 +191,7 @@ def _mean_and_largest(values: np.ndarray) -> str:
     return f"{values.mean():.2f}" + (f" ({values.max():.2f})" if len(values) > 1 else "")
 
 
-def _curve_table(entries: dict[str, Any], title: str, every: int = 100) -> list[str]:
+def _curve_table(entries: dict[str, Any], title: str, every: int = 2 * EVAL_EVERY) -> list[str]:
     """Learning curves as a table: one row per method, the mean over its trials every ``every`` iterations
     at which every trial was evaluated ("—" after a trial stopped)."""
     rows = {}
@@ -198,8 +199,8 @@ def _curve_table(entries: dict[str, Any], title: str, every: int = 100) -> list[
         curves = [dict(curve) for curve in entry.get("curves", [])]
         if not curves:  # the oracle
             continue
-        common = set.intersection(*(set(c) for c in curves)) if curves else set()
-        rows[name] = {i: np.mean([c[i] for c in curves]) for i in common if i % every == 0}
+        common = set.intersection(*(set(c) for c in curves))
+        rows[name] = {int(i): np.mean([c[i] for c in curves]) for i in common if i % every == 0}
     iterations = sorted(set().union(*rows.values())) if rows else []
     if not iterations:
         return []

@@ -48,9 +48,9 @@ MODES = {
 }
 SAMPLES = {"precision": 20, "flexibility": 100}
 #: Training contexts per experiment (``study.TRAINING_CONTEXTS``). Precision: the arcsine law Beta(½, ½) on
-#: [3, 12] m trains each outer quarter of the range on a third of the draws; uniform draws put about 1 in
-#: 20 in the last half metre, too few to fix the far end of an affine policy that the targets in between
-#: pin (README, "Where the precision error comes from"). Every precision method draws the same way.
+#: [3, 12] m trains each outer quarter of the range on a third of the draws; uniform draws put 1 in
+#: 18 in the last half metre, too few to fix the far end of an affine policy that the targets in between
+#: pin (README, "Where the precision error came from"). Every precision method draws the same way.
 TRAINING = {"precision": "arcsine", "flexibility": "uniform"}
 #: Every method runs the paper's whole budget: the stagnation criterion (meant for noise-free problems) is
 #: off, the optimisers' other stop criteria (a degenerate covariance, ...) still end a run.
@@ -62,7 +62,7 @@ RBF = {"ridge": 1e-2, **FULL_BUDGET}
 #: Huber's, ranks all those falls last whatever their severity, so the mean there has no direction back to a
 #: kick that stands (docs/algorithms.md, C1''). Its mean moves half way to each new fit (c_m = 0.5): the
 #: regression on μ_eff ≈ 6 samples moves the mean at the targets' ends by about 0.8 σ per iteration under
-#: blind selection, enough to step into a fall. README, "Where the precision error comes from", has the
+#: blind selection, enough to step into a fall. README, "Where the precision error came from", has the
 #: settings this replaced (Huber's baseline on v0; mean_repulsion).
 LOCAL = {"baseline_bandwidth": 0.3, "c_m": 0.5, **FULL_BUDGET}
 #: The methods of each experiment: registry name, mean features, options. The CREPS methods use the paper's

@@ -1,13 +1,13 @@
 """Does C-CMA-ES's selection pick kicks or targets? Selection rates per range of targets under a run's policy.
 
 C-CMA-ES ranks the advantages a_k = R_k − V(s_k). If the context baseline V follows E[R | s], about half of
-the samples in every range of targets are selected (ranked in the best N/2), and selection is about the
-kick θ alone. If V cannot follow E[R | s], selection favours the targets where V is too low and starves the
-others. This probe draws ``--batches`` batches of 20 kicks from a finished precision run's final policy at
-targets s ~ U[3, 12] m, computes the advantages as the optimiser does (each batch with the two batches before
-it, ``baseline_batches=3``) for several baseline degrees and losses, and prints, per baseline, the fraction
-of samples selected in each range of targets, after a first line with the median return in each range. Each
-line of output is a JSON object.
+the samples in every range of targets are selected (ranked in the best N/2), and selection is about the kick θ
+alone. If V cannot follow E[R | s], selection favours the targets where V is too low and starves the others.
+This probe draws ``--batches`` batches of 20 kicks from a finished precision run's final policy at targets s ~
+U[3, 12] m (the paper's draw; the study now trains on Beta(½, ½)), computes the advantages as the optimiser
+does (each batch with the two batches before it, ``baseline_batches=3``) for several baseline degrees and
+losses, and prints, per baseline, the fraction of samples selected in each range of targets, after a first
+line with the median return in each range. Each line of output is a JSON object.
 
     python benchmarks/kick/selection_probe.py --run c-cma-es-trial1
 """

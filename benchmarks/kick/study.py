@@ -183,8 +183,8 @@ def train_run(
     Files under ``folder``: ``<name>-trial<k>.npz`` (optimiser), ``.history.json`` (the setting; per
     iteration, mean return and fall rate of the batch; every ``EVAL_EVERY`` iterations the mean policy's
     metric) and, when finished, ``.json`` (the result). A result or checkpoint of another setting (env,
-    features, options, batch size) is computed again. The run ends at ``spec.iterations`` or when the
-    optimiser's own stop criteria are met.
+    training contexts, features, options, batch size) is computed again. The run ends at
+    ``spec.iterations`` or when the optimiser's own stop criteria are met.
     """
     folder.mkdir(parents=True, exist_ok=True)
     stem = folder / f"{spec.name}-trial{trial}"
@@ -205,8 +205,7 @@ def train_run(
     # The history is written before the checkpoint, so after a kill it may run ahead of it: cut it back.
     history["batch"] = history["batch"][: opt.iteration]
     history["evaluations"] = [e for e in history["evaluations"] if e[0] <= opt.iteration]
-    draw_contexts = context_sampler(spec, env)
-    start = time.perf_counter()
+    draw_contexts, start = context_sampler(spec, env), time.perf_counter()
     while opt.iteration < spec.iterations and not opt.stop():
         rng = np.random.default_rng([*base_seed, opt.iteration])
         contexts = draw_contexts(rng, spec.samples)

@@ -99,13 +99,20 @@ class BetaContexts:
 
     def __init__(self, low: Any, high: Any, a: float, b: float | None = None) -> None:
         self.low, self.high = _check_box(low, high)
+        with np.errstate(over="ignore"):
+            self.width = self.high - self.low
+        if not np.isfinite(self.width).all():
+            raise ValueError(
+                f"low/high: expected a box whose width high - low is finite, got {self.low.tolist()} to "
+                f"{self.high.tolist()}"
+            )
         self.a = check_real(a, "a", strict=True)
         self.b = self.a if b is None else check_real(b, "b", strict=True)
 
     def __call__(self, rng: np.random.Generator, n: int) -> Array:
         """Draw ``n`` contexts, shape (n, z)."""
         n = check_positive_int(n, "n")
-        return self.low + (self.high - self.low) * rng.beta(self.a, self.b, size=(n, self.low.shape[0]))
+        return self.low + self.width * rng.beta(self.a, self.b, size=(n, self.low.shape[0]))
 
     def __repr__(self) -> str:
         return f"BetaContexts(low={self.low.tolist()}, high={self.high.tolist()}, a={self.a}, b={self.b})"

@@ -191,16 +191,20 @@ def _mean_and_largest(values: np.ndarray) -> str:
     return f"{values.mean():.2f}" + (f" ({values.max():.2f})" if len(values) > 1 else "")
 
 
+def _mean_curve(curves: list[Any]) -> dict[int, float]:
+    """Iteration → mean over the trials' curves ``[[iteration, value], ...]`` where every trial has one."""
+    by_iteration = [dict((int(i), v) for i, v in curve) for curve in curves]
+    common = set.intersection(*(set(c) for c in by_iteration)) if by_iteration else set()
+    return {i: float(np.mean([c[i] for c in by_iteration])) for i in sorted(common)}
+
+
 def _curve_table(entries: dict[str, Any], title: str, every: int = 2 * EVAL_EVERY) -> list[str]:
     """Learning curves as a table: one row per method, the mean over its trials every ``every`` iterations
     at which every trial was evaluated ("—" after a trial stopped)."""
     rows = {}
     for name, entry in entries.items():
-        curves = [dict(curve) for curve in entry.get("curves", [])]
-        if not curves:  # the oracle
-            continue
-        common = set.intersection(*(set(c) for c in curves))
-        rows[name] = {int(i): np.mean([c[i] for c in curves]) for i in common if i % every == 0}
+        if entry.get("curves"):  # not the oracle
+            rows[name] = {i: v for i, v in _mean_curve(entry["curves"]).items() if i % every == 0}
     iterations = sorted(set().union(*rows.values())) if rows else []
     if not iterations:
         return []
@@ -277,13 +281,12 @@ def plot(document: dict[str, Any], out: Path) -> None:
     for experiment, ax in zip(("precision", "flexibility"), (axes[1], twin), strict=True):
         style = "-" if experiment == "precision" else "--"
         for name, entry in document[experiment].items():
-            curves = [np.asarray(curve).T for curve in entry.get("curves", []) if curve]
-            for it, value in curves:  # each trial thin, the mean over the trials (where all ran) bold
-                ax.plot(it, value, ls=style, color=colours[name], alpha=0.25, lw=0.8)
-            common = sorted(set.intersection(*(set(it) for it, _ in curves))) if curves else []
-            if common:
-                mean = [np.mean([v[list(it).index(i)] for it, v in curves]) for i in common]
-                ax.plot(common, mean, ls=style, color=colours[name], lw=2, label=f"{experiment[:4]} {name}")
+            curves = [curve for curve in entry.get("curves", []) if curve]
+            for curve in curves:  # each trial thin, the mean over the trials (where all ran) bold
+                ax.plot(*np.asarray(curve).T, ls=style, color=colours[name], alpha=0.25, lw=0.8)
+            if mean := _mean_curve(curves):
+                ax.plot(list(mean), list(mean.values()), ls=style, color=colours[name], lw=2,
+                        label=f"{experiment[:4]} {name}")  # fmt: skip
     axes[1].set(
         xlabel="iteration",
         ylabel="precision error [m] (solid)",

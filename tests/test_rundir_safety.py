@@ -79,20 +79,77 @@ def edit_config(path: Path, **changes) -> None:
 
 
 # -- item 13: config.json never makes resume import code --------------------------------------------------
-@pytest.mark.parametrize("env", ["evil_payload:X-v0", "this:X-v0"])
-def test_resume_never_imports_a_module_named_by_config_json(tmp_path, env):
+# Gymnasium imports any text before an id's first ":", identifier or not
+EVIL_MODULES = ["evil_payload", "1evil", "my-evil", "évil", "evil.payload", " evil_payload", "9"]
+
+
+def plant_payload(out: Path, module: str) -> None:
+    """Files that ``importlib.import_module(module)`` would run from ``out`` (a package for dotted names)."""
+    payload = f"open({str(out / 'PAYLOAD_RAN')!r}, 'w').write('yes')\n"
+    parts = module.split(".")
+    for depth in range(1, len(parts)):
+        package = out.joinpath(*parts[:depth])
+        package.mkdir()
+        (package / "__init__.py").write_text(payload)
+    out.joinpath(*parts[:-1], f"{parts[-1]}.py").write_text(payload)
+
+
+@pytest.mark.parametrize("module", [*EVIL_MODULES, "this"])
+@pytest.mark.parametrize("entry", ["python-api", "python-m-cli"])
+def test_resume_never_imports_a_module_named_by_config_json(tmp_path, module, entry):
     out = make_run(tmp_path / "run", stop_after=3)
-    (out / "evil_payload.py").write_text(PAYLOAD)
-    edit_config(out, env=env)
-    result = cli("resume", ".", "--no-plot", cwd=out)  # the run directory is sys.path[0]
+    plant_payload(out, module)
+    edit_config(out, env=f"{module}:creps_gym/Sphere-v0")
+    if entry == "python-api":  # the run directory is the current one, so sys.path[0] (`python -c`)
+        code = "from creps_gym.runner import resume; resume('.')"
+        result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=out, timeout=120)
+        expected_code, stream = 1, result.stderr
+    else:  # `python -m` puts the current directory first on sys.path too
+        result = subprocess.run(
+            [sys.executable, "-m", "creps_gym.cli", "resume", ".", "--no-plot"],
+            capture_output=True, text=True, cwd=out, timeout=120,
+        )  # fmt: skip
+        expected_code, stream = 3, result.stderr
+        assert "Traceback" not in stream
     assert not (out / "PAYLOAD_RAN").exists()
     assert "Beautiful is better than ugly" not in result.stdout
-    assert result.returncode == 3 and "Traceback" not in result.stderr
-    module = env.split(":")[0]
+    assert result.returncode == expected_code, stream
     assert f"config.json: env: expected no reference to a module that is not imported (here {module!r})" in (
-        result.stderr
+        stream
     )
-    assert "--import MODULE" in result.stderr
+    assert "--import MODULE" in stream
+
+
+@pytest.mark.parametrize("module", EVIL_MODULES)
+@pytest.mark.parametrize(
+    ("env", "kwargs", "field"),
+    [
+        ("creps_gym/ReacherTarget-v0", {"env": "{m}:Reacher-v5"}, "env_kwargs.env"),
+        ("creps_gym/PointMazeGoal-v0", {"env": "{m}:PointMaze_UMaze-v3"}, "env_kwargs.env"),
+        (SPHERE, {"dim": 3, "extra": {"deep": ["ok", {"id": "{m}:X-v0"}]}}, "env_kwargs.extra.deep[1].id"),
+        (SPHERE, {"dim": 3, "{m}:key": 1}, "env_kwargs.{m}:key"),
+    ],
+)
+def test_no_string_in_the_env_kwargs_imports_a_module(tmp_path, monkeypatch, module, env, kwargs, field):
+    out = make_run(tmp_path / "run", stop_after=3)
+    plant_payload(out, module)
+    monkeypatch.syspath_prepend(str(out))
+    text = json.dumps(kwargs).replace("{m}", module)
+    edit_config(out, env=env, env_kwargs=json.loads(text))
+    with pytest.raises(RunDirError, match="expected no reference to a module that is not imported") as error:
+        resume(out)
+    assert str(error.value).startswith(f"{out / RunDir.CONFIG}: {field.replace('{m}', module)}: ")
+    assert not (out / "PAYLOAD_RAN").exists() and module not in sys.modules
+
+
+def test_a_module_reference_is_any_text_before_the_first_colon():
+    from creps_gym.runner.trust import module_reference
+
+    assert module_reference("1evil:creps_gym/Sphere-v0") == "1evil"
+    assert module_reference("évil:X:Y") == "évil"
+    assert module_reference(" os :X") == " os "
+    assert module_reference(":X") == ""
+    assert module_reference("creps_gym/Sphere-v0") is None
 
 
 def test_an_unregistered_id_behind_an_imported_module_is_refused(tmp_path):

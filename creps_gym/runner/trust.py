@@ -24,7 +24,6 @@ from __future__ import annotations
 import hashlib
 import importlib
 import json
-import re
 import sys
 from collections.abc import Iterator, Sequence
 from typing import Any
@@ -57,13 +56,17 @@ FINGERPRINT_FIELDS = ("env", "env_kwargs", "optimizer", "optimizer_options", "se
                       "max_episodes", "target_regret", "max_time")  # fmt: skip
 #: The fields format ``creps_gym.run/2`` fingerprinted (it had no ``context_draws``: always ``"reset"``).
 FINGERPRINT_FIELDS_2 = tuple(name for name in FINGERPRINT_FIELDS if name != "context_draws")
-_MODULE_PREFIX = re.compile(r"^\s*([A-Za-z_][\w.]*)\s*:")
 
 
 def module_reference(text: str) -> str | None:
-    """The module a ``"module:name"`` string makes Gymnasium (or a registry) import, or None."""
-    match = _MODULE_PREFIX.match(text)
-    return match.group(1) if match else None
+    """The module a ``"module:name"`` string makes Gymnasium (or a registry) import, or None.
+
+    Gymnasium imports *any* text before the first ``:`` of an env id (``"1evil:X-v0"``, ``"my-evil:X"``,
+    ``"évil:X"``, ``" os :X"``), whether or not it is a Python identifier, so every such text counts as
+    a module reference, unchanged (no stripping: ``" os"`` is not the module ``os``).
+    """
+    module, colon, _ = text.partition(":")
+    return module if colon else None
 
 
 def import_modules(modules: Sequence[str]) -> None:

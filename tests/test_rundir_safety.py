@@ -102,7 +102,8 @@ def test_resume_never_imports_a_module_named_by_config_json(tmp_path, module, en
     edit_config(out, env=f"{module}:creps_gym/Sphere-v0")
     if entry == "python-api":  # the run directory is the current one, so sys.path[0] (`python -c`)
         code = "from creps_gym.runner import resume; resume('.')"
-        result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=out, timeout=120)
+        command = [sys.executable, "-c", code]
+        result = subprocess.run(command, capture_output=True, text=True, cwd=out, timeout=120)
         expected_code, stream = 1, result.stderr
     else:  # `python -m` puts the current directory first on sys.path too
         result = subprocess.run(

@@ -6,6 +6,7 @@ and what was received, so that bad input never turns into a silent NaN further d
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from typing import Any
 
@@ -21,6 +22,7 @@ __all__ = [
     "check_real",
     "check_real_in_range",
     "check_seed",
+    "load_json",
 ]
 
 
@@ -234,3 +236,28 @@ def check_fits_in_memory(n_bytes: float, name: str, value: Any, what: str) -> No
             f"{name}: expected a size whose arrays fit in memory ({what} need {n_bytes / 2**30:.3g} GiB; "
             f"{free / 2**30:.3g} GiB available, of which {MEMORY_FRACTION:.0%} may be used), got {value!r}"
         )
+
+
+#: Deepest nesting of JSON arrays and objects read from a file or a flag (creps_gym writes depth 4 at most).
+MAX_JSON_DEPTH = 100
+
+
+def load_json(text: str | bytes, source: str, max_depth: int = MAX_JSON_DEPTH) -> Any:
+    """``json.loads(text)``; a ``ValueError`` naming ``source`` if it nests deeper than ``max_depth``.
+
+    Deep nesting would otherwise raise ``RecursionError`` here or in any recursive code that reads it.
+    """
+    expected = f"{source}: expected JSON nested at most {max_depth} levels deep"
+    try:
+        document = json.loads(text)
+    except RecursionError:
+        raise ValueError(f"{expected}, got deeper") from None
+    stack = [(document, 1)]
+    while stack:
+        value, depth = stack.pop()
+        if isinstance(value, (dict, list)):
+            if depth > max_depth:
+                raise ValueError(f"{expected}, got {depth} levels")
+            children = value.values() if isinstance(value, dict) else value
+            stack.extend((child, depth + 1) for child in children)
+    return document

@@ -8,11 +8,14 @@ Exit codes
     The run failed: an episode failed after its retries, or the env or optimiser raised.
 2
     Usage error: unknown command, flag, env or optimiser, or a bad value (the message names the flag,
-    what was expected and what was given).
+    what was expected and what was given), or a ``-o`` file that cannot be written (not a regular file,
+    a run directory's own file, a full disk, ...).
 3
     Run-directory error: ``--out`` holds a run or other files, ``resume``/``plot``/``export`` got a folder
     that is not a run directory, a damaged file, a checkpoint of another run, a ``config.json`` that names
-    a module that is not imported (``--import MODULE``), or another process writes the run directory.
+    a module that is not imported (``--import MODULE``), or another process writes the run directory; a
+    file in it that is not a regular file (a link, a FIFO, a device, a folder) or is too large; or an
+    operating-system error on one of its files (disk full, read-only, ``ulimit -f``, a name too long).
 4
     An optional dependency is missing (e.g. ``pip install creps-gym[plot]`` for ``plot``).
 130
@@ -25,6 +28,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import signal
 import sys
 import warnings
 from collections.abc import Sequence
@@ -240,9 +244,10 @@ def _finish(runner: Any, args: argparse.Namespace) -> int:
         )
     if not args.no_plot and history.records:
         try:
-            from creps_gym.runner.plots import plot_run_dirs
+            from creps_gym.runner.plots import figure_bytes, plot_run_dirs
 
-            plot_run_dirs([runner.run_dir.path], runner.run_dir.file(RunDir.PLOT))
+            figure = plot_run_dirs([runner.run_dir.path])
+            runner.run_dir.write_file(RunDir.PLOT, figure_bytes(figure))  # never through a link
             print(f"plot: {runner.run_dir.file(RunDir.PLOT)}")
         except ImportError as exc:
             print(f"creps-gym: no plot written ({exc})", file=sys.stderr)
@@ -286,27 +291,47 @@ def _cmd_resume(args: argparse.Namespace) -> int:
     return _finish(runner, args)
 
 
+def _write_output(write: Any, args: argparse.Namespace, what: str) -> int:
+    """Write ``-o`` with ``write(path)`` (exit 2 if it cannot be) and print the file actually written."""
+    try:
+        written = write(args.output)
+    except (ValueError, OSError) as exc:
+        cause = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        cause = cause.removeprefix("path: ")
+        where = f"cannot write {args.output}: " if isinstance(exc, OSError) else ""
+        raise UsageError(f"argument -o/--output: {where}{cause}") from None
+    named = os.path.abspath(args.output) == str(written)
+    print(f"{what}: {args.output}" if named else f"{what}: {written} (through the link {args.output})")
+    return 0
+
+
 def _cmd_plot(args: argparse.Namespace) -> int:
-    from creps_gym.runner.plots import plot_run_dirs
+    from creps_gym.runner.plots import plot_run_dirs, save_figure
+    from creps_gym.runner.session import RunDirError
 
     try:
-        plot_run_dirs(args.run_dirs, args.output, title=args.title, mix_envs=args.mix_envs)
+        figure = plot_run_dirs(args.run_dirs, title=args.title, mix_envs=args.mix_envs)
+    except RunDirError:
+        raise
     except ValueError as exc:  # e.g. runs of different envs without --mix-envs
         raise UsageError(str(exc)) from None
-    print(f"plot: {args.output}")
-    return 0
+    return _write_output(lambda path: save_figure(figure, path), args, "plot")
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from creps_gym.runner.export import write_iohanalyzer
+    from creps_gym.runner.export import iohanalyzer_text, write_iohanalyzer
     from creps_gym.runner.plots import load_history
+    from creps_gym.runner.session import RunDirError
 
     try:
-        write_iohanalyzer([load_history(p) for p in args.run_dirs], args.output, mix_envs=args.mix_envs)
+        histories = [load_history(p) for p in args.run_dirs]
+        iohanalyzer_text(histories, args.mix_envs)
+    except RunDirError:
+        raise
     except ValueError as exc:  # e.g. runs of different envs without --mix-envs
         raise UsageError(str(exc)) from None
-    print(f"IOHanalyzer CSV: {args.output}")
-    return 0
+    write = lambda path: write_iohanalyzer(histories, path, mix_envs=args.mix_envs)  # noqa: E731
+    return _write_output(write, args, "IOHanalyzer CSV")
 
 
 _COMMANDS = {
@@ -325,6 +350,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from creps_gym.runner.backends import EpisodeError
     from creps_gym.runner.session import RunDirError
 
+    if hasattr(signal, "SIGXFSZ"):  # `ulimit -f`: a write past it fails with EFBIG (named, exit 3)
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     parser = build_parser()
     args = parser.parse_args(argv)  # exits with code 2 on usage errors
     prog = f"creps-gym {args.command}"
@@ -356,6 +383,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (EpisodeError, RuntimeError, ValueError, TypeError, ArithmeticError, GymnasiumError) as exc:
         print(f"{prog}: run failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return EXIT_CODES["run_failed"]
+    except OSError as exc:  # a file the run directory's own checks did not name (they raise RunDirError)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"{prog}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_CODES["run_dir"]
 
 
 if __name__ == "__main__":

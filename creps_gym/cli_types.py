@@ -60,10 +60,14 @@ def key_value(text: str) -> tuple[str, Any]:
         raise argparse.ArgumentTypeError(
             f"expected KEY=VALUE (VALUE in JSON or a plain string), got {text!r}"
         )
+    from creps_gym._validation import load_json
+
     try:
-        return key, json.loads(raw)
+        return key, load_json(raw, key)
     except json.JSONDecodeError:
         return key, raw
+    except ValueError as exc:  # nested too deeply
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def optimizer_name(text: str) -> str:

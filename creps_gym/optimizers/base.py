@@ -28,12 +28,12 @@ import zipfile
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import Any, BinaryIO, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_bool, check_positive_int
+from creps_gym._validation import as_float_array, check_bool, check_positive_int, load_json
 
 __all__ = [
     "AskTellOptimizer",
@@ -142,15 +142,17 @@ def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
     return path
 
 
-def load_state(path: str | os.PathLike[str]) -> dict[str, Any]:
+def load_state(path: str | os.PathLike[str] | BinaryIO) -> dict[str, Any]:
     """Read a state dict written by :func:`save_state` (never unpickles anything).
+
+    ``path`` may also be a binary file opened for reading (a seekable stream).
 
     A file that is not such a checkpoint (truncated, empty, a ``.npy``, a JSON document that is not an
     object, an unknown non-finite marker) raises ``ValueError`` naming ``path``; a missing one
     ``FileNotFoundError``.
     """
     try:
-        data = np.load(Path(path), allow_pickle=False)
+        data = np.load(path if hasattr(path, "read") else Path(path), allow_pickle=False)
     except FileNotFoundError:
         raise
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
@@ -161,7 +163,7 @@ def load_state(path: str | os.PathLike[str]) -> dict[str, Any]:
         if JSON_KEY not in data.files:
             raise ValueError(f"path: expected a creps_gym checkpoint with a {JSON_KEY!r} entry, got {path}")
         try:
-            document = json.loads(data[JSON_KEY].tobytes().decode())
+            document = load_json(data[JSON_KEY].tobytes().decode(), f"{path}: {JSON_KEY}")
             if not isinstance(document, dict):
                 raise ValueError(f"a JSON {type(document).__name__}, not an object")
             state: dict[str, Any] = _decode_non_finite(document)

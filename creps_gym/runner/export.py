@@ -26,7 +26,7 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from creps_gym.runner.history import History, atomic_write_text
+from creps_gym.runner.history import History
 
 __all__ = [
     "IOH_COLUMNS",
@@ -86,5 +86,13 @@ def iohanalyzer_text(histories: Sequence[History], mix_envs: bool = False) -> st
 def write_iohanalyzer(
     histories: Sequence[History], path: str | os.PathLike[str], *, mix_envs: bool = False
 ) -> Path:
-    """Write the rows of :func:`iohanalyzer_rows` to ``path`` (atomically); returns the path."""
-    return atomic_write_text(path, iohanalyzer_text(histories, mix_envs))
+    """Write the rows of :func:`iohanalyzer_rows` to ``path`` (atomically); returns the file written.
+
+    A link is followed (its target is replaced); a target that is not a regular file, or that is a run
+    directory's own file, raises ``ValueError`` (:func:`creps_gym.runner.files.write_output`).
+    """
+    from creps_gym.runner.files import write_output
+    from creps_gym.runner.rundir import RunDir
+
+    text = iohanalyzer_text(histories, mix_envs)
+    return write_output(path, text.encode("utf-8"), protected=RunDir.owns)

@@ -218,7 +218,7 @@ class Runner:
             self._elapsed_before = float(state["elapsed"])
         except RunDirError:
             raise
-        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
             raise run_dir.damaged(RunDir.CHECKPOINT, exc, RESTART) from None
 
     def _checkpoint_history(self, run_dir: RunDir, state: dict[str, Any]) -> History:
@@ -380,7 +380,7 @@ class Runner:
         """Append an iteration's record to the log and to the checksum the checkpoints keep."""
         if self.run_dir is not None:
             entry = record.to_dict()
-            self.run_dir.append_log(entry)
+            self.run_dir.append_log(entry, log_crc=self._log_crc)
             self._log_crc = chain_crc(self._log_crc, entry)
 
     def _log(self, entry: dict[str, Any]) -> None:

@@ -11,6 +11,7 @@ from run directories, grouping them by optimiser. Runs of different envs are ref
 
 from __future__ import annotations
 
+import io
 import os
 from collections import Counter
 from collections.abc import Mapping, Sequence
@@ -22,10 +23,11 @@ from numpy.typing import NDArray
 
 from creps_gym.optimizers.adapters.base import import_optional
 from creps_gym.runner.export import check_one_env, env_key
+from creps_gym.runner.files import output_target, write_output
 from creps_gym.runner.history import History
 from creps_gym.runner.rundir import RunDir
 
-__all__ = ["load_history", "plot_histories", "plot_run_dirs"]
+__all__ = ["figure_bytes", "load_history", "plot_histories", "plot_run_dirs", "save_figure"]
 
 
 def _stack(runs: Sequence[History], name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -76,7 +78,7 @@ def plot_histories(
     groups : mapping of str to sequence of History
         Label -> runs (e.g. one optimiser over several seeds).
     path : path-like, optional
-        Where to save the figure (PNG, PDF, ... by extension).
+        Where to save the figure (see :func:`save_figure`).
     band : (float, float)
         Quantiles of the shaded band (default the inter-quartile range).
     title : str, optional
@@ -120,8 +122,27 @@ def plot_histories(
         axis.legend(fontsize="small")
     figure.suptitle(title if title is not None else " / ".join(envs))
     if path is not None:
-        figure.savefig(Path(path), dpi=120)
+        save_figure(figure, path)
     return figure
+
+
+def figure_bytes(figure: Any, image_format: str = "png") -> bytes:
+    """The figure as an image file's content (``"png"``, ``"pdf"``, ``"svg"``, ...)."""
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format=image_format, dpi=120)
+    return buffer.getvalue()
+
+
+def save_figure(figure: Any, path: str | os.PathLike[str]) -> Path:
+    """Write ``figure`` to exactly ``path``, in the format of its extension (PNG without one).
+
+    A link is followed (its target is replaced); a target that is not a regular file, or that is a run
+    directory's own file, raises ``ValueError`` (:func:`creps_gym.runner.files.write_output`), and so
+    does an extension matplotlib cannot write. Returns the file written.
+    """
+    output_target(path, protected=RunDir.owns)  # refused before drawing
+    suffix = Path(path).suffix.lstrip(".").lower()
+    return write_output(path, figure_bytes(figure, suffix or "png"), protected=RunDir.owns)
 
 
 def load_history(path: str | os.PathLike[str]) -> History:

@@ -13,8 +13,10 @@ import warnings
 import zlib
 from typing import Any
 
+from creps_gym.runner import files
 from creps_gym.runner.history import History, IterationRecord
 from creps_gym.runner.rundir import RESTART, RunDir
+from creps_gym.runner.runlog import record_chain
 from creps_gym.runner.session import RunDirWarning
 
 __all__ = ["REBUILD", "chain_crc", "checkpoint_history", "history_crc", "read_history"]
@@ -82,9 +84,9 @@ def read_history(run_dir: RunDir) -> History:
     loaded = run_dir.load_checkpoint()
     state = None if loaded is None else loaded[0]
     path = run_dir.file(run_dir.HISTORY_JSON)
-    if path.exists():
+    if files.check_regular(path):
         try:
-            final = History.from_json(path)
+            final = History.from_dict(files.json_document(files.read_run_file(path), run_dir.HISTORY_JSON))
             if state is None or _is_final(run_dir, final, state):
                 return final
             problem = f"differs from the final history of {run_dir.CHECKPOINT}"
@@ -93,7 +95,8 @@ def read_history(run_dir: RunDir) -> History:
         message = f"{path}: {problem}; rebuilt from {run_dir.CHECKPOINT} and {run_dir.LOG}"
         warnings.warn(message + " (`creps-gym resume` rewrites it)", RunDirWarning, stacklevel=3)
     damaged: list[int] = []
-    records, _ = run_dir.read_log(damaged)
+    chains: dict[int, int | None] = {}
+    records, _ = run_dir.read_log(damaged, chains)
     history, legacy = History(meta=dict(run_dir.document().get("meta", {}))), False
     if state is not None and "history" in state:
         try:
@@ -103,13 +106,42 @@ def read_history(run_dir: RunDir) -> History:
     elif state is not None:
         history = checkpoint_history(run_dir, state, records) or history
     from_checkpoint = len(history)
-    for record in records:
-        if record.iteration == len(history) + 1 and history.stop_reason is None:
-            history.append(record)
+    foreign = _append_own_records(run_dir, history, records, chains)
     checkpointed = 0 if state is None or legacy else state["iteration"]
     legacy_part = from_checkpoint if legacy else None
     _warn_log_problems(run_dir, records, damaged, (len(history), checkpointed), legacy_part)
+    if foreign is not None:
+        warnings.warn(
+            f"{run_dir.file(RunDir.LOG)}: logged iteration {foreign} is not this run's (its line has no "
+            f"chain or another run's; copied or written by hand?), so the history ends at iteration "
+            f"{len(history)}; `creps-gym resume` redoes the rest",
+            RunDirWarning,
+            stacklevel=3,
+        )
     return history
+
+
+def _append_own_records(
+    run_dir: RunDir, history: History, records: list[IterationRecord], chains: dict[int, int | None]
+) -> int | None:
+    """Append the logged records that follow ``history`` and are provably this run's.
+
+    Each must carry the ``"chain"`` (:func:`~creps_gym.runner.runlog.record_chain`) of this run's
+    fingerprint and of the history before it. Returns the first iteration that does not (None if none).
+    """
+    following = [r for r in records if r.iteration > len(history)]
+    if history.stop_reason is not None or not following or following[0].iteration != len(history) + 1:
+        return None
+    fingerprint, crc = run_dir.fingerprint(), history_crc(history.records)
+    for record in following:
+        if record.iteration != len(history) + 1:
+            break
+        entry = record.to_dict()
+        if chains.get(record.iteration) != record_chain(fingerprint, crc, entry):
+            return record.iteration
+        history.append(record)
+        crc = chain_crc(crc, entry)
+    return None
 
 
 def _warn_log_problems(

@@ -24,6 +24,8 @@ file                      content
 
 A run directory is untrusted input: a damaged file raises :class:`RunDirError` (a ``ValueError``) naming
 the file and what to do, and ``config.json`` is checked by :func:`creps_gym.runner.trust.check_trusted`.
+Every file is read and written through :mod:`creps_gym.runner.files`: only regular files, never through
+a link, with bounded reads. The log's lines are described in :mod:`creps_gym.runner.runlog`.
 """
 
 from __future__ import annotations
@@ -34,15 +36,17 @@ import platform
 import re
 import sys
 import warnings
-import zlib
 from dataclasses import replace
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
 from creps_gym.optimizers.base import load_state, save_state
+from creps_gym.runner import files
 from creps_gym.runner.config import RunConfig
-from creps_gym.runner.history import History, IterationRecord, atomic_write_text
+from creps_gym.runner.history import History, IterationRecord
+from creps_gym.runner.runlog import entry_crc as _crc
+from creps_gym.runner.runlog import log_line, parse_log, record_chain
 from creps_gym.runner.session import RunDirError, RunDirWarning, RunLock
 from creps_gym.runner.trust import (
     CHECKPOINT_FORMAT,
@@ -72,10 +76,6 @@ def package_versions() -> dict[str, str]:
 _CHECKPOINT_KEYS = ("format", "fingerprint", "state_crc")
 
 
-def _crc(entry: dict[str, Any], *, sort_keys: bool = False) -> int:
-    return zlib.crc32(json.dumps(entry, allow_nan=False, sort_keys=sort_keys).encode())
-
-
 class RunDir:
     """A run directory (see the module docstring for its files)."""
 
@@ -98,6 +98,15 @@ class RunDir:
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
         self.lock = RunLock(self.path / self.LOCK)
+        self._fingerprint: str | None = None
+
+    @classmethod
+    def owns(cls, path: str | os.PathLike[str]) -> bool:
+        """Whether ``path`` is a run directory's own file: a run file's name (or a run's temporary) in a
+        folder that holds a ``config.json``, ``checkpoint.npz`` or ``log.jsonl`` (outputs never go there)."""
+        path = Path(path)
+        own = path.name in (*cls.FILES, cls.LOCK) or cls.TEMPORARY.match(path.name) is not None
+        return own and any(os.path.lexists(path.parent / n) for n in (cls.CONFIG, cls.CHECKPOINT, cls.LOG))
 
     def file(self, name: str) -> Path:
         """Path of one of the files."""
@@ -119,22 +128,34 @@ class RunDir:
         run's files (those listed in the module docstring, and nothing else) are deleted first.
         """
         run_dir = cls(path)
-        if run_dir.path.exists() and not run_dir.path.is_dir():
-            raise NotADirectoryError(f"out: expected a directory, got the file {run_dir.path}")
-        run_dir.path.mkdir(parents=True, exist_ok=True)
+        try:
+            if run_dir.path.exists() and not run_dir.path.is_dir():
+                raise NotADirectoryError(f"out: expected a directory, got the file {run_dir.path}")
+            run_dir.path.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            if isinstance(exc, NotADirectoryError) and exc.errno is None:
+                raise
+            raise files.os_failure(run_dir.path, exc, "create it", "choose another path") from None
         run_dir.lock.acquire()
         try:
             run_dir._check_new(overwrite)
+            run_dir.remove_temporaries()
+            for name in cls.FILES:
+                try:
+                    run_dir.file(name).unlink(missing_ok=True)
+                except OSError as exc:  # e.g. a folder of that name
+                    raise files.os_failure(run_dir.file(name), exc, "delete it") from None
         except BaseException:
             run_dir.lock.release()
             raise
-        run_dir.remove_temporaries()
-        for name in cls.FILES:
-            run_dir.file(name).unlink(missing_ok=True)
         document = {"config": config.to_dict(), "meta": meta}
-        atomic_write_text(run_dir.file(cls.CONFIG), json.dumps(document, indent=1, allow_nan=False) + "\n")
-        atomic_write_text(run_dir.file(cls.VERSIONS), json.dumps(package_versions(), indent=1) + "\n")
+        run_dir.write_file(cls.CONFIG, json.dumps(document, indent=1, allow_nan=False) + "\n")
+        run_dir.write_file(cls.VERSIONS, json.dumps(package_versions(), indent=1) + "\n")
         return run_dir
+
+    def write_file(self, name: str, data: str | bytes) -> None:
+        """Replace the file ``name`` atomically (:func:`creps_gym.runner.files.write_run_file`)."""
+        files.write_run_file(self.file(name), data.encode() if isinstance(data, str) else data)
 
     def _check_new(self, overwrite: bool) -> None:
         entries = sorted(
@@ -164,7 +185,13 @@ class RunDir:
     def open(cls, path: str | os.PathLike[str]) -> RunDir:
         """An existing run directory (``FileNotFoundError`` naming the path if it is not one)."""
         run_dir = cls(path)
-        if not run_dir.file(cls.CONFIG).is_file():
+        try:
+            os.stat(run_dir.path)
+        except FileNotFoundError:
+            pass
+        except OSError as exc:  # e.g. a name too long
+            raise files.os_failure(run_dir.path, exc, "open it", "check the path") from None
+        if not files.check_regular(run_dir.file(cls.CONFIG)):  # a link or a FIFO is refused
             extra = ""
             if run_dir.file(cls.CHECKPOINT).exists():
                 extra = f" ({cls.CHECKPOINT} without its {cls.CONFIG} cannot be matched with a configuration)"
@@ -176,7 +203,8 @@ class RunDir:
     def document(self) -> dict[str, Any]:
         """``config.json``'s content ``{"config": ..., "meta": ...}`` (:class:`RunDirError` if damaged)."""
         try:
-            document = json.loads(self.file(self.CONFIG).read_text(encoding="utf-8"))
+            data = files.read_run_file(self.file(self.CONFIG)).decode("utf-8")
+            document = files.json_document(data, self.CONFIG)
             if not isinstance(document, dict) or not isinstance(document.get("config"), dict):
                 raise ValueError("expected a JSON object with a 'config' object")
         except (OSError, ValueError) as exc:
@@ -202,47 +230,49 @@ class RunDir:
         check_trusted(config, str(self.file(self.CONFIG)))
         return replace(config, ray_address=None)
 
-    # -- log -------------------------------------------------------------------------------------------------
-    def append_log(self, entry: dict[str, Any]) -> None:
-        """Append one JSON line (flushed), ending with the ``crc32`` of the rest, so damage is found.
+    def fingerprint(self) -> str:
+        """The :func:`~creps_gym.runner.trust.config_fingerprint` of ``config.json``'s configuration.
 
-        A line cut by a crash is closed first so it stays one bad line.
+        It imports nothing (unlike :meth:`config`, it does not check the names in it).
         """
-        path = self.file(self.LOG)
-        prefix = ""
-        if path.exists() and path.stat().st_size > 0:
-            with open(path, "rb") as stream:
-                stream.seek(-1, os.SEEK_END)
-                prefix = "" if stream.read(1) == b"\n" else "\n"
-        with open(path, "a", encoding="utf-8") as stream:
-            stream.write(prefix + json.dumps({**entry, "crc32": _crc(entry)}, allow_nan=False) + "\n")
-            stream.flush()
+        data = dict(self.document()["config"])
+        data.setdefault("context_draws", "reset")
+        try:
+            return config_fingerprint(RunConfig.from_dict(data))
+        except (TypeError, ValueError) as exc:
+            raise self.damaged(self.CONFIG, exc, "restore it from a backup or start a new run") from None
+
+    # -- log -------------------------------------------------------------------------------------------------
+    def append_log(self, entry: dict[str, Any], *, log_crc: int | None = None) -> None:
+        """Append one JSON line, ending with the ``crc32`` of the rest, so damage is found.
+
+        An iteration record passes ``log_crc``, the checksum of the iterations before it: the line then
+        gets its ``"chain"`` (:func:`record_chain`). A line cut by a crash is closed first so it stays one
+        bad line.
+        """
+        if log_crc is not None:
+            if self._fingerprint is None:
+                self._fingerprint = self.fingerprint()
+            entry = {**entry, "chain": record_chain(self._fingerprint, log_crc, entry)}
+        files.append_run_file(self.file(self.LOG), log_line(entry))
 
     def read_log(
-        self, damaged: list[int] | None = None
+        self, damaged: list[int] | None = None, chains: dict[int, int | None] | None = None
     ) -> tuple[list[IterationRecord], list[dict[str, Any]]]:
         """Iteration records (last copy of each, in order) and events.
 
         Damaged lines are never skipped silently: their (1-based) numbers are appended to ``damaged`` when
-        it is given, else a :class:`RunDirWarning` names them.
+        it is given, else a :class:`RunDirWarning` names them. ``chains`` gets each kept record's
+        ``"chain"`` (None if its line has none).
         """
-        records: dict[int, IterationRecord] = {}
-        events: list[dict[str, Any]] = []
-        bad: list[int] = []
         path = self.file(self.LOG)
-        data = path.read_bytes() if path.exists() else b""
-        for number, line in enumerate(data.splitlines(), 1):
-            try:
-                entry = json.loads(line.decode("utf-8"))
-                if entry.pop("crc32", None) not in (None, _crc(entry)):  # (older logs have none)
-                    raise ValueError("checksum mismatch")
-                if "event" in entry:
-                    events.append(entry)
-                else:
-                    record = IterationRecord.from_dict(entry)
-                    records[record.iteration] = record
-            except (ValueError, KeyError, TypeError, AttributeError):
-                bad.append(number)
+        try:
+            data = files.read_run_file(path)
+        except FileNotFoundError:
+            data = b""
+        records, events, bad, found = parse_log(data, self.LOG)
+        if chains is not None:
+            chains.update(found)
         if damaged is not None:
             damaged.extend(bad)
         elif bad:
@@ -256,7 +286,10 @@ class RunDir:
         """
         stale = sorted(p for p in self.path.iterdir() if self.TEMPORARY.match(p.name))
         for path in stale:
-            path.unlink(missing_ok=True)
+            try:
+                path.unlink(missing_ok=True)
+            except OSError as exc:  # e.g. a folder of that name
+                raise files.os_failure(path, exc, "delete this temporary file") from None
         return stale
 
     # -- checkpoint ------------------------------------------------------------------------------------------
@@ -267,8 +300,13 @@ class RunDir:
         flat = {"format": CHECKPOINT_FORMAT, "fingerprint": config_fingerprint(config), **state}
         flat["state_crc"] = _crc(state, sort_keys=True)  # the loop's state is checked as a whole
         flat.update({f"optimizer.{key}": value for key, value in optimizer_state.items()})
-        path = save_state(flat, self.file(self.CHECKPOINT))
-        os.chmod(path, self.file(self.CONFIG).stat().st_mode & 0o777)  # one mode for all the run's files
+        path = self.file(self.CHECKPOINT)
+        files.check_regular(path)
+        try:
+            save_state(flat, path)
+            os.chmod(path, os.lstat(self.file(self.CONFIG)).st_mode & 0o777)  # one mode for the run's files
+        except OSError as exc:
+            raise files.os_failure(path, exc, "write it") from None
         return path
 
     def load_checkpoint(
@@ -280,10 +318,13 @@ class RunDir:
         optimiser, ...) raises :class:`RunDirError`, and so does a damaged one.
         """
         path = self.file(self.CHECKPOINT)
-        if not path.exists():
+        try:
+            stream = files.open_binary(path)
+        except FileNotFoundError:
             return None
         try:
-            flat = load_state(path)
+            with stream:
+                flat = load_state(stream)
         except Exception as exc:  # an untrusted file: every way of failing to parse it is damage
             raise self.damaged(self.CHECKPOINT, exc, RESTART) from None
         if flat.get("format") not in (CHECKPOINT_FORMAT, *LEGACY_FORMATS):
@@ -326,18 +367,19 @@ class RunDir:
         }
         written = []
         for name, text in texts.items():
-            path = self.file(name)
             if only_changed and self._holds(name, text):
                 continue
-            atomic_write_text(path, text)
+            self.write_file(name, text)
             written.append(name)
         return written
 
     def _holds(self, name: str, text: str) -> bool:
         """Whether the file ``name`` holds ``text`` (for JSON: the same document, keys in any order)."""
         try:
-            found = self.file(name).read_bytes().decode("utf-8")
-            return json.loads(found) == json.loads(text) if name.endswith(".json") else found == text
+            found = files.read_run_file(self.file(name)).decode("utf-8")
+            if name.endswith(".json"):
+                return files.json_document(found, name) == json.loads(text)
+            return found == text
         except (OSError, ValueError):
             return False
 

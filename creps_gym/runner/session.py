@@ -68,8 +68,10 @@ class RunLock:
 
     def _open_locked(self) -> int:
         """A descriptor of the lock file on disk, with the ``flock`` held."""
+        from creps_gym.runner.files import open_run_file  # (it imports this module)
+
         while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = open_run_file(self.path, os.O_RDWR | os.O_CREAT)  # never through a link
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
@@ -77,7 +79,7 @@ class RunLock:
                 os.close(fd)
                 raise self._refuse(owner) from None
             try:  # a writer that just ended may have deleted the file we opened: then lock the new one
-                if os.fstat(fd).st_ino == os.stat(self.path).st_ino:
+                if os.fstat(fd).st_ino == os.lstat(self.path).st_ino:
                     return fd
             except FileNotFoundError:
                 pass
@@ -100,9 +102,15 @@ class RunLock:
                     RunDirWarning,
                     stacklevel=3,
                 )
-        os.ftruncate(fd, 0)
-        os.lseek(fd, 0, os.SEEK_SET)
-        os.write(fd, json.dumps({"pid": os.getpid(), "host": socket.gethostname()}).encode())
+        try:
+            os.ftruncate(fd, 0)
+            os.lseek(fd, 0, os.SEEK_SET)
+            os.write(fd, json.dumps({"pid": os.getpid(), "host": socket.gethostname()}).encode())
+        except OSError as exc:  # e.g. a full disk
+            os.close(fd)
+            from creps_gym.runner.files import os_failure
+
+            raise os_failure(self.path, exc, "write the lock file") from None
         self._fd = fd
 
     def release(self) -> None:
@@ -111,7 +119,7 @@ class RunLock:
             return
         fd, self._fd = self._fd, None
         try:
-            if os.fstat(fd).st_ino == os.stat(self.path).st_ino:
+            if os.fstat(fd).st_ino == os.lstat(self.path).st_ino:
                 self.path.unlink()
         except FileNotFoundError:
             pass

@@ -1,0 +1,260 @@
+"""The one way the runner opens files: run-directory files never followed, outputs written where named.
+
+**Run-directory files** (:func:`read_run_file`, :func:`open_run_file`, :func:`append_run_file`,
+:func:`write_run_file`). A run directory is untrusted input, so each of its files is either absent or a
+regular file: a symbolic link, a FIFO, a device, a socket or a directory in a file's place raises
+:class:`~creps_gym.runner.session.RunDirError` naming the file (CLI exit code 3). Files are opened with
+``O_NOFOLLOW`` and ``O_NONBLOCK`` and checked again on the open descriptor, so a link planted in a run
+directory never makes the runner read or write anything outside it, and a FIFO never blocks it. Reads are
+bounded: a file larger than its limit (:data:`LIMITS`, :data:`DEFAULT_LIMIT`) is refused before it is
+read. Writes are atomic (a new temporary file in the same folder, then a rename) or appends. An
+operating-system error (disk full, read-only file system, file size limit, name too long) is a
+:class:`RunDirError` naming the file and the cause.
+
+**Outputs** (:func:`write_output`: ``plot -o``, ``export -o``, :func:`~creps_gym.runner.plot_histories`'s
+path). The user names them, so a symbolic link is followed and its target is replaced (atomically); a
+target that is not a regular file (a FIFO, a device, a directory) and a run directory's own file are
+refused with a ``ValueError`` (CLI exit code 2).
+
+**JSON** (:func:`json_document`): a document nested deeper than :data:`MAX_DEPTH` is a ``ValueError``,
+never a ``RecursionError``.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import stat
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, BinaryIO
+
+from creps_gym._validation import MAX_JSON_DEPTH as MAX_DEPTH
+from creps_gym._validation import load_json
+from creps_gym.runner.session import RunDirError
+
+__all__ = [
+    "DEFAULT_LIMIT",
+    "LIMITS",
+    "MAX_DEPTH",
+    "append_run_file",
+    "check_regular",
+    "file_kind",
+    "json_document",
+    "open_binary",
+    "open_run_file",
+    "os_failure",
+    "output_target",
+    "read_run_file",
+    "write_output",
+    "write_run_file",
+]
+
+MiB = 1 << 20
+#: Largest size read from a run directory's file, by name (bytes); other files: :data:`DEFAULT_LIMIT`.
+#: Generous for real runs: a log line is about 0.5 kB, so 1 GiB holds about two million iterations.
+LIMITS = {"config.json": 16 * MiB, "versions.json": 16 * MiB, "run.lock": 4096}
+DEFAULT_LIMIT = 1024 * MiB
+
+_KINDS = (
+    (stat.S_ISLNK, "a symbolic link"),
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def file_kind(mode: int) -> str:
+    """What an ``st_mode`` is, in words ("a regular file", "a symbolic link", "a FIFO", ...)."""
+    if stat.S_ISREG(mode):
+        return "a regular file"
+    return next((text for test, text in _KINDS if test(mode)), "a special file")
+
+
+def _refuse(path: Path, kind: str) -> RunDirError:
+    return RunDirError(
+        f"{path}: expected a regular file, got {kind} (a run directory's files are never followed or read "
+        "unless they are regular files); remove it, or restore the run directory from a backup"
+    )
+
+
+#: What to do after an operating-system error on a run directory's file.
+RESUME = (
+    "the files written before it are intact: free space or fix the file, then `creps-gym resume` "
+    "continues from the last checkpoint"
+)
+
+
+def os_failure(path: str | os.PathLike[str], exc: OSError, doing: str, advice: str = RESUME) -> RunDirError:
+    """The error for an operating-system failure on a run directory's file: names it and the cause."""
+    cause = exc.strerror or type(exc).__name__
+    code = errno.errorcode.get(exc.errno or 0, "")
+    return RunDirError(f"{path}: cannot {doing} ({cause}{', ' + code if code else ''}); {advice}")
+
+
+def check_regular(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` exists (as a regular file); :class:`RunDirError` if it is anything else."""
+    path = Path(path)
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return False
+    except OSError as exc:
+        raise os_failure(path, exc, "read it") from None
+    if not stat.S_ISREG(mode):
+        raise _refuse(path, file_kind(mode))
+    return True
+
+
+def open_run_file(path: str | os.PathLike[str], flags: int = os.O_RDONLY, mode: int = 0o644) -> int:
+    """A descriptor of a run directory's regular file (see the module docstring), never through a link.
+
+    ``FileNotFoundError`` if it is missing (and ``flags`` has no ``O_CREAT``).
+    """
+    path = Path(path)
+    check_regular(path)
+    nofollow = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(path, flags | nofollow, mode)
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        if exc.errno in (errno.ELOOP, errno.ENXIO, errno.EISDIR):  # a link, FIFO or folder planted since
+            raise _refuse(path, "a symbolic link or special file") from None
+        raise os_failure(path, exc, "open it") from None
+    found = os.fstat(fd).st_mode
+    if not stat.S_ISREG(found):
+        os.close(fd)
+        raise _refuse(path, file_kind(found))
+    return fd
+
+
+def _limit(path: Path, limit: int | None) -> int:
+    return LIMITS.get(path.name, DEFAULT_LIMIT) if limit is None else limit
+
+
+def open_binary(path: str | os.PathLike[str], limit: int | None = None) -> BinaryIO:
+    """A run directory's regular file opened for reading, its size checked against its limit."""
+    path = Path(path)
+    fd = open_run_file(path)
+    size, most = os.fstat(fd).st_size, _limit(path, limit)
+    if size > most:
+        os.close(fd)
+        raise RunDirError(
+            f"{path}: expected at most {most} bytes, got {size} (not written by a creps_gym run); remove "
+            "it, or restore the run directory from a backup"
+        )
+    return os.fdopen(fd, "rb")
+
+
+def read_run_file(path: str | os.PathLike[str], limit: int | None = None) -> bytes:
+    """The content of a run directory's regular file, at most its limit (:data:`LIMITS`) in bytes."""
+    path = Path(path)
+    with open_binary(path, limit) as stream:
+        try:
+            data = stream.read(_limit(path, limit) + 1)
+        except OSError as exc:
+            raise os_failure(path, exc, "read it") from None
+    if len(data) > _limit(path, limit):  # it grew while being read
+        raise RunDirError(f"{path}: expected at most {_limit(path, limit)} bytes, got more")
+    return data
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view) :]
+
+
+def append_run_file(path: str | os.PathLike[str], data: bytes) -> None:
+    """Append ``data`` to a run directory's file (created if missing); a line cut by a crash is closed."""
+    path = Path(path)
+    fd = open_run_file(path, os.O_RDWR | os.O_APPEND | os.O_CREAT)
+    try:
+        size = os.fstat(fd).st_size
+        if size and os.pread(fd, 1, size - 1) != b"\n":
+            data = b"\n" + data
+        _write_all(fd, data)
+    except OSError as exc:
+        raise os_failure(path, exc, "append to it") from None
+    finally:
+        os.close(fd)
+
+
+def _atomic_write(path: Path, data: bytes, failure: Callable[[Path, OSError], Exception]) -> Path:
+    """Write ``data`` to ``path`` through a new temporary file in its folder and a rename."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        if os.path.lexists(tmp):  # our own temporary, left by a killed process of this id
+            os.unlink(tmp)
+        fd = os.open(tmp, flags, 0o644)
+        try:
+            _write_all(fd, data)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except OSError as exc:
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+        raise failure(path, exc) from None
+    return path
+
+
+def write_run_file(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Replace a run directory's file (absent or regular, see the module docstring) atomically."""
+    path = Path(path)
+    check_regular(path)
+    return _atomic_write(path, data, lambda p, exc: os_failure(p, exc, "write it"))
+
+
+def output_target(
+    path: str | os.PathLike[str], *, name: str = "path", protected: Callable[[Path], bool] | None = None
+) -> Path:
+    """The file :func:`write_output` would replace (a link's target); ``ValueError`` if it must not."""
+    target = Path(os.path.realpath(path))
+    try:
+        mode = os.stat(target).st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as exc:
+        raise ValueError(f"{name}: cannot write {path} ({exc.strerror})") from None
+    via = "" if target == Path(os.path.abspath(path)) else f" (the target of {path})"
+    if mode is not None and not stat.S_ISREG(mode):
+        kind = file_kind(mode)
+        raise ValueError(f"{name}: expected a regular file or a new file, got {kind} {target}{via}")
+    if protected is not None and protected(target):
+        raise ValueError(
+            f"{name}: expected a file outside a run directory's own files, got {target}{via}; choose "
+            "another name"
+        )
+    return target
+
+
+def write_output(
+    path: str | os.PathLike[str],
+    data: bytes,
+    *,
+    name: str = "path",
+    protected: Callable[[Path], bool] | None = None,
+) -> Path:
+    """Write a file the user named (see the module docstring); returns the file written.
+
+    A symbolic link is followed: its target is replaced. ``ValueError`` naming ``name`` for a target that
+    is not a regular file or that ``protected`` refuses (a run directory's own file); ``OSError`` naming
+    the file for a target that cannot be written (a full disk, a read-only file system, ...).
+    """
+    target = output_target(path, name=name, protected=protected)
+
+    def failure(where: Path, exc: OSError) -> OSError:
+        return type(exc)(exc.errno, exc.strerror, str(where))
+
+    return _atomic_write(target, data, failure)
+
+
+def json_document(text: str | bytes, source: str) -> Any:
+    """``json.loads(text)``; a ``ValueError`` naming ``source`` if it nests deeper than :data:`MAX_DEPTH`."""
+    return load_json(text, source, MAX_DEPTH)

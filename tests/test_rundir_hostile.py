@@ -468,3 +468,15 @@ def test_a_generator_state_out_of_range_gives_exit_3_naming_the_checkpoint(place
     code, error = hostile(capsys, tmp_path, "resume", out, "--no-progress")
     assert code == 3
     one_error_naming(error, out / RunDir.CHECKPOINT)
+
+
+def test_the_threat_model_in_the_runner_guide_quotes_the_limits_the_code_applies():
+    from creps_gym._validation import MAX_JSON_DEPTH
+    from creps_gym.runner import files
+
+    guide = (Path(__file__).resolve().parent.parent / "docs" / "runner.md").read_text(encoding="utf-8")
+    section = guide[guide.index("### Threat model") : guide.index("- **No code from a run directory.**")]
+    quoted = " ".join(section.split())
+    assert files.LIMITS == {"config.json": 16 << 20, "versions.json": 16 << 20, "run.lock": 4096}
+    assert "`config.json` and `versions.json` 16 MiB, `run.lock` 4 kB, every other file 1 GiB" in quoted
+    assert files.DEFAULT_LIMIT == 1 << 30 and f"more than {MAX_JSON_DEPTH} levels deep" in quoted

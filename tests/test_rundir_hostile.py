@@ -29,7 +29,7 @@ from helpers import SPHERE, cli_command
 from creps_gym.cli import main
 from creps_gym.optimizers import CREPSCMA
 from creps_gym.optimizers.base import JSON_KEY, load_state, save_state
-from creps_gym.runner import RunDir, RunDirError, RunDirWarning, load_history, resume, run
+from creps_gym.runner import History, RunDir, RunDirError, RunDirWarning, load_history, resume, run
 from creps_gym.runner.export import write_iohanalyzer
 from creps_gym.runner.watchdog import child_pids
 
@@ -312,6 +312,17 @@ def test_the_runs_own_lines_after_the_checkpoint_are_read_and_a_resume_is_bit_id
     assert resume(out).equals(templates["history"])
 
 
+def test_a_history_json_that_no_checkpoint_closes_is_not_exported(place, templates):
+    out = place("crashed")  # a forged history.json beside a run whose checkpoint is gone
+    (out / RunDir.CHECKPOINT).unlink()
+    forged = History.from_dict(templates["history"].to_dict())
+    forged.records[0].mean_return, forged.stop_reason = 1.0, "iterations"
+    forged.to_json(out / RunDir.HISTORY_JSON)
+    with pytest.warns(RunDirWarning, match="no checkpoint.npz closes it"):
+        history = load_history(out)
+    assert len(history) == 3 and history.stop_reason is None and history.records[0].mean_return != 1.0
+
+
 def strip_chains(path: Path) -> None:
     """The log as written before lines had a chain."""
     lines = []
@@ -448,6 +459,12 @@ def test_a_deep_json_flag_gives_exit_2(tmp_path, capsys, flag):
     assert exit_.value.code == 2
     assert f"argument {flag}: epsilon: expected JSON nested at most" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+def test_history_from_json_of_deep_json_is_a_value_error_naming_the_file(tmp_path):
+    (tmp_path / "h.json").write_text(DEEP)
+    with pytest.raises(ValueError, match=r"h\.json: expected JSON nested at most"):
+        History.from_json(tmp_path / "h.json")
 
 
 def test_a_deep_json_in_an_optimizer_npz_is_a_value_error_naming_the_file(tmp_path):

@@ -38,6 +38,7 @@ __all__ = [
     "LIMITS",
     "MAX_DEPTH",
     "append_run_file",
+    "atomic_write",
     "check_regular",
     "file_kind",
     "json_document",
@@ -204,6 +205,15 @@ def _atomic_write(path: Path, data: bytes, failure: Callable[[Path, OSError], Ex
     return path
 
 
+def atomic_write(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Replace ``path`` (a link there is replaced, not followed) atomically; ``OSError`` naming it."""
+
+    def failure(where: Path, exc: OSError) -> OSError:
+        return type(exc)(exc.errno, exc.strerror, str(where))
+
+    return _atomic_write(Path(path), data, failure)
+
+
 def write_run_file(path: str | os.PathLike[str], data: bytes) -> Path:
     """Replace a run directory's file (absent or regular, see the module docstring) atomically."""
     path = Path(path)
@@ -247,12 +257,7 @@ def write_output(
     is not a regular file or that ``protected`` refuses (a run directory's own file); ``OSError`` naming
     the file for a target that cannot be written (a full disk, a read-only file system, ...).
     """
-    target = output_target(path, name=name, protected=protected)
-
-    def failure(where: Path, exc: OSError) -> OSError:
-        return type(exc)(exc.errno, exc.strerror, str(where))
-
-    return _atomic_write(target, data, failure)
+    return atomic_write(output_target(path, name=name, protected=protected), data)
 
 
 def json_document(text: str | bytes, source: str) -> Any:

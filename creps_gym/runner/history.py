@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._validation import load_json
+
 __all__ = ["History", "IterationRecord", "atomic_write_text", "decode_float", "encode_float"]
 
 FIELDS = ("iteration", "episodes", "mean_return", "eval_return", "eval_regret", "wall_time")
@@ -43,15 +45,13 @@ def decode_float(value: Any) -> float:
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "w", encoding="utf-8", newline="") as stream:
-        stream.write(text)
-        stream.flush()
-        os.fsync(stream.fileno())
-    os.replace(tmp, path)
-    return path
+    """Write ``text`` to ``path`` through a new temporary file in the same folder and a rename.
+
+    ``path`` itself is replaced (a link there is not followed); ``OSError`` naming it if it cannot be.
+    """
+    from creps_gym.runner.files import atomic_write
+
+    return atomic_write(path, text.encode("utf-8"))
 
 
 def _same_float(a: float, b: float) -> bool:
@@ -177,7 +177,7 @@ class History:
     @classmethod
     def from_json(cls, path: str | os.PathLike[str]) -> History:
         """Read a history written by :meth:`to_json`."""
-        return cls.from_dict(json.loads(Path(path).read_text(encoding="utf-8")))
+        return cls.from_dict(load_json(Path(path).read_text(encoding="utf-8"), str(path)))
 
     # -- CSV -------------------------------------------------------------------------------------------------
     def to_csv(self, path: str | os.PathLike[str]) -> Path:

@@ -87,9 +87,11 @@ def read_history(run_dir: RunDir) -> History:
     if files.check_regular(path):
         try:
             final = History.from_dict(files.json_document(files.read_run_file(path), run_dir.HISTORY_JSON))
-            if state is None or _is_final(run_dir, final, state):
+            if state is not None and _is_final(run_dir, final, state):
                 return final
             problem = f"differs from the final history of {run_dir.CHECKPOINT}"
+            if state is None:  # a run ends with a checkpoint: nothing vouches for this one
+                problem = f"no {run_dir.CHECKPOINT} closes it"
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             problem = f"damaged ({type(exc).__name__}: {exc})"
         message = f"{path}: {problem}; rebuilt from {run_dir.CHECKPOINT} and {run_dir.LOG}"

@@ -152,15 +152,18 @@ def open_binary(path: str | os.PathLike[str], limit: int | None = None) -> Binar
 
 def read_run_file(path: str | os.PathLike[str], limit: int | None = None) -> bytes:
     """The content of a run directory's regular file, at most its limit (:data:`LIMITS`) in bytes."""
-    path = Path(path)
-    with open_binary(path, limit) as stream:
+    path, most = Path(path), _limit(Path(path), limit)
+    chunks, total = [], 0
+    with open_binary(path, limit) as stream:  # read in chunks: a live run's log may grow meanwhile
         try:
-            data = stream.read(_limit(path, limit) + 1)
+            while total <= most and (chunk := stream.read(min(most + 1 - total, 16 * MiB))):
+                chunks.append(chunk)
+                total += len(chunk)
         except OSError as exc:
             raise os_failure(path, exc, "read it") from None
-    if len(data) > _limit(path, limit):  # it grew while being read
-        raise RunDirError(f"{path}: expected at most {_limit(path, limit)} bytes, got more")
-    return data
+    if total > most:
+        raise RunDirError(f"{path}: expected at most {most} bytes, got more")
+    return b"".join(chunks)
 
 
 def _write_all(fd: int, data: bytes) -> None:

@@ -486,3 +486,49 @@ def test_more_workers_than_samples_are_capped_at_the_samples():
         assert backend.num_envs == 8
     finally:
         backend.close()
+
+
+class _Misbehaving(CREPSCMA):
+    """CREPS-CMA whose ``ask`` or ``stop`` output breaks the protocol as ``fault`` says."""
+
+    fault = ""
+
+    def ask(self, contexts):
+        params = super().ask(contexts)
+        return params + 0j if self.fault == "complex ask" else params
+
+    def recommend(self, contexts):
+        params = super().recommend(contexts)
+        return params.astype(np.complex128) if self.fault == "complex recommend" else params
+
+    def stop(self):
+        return {"str": "bye", "list": ["tolx"], "name": {"$\\frac{$": 1}, "key": {1: 1}}.get(self.fault, {})
+
+
+@pytest.mark.parametrize(
+    ("fault", "error", "message"),
+    [
+        (
+            "complex ask",
+            TypeError,
+            r"optimizer\.ask\(\) output: expected an array of real numbers, got a complex",
+        ),
+        ("str", TypeError, r"optimizer\.stop\(\): expected a dict of the met stop criteria .* got str 'bye'"),
+        ("list", TypeError, r"optimizer\.stop\(\): expected a dict .* got list"),
+        ("name", ValueError, r"optimizer\.stop\(\): expected criterion names of letters"),
+        ("key", TypeError, r"optimizer\.stop\(\): expected str criterion names, got int 1"),
+    ],
+)
+def test_optimizer_output_that_breaks_the_protocol_is_refused_not_converted(fault, error, message):
+    optimizer = _Misbehaving(4, 1, seed=0)
+    optimizer.fault = fault
+    with pytest.raises(error, match=message):
+        run(optimizer, SPHERE, 2, 8, 0, env_kwargs={"dim": 4}, eval_every=1)
+
+
+def test_complex_recommendations_are_refused_in_episodes_of_a_plain_env():
+    optimizer = _Misbehaving(1, 1, seed=0)
+    optimizer.fault = "complex recommend"
+    message = r"TypeError: optimizer\.recommend\(\) output: expected an array of real numbers, got a complex"
+    with pytest.raises(EpisodeError, match=message):
+        run(optimizer, PlainEnv(), 2, 8, 0, eval_every=1)

@@ -532,3 +532,35 @@ def test_complex_recommendations_are_refused_in_episodes_of_a_plain_env():
     message = r"TypeError: optimizer\.recommend\(\) output: expected an array of real numbers, got a complex"
     with pytest.raises(EpisodeError, match=message):
         run(optimizer, PlainEnv(), 2, 8, 0, eval_every=1)
+
+
+def test_finite_mean_never_overflows_and_keeps_the_bits_of_ordinary_means():
+    from creps_gym.envs.evaluation import finite_mean
+
+    values = np.full(14, -1.4283e308)
+    with np.errstate(over="ignore"):
+        assert np.isinf(values.mean())  # what the runner recorded before
+    assert finite_mean(values) == pytest.approx(-1.4283e308, rel=1e-12)
+    ordinary = np.random.default_rng(0).normal(size=101) * 1e3
+    assert finite_mean(ordinary) == float(ordinary.mean())  # bit for bit
+    assert finite_mean([1.0, -np.inf]) == -np.inf and math.isnan(finite_mean([np.nan, 1.0]))
+
+
+def test_returns_near_the_float_limit_give_finite_summaries_history_and_export(tmp_path):
+    """Before: every return was finite, but the mean overflowed to -inf in history.json and the export."""
+    history = run(
+        "creps",
+        SPHERE,
+        2,
+        14,
+        0,
+        env_kwargs={"dim": 3},
+        initial_mean=6.9e153,
+        initial_std=1e140,
+        run_dir=tmp_path,
+    )
+    for column in ("mean_return", "eval_return", "eval_regret"):
+        values = history.column(column)
+        assert np.isfinite(values).all() and np.abs(values).max() > 1e308, column
+    for name in ("history.json", "history.csv", "iohanalyzer.csv"):
+        assert "inf" not in (tmp_path / name).read_text().lower(), name

@@ -40,7 +40,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym.envs.evaluation import evaluate_policy, test_contexts
+from creps_gym.envs.evaluation import evaluate_policy, finite_mean, test_contexts
 from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
 from creps_gym.runner import checks
 from creps_gym.runner.backends import Backend, EnvSource, EpisodeError, retry, run_episodes
@@ -288,7 +288,7 @@ class Runner:
             label="evaluation",
             retries=self.config.retries,
         )
-        return float(returns.mean()), math.nan
+        return finite_mean(returns), math.nan
 
     def _stop_before_evaluation(self) -> str | None:
         config = self.config
@@ -318,7 +318,7 @@ class Runner:
             if reason is None and target is not None and eval_regret <= target:
                 reason = "target_regret"
         diagnostics = {str(k): float(v) for k, v in dict(self.optimizer.diagnostics).items()}
-        counts = (self.iteration, self.episodes, float(returns.mean()))
+        counts = (self.iteration, self.episodes, finite_mean(returns))
         record = IterationRecord(*counts, eval_return, eval_regret, self.elapsed, diagnostics)
         return record, reason
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shlex
 import subprocess
 import sys
@@ -377,3 +378,73 @@ def test_a_tampered_adapter_record_is_refused_before_replay(name, tamper, match)
     tamper(state)
     with pytest.raises(ValueError, match=match):
         registry.restore_optimizer(name, state)
+
+
+# -- options are data (issue 30, items 5 and 12) -------------------------------------------------------------
+@EXTRAS
+@pytest.mark.parametrize(
+    "value", ["9**9**9", "abc", "1e-12", "__import__('os')", {"a": 1}, [1, "x"], [[[[1]]]]]
+)
+def test_cma_options_that_pycma_would_evaluate_are_refused_naming_the_option(value):
+    with pytest.raises(
+        ValueError, match=r"tolfun: expected a number, a boolean, None or a list of them .* got "
+    ):
+        CMAAdapter(2, 1, seed=0, tolfun=value)
+    with pytest.raises(ValueError, match=r"tolfun: expected a number"):
+        CMAAdapter(2, 1, seed=0, cma_options={"tolfun": value})
+
+
+@EXTRAS
+def test_cma_options_that_are_data_still_reach_pycma():
+    options = {
+        "tolfun": 1e3,
+        "CMA_elitist": True,
+        "bounds": [[-1, None], [1, 2.0]],
+        "BoundaryHandler": "BoundTransform",
+    }
+    adapter = CMAAdapter(2, 1, seed=0, **options)
+    adapter.ask(np.zeros((6, 1)))
+    assert adapter._lib.opts["tolfun"] == 1e3 and adapter._lib.opts["bounds"] == [[-1, None], [1, 2.0]]
+
+
+@EXTRAS
+def test_the_cli_refuses_a_cma_option_that_is_not_data_with_exit_2_before_writing(tmp_path, capsys):
+    """Before: ``--opt tolfun=abc`` failed with exit 1 after writing the run folder."""
+    argv = [
+        "run",
+        "--env",
+        "creps_gym/Sphere-v0",
+        "--env-kwarg",
+        "dim=2",
+        "--optimizer",
+        "cma",
+        "--seed",
+        "0",
+    ]
+    argv += [
+        "--iterations",
+        "2",
+        "--out",
+        str(tmp_path / "run"),
+        "--no-progress",
+        "--no-plot",
+        "--opt",
+        "tolfun=abc",
+    ]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "argument --opt: tolfun: expected a number, a boolean, None or a list of them" in err
+    assert "got str 'abc'" in err and not (tmp_path / "run").exists()
+
+
+@EXTRAS
+def test_resume_refuses_cma_options_in_config_json_that_are_not_data(tmp_path, capsys):
+    """Before: pycma evaluated ``"9**9"`` from config.json (``"9**9**9"`` computed for ever)."""
+    run("cma", "creps_gym/Sphere-v0", 2, 6, 0, env_kwargs={"dim": 2}, run_dir=tmp_path)
+    (tmp_path / "checkpoint.npz").unlink()  # a run folder without checkpoint: built from config.json
+    document = json.loads((tmp_path / "config.json").read_text())
+    document["config"]["optimizer_options"] = {"tolfun": "9**9"}
+    (tmp_path / "config.json").write_text(json.dumps(document))
+    assert cli.main(["resume", str(tmp_path), "--no-progress", "--no-plot"]) == 3
+    err = capsys.readouterr().err
+    assert "config.json: optimizer_options: tolfun: expected a number" in err and "got str '9**9'" in err

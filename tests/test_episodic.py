@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import subprocess
 import sys
+from decimal import Decimal
 
 import gymnasium as gym
 import numpy as np
@@ -427,3 +428,36 @@ def test_creps_cma_old_learns_goal_dependent_reaching_in_point_maze():
     assert end_return > start_return + 20.0
     goals = opt.recommend(test)[:, :2]  # the learned DMP goal follows the context
     assert min(np.corrcoef(goals[:, k], test[:, k])[0, 1] for k in range(2)) > 0.9
+
+
+class _RewardOf(PointGoal):
+    """PointGoal whose step returns a given reward object."""
+
+    def __init__(self, reward) -> None:
+        super().__init__()
+        self.reward = reward
+
+    def step(self, action):
+        observation, _, terminated, truncated, info = super().step(action)
+        return observation, self.reward, terminated, truncated, info
+
+
+@pytest.mark.parametrize(
+    "reward",
+    ["1.5", True, np.bool_(True), Decimal("1"), np.complex128(1 + 2j), 1 + 0j, np.array([1.0]), None],
+    ids=repr,
+)
+def test_an_inner_reward_that_is_not_a_real_number_is_refused_not_converted(reward):
+    controller = {"type": "linear", "indices": [0, 1, 2, 3, 6, 7], "gain_bound": 5.0}
+    env = EpisodicEnv(_RewardOf(reward), controller, GoalContext([-1.0, -1.0], [1.0, 1.0]), max_inner_steps=5)
+    env.reset(seed=0)
+    with pytest.raises(TypeError, match=rf"reward: expected a real number .* got {type(reward).__name__} "):
+        env.step(np.zeros(env.param_dim))
+
+
+@pytest.mark.parametrize("reward", [2, 1.5, np.float32(1.5), np.int64(2), np.array(1.5)], ids=repr)
+def test_real_inner_rewards_of_any_numeric_type_are_summed(reward):
+    controller = {"type": "linear", "indices": [0, 1, 2, 3, 6, 7], "gain_bound": 5.0}
+    env = EpisodicEnv(_RewardOf(reward), controller, GoalContext([-1.0, -1.0], [1.0, 1.0]), max_inner_steps=5)
+    env.reset(seed=0)
+    assert env.step(np.zeros(env.param_dim))[1] == 5 * float(reward)

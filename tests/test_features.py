@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import math
+import time
 
 import numpy as np
 import pytest
@@ -151,3 +153,47 @@ def test_rbf_features_compare_and_hash_by_value():
     assert rbf != RBFFeatures.grid([0.0], [1.0], per_dim=4) and rbf != AffineFeatures(1)
     with pytest.raises(TypeError, match="bandwidth: expected a finite number > 0, got bool"):
         RBFFeatures(1, centres=[[0.0]], bandwidth=True)
+
+
+# -- feature counts are checked before anything is enumerated (issue 30, item 6) -----------------------------
+def test_the_monomial_count_is_the_binomial_coefficient_and_the_enumerated_count():
+    from creps_gym.optimizers.features import PolynomialFeatures, count_monomials
+
+    for z, degree in [(0, 0), (0, 5), (1, 0), (1, 7), (3, 4), (5, 2), (2, 9)]:
+        count = count_monomials(z, degree)
+        assert count == math.comb(z + degree, degree) == len(PolynomialFeatures(z, degree).monomials)
+    assert count_monomials(10**6, 10**6, limit=1000) > 1000  # stops early: no huge product
+
+
+@pytest.mark.parametrize(
+    ("z", "degree", "message"),
+    [
+        (1, 100_000, r"mean_features: degree: expected a size whose arrays fit in memory .*100001 monomials"),
+        (
+            3,
+            10**12,
+            r"mean_features: degree: expected a degree whose monomials of 3 context dimensions number",
+        ),
+    ],
+)
+def test_a_polynomial_degree_whose_features_cannot_fit_is_refused_at_once_naming_the_option(
+    z, degree, message
+):
+    """Before: the monomials were enumerated until the OOM killer stopped the process."""
+    from creps_gym.optimizers import make_optimizer
+
+    for name in ("creps", "c-cma-es"):
+        start = time.perf_counter()
+        with pytest.raises(ValueError, match=message):
+            make_optimizer(name, 2, z, 0, mean_features={"name": "polynomial", "degree": degree})
+        assert time.perf_counter() - start < 5.0
+
+
+def test_the_cli_refuses_a_huge_polynomial_degree_with_exit_2_before_writing(tmp_path, capsys):
+    from creps_gym.cli import main
+
+    option = 'mean_features={"name": "polynomial", "degree": 100000}'
+    argv = ["run", "--env", "creps_gym/Sphere-v0", "--optimizer", "creps", "--iterations", "1", "--seed", "0"]
+    assert main([*argv, "--out", str(tmp_path / "run"), "--opt", option, "--no-progress", "--no-plot"]) == 2
+    assert "argument --opt: mean_features: degree: expected" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()

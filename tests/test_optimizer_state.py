@@ -5,11 +5,17 @@ Parametrised over every optimiser of this package in the registry (the adapters 
 
 from __future__ import annotations
 
+import io
+import json
+import tracemalloc
+import zipfile
+
 import numpy as np
 import pytest
 
-from creps_gym.optimizers import load_state, make_optimizer, optimizer_names, save_state
+from creps_gym.optimizers import CREPSCMA, load_state, make_optimizer, optimizer_names, save_state
 from creps_gym.optimizers.registry import optimizer_class, restore_optimizer
+from creps_gym.runner import RunDirError, resume, run
 
 NATIVE = [name for name in optimizer_names() if ".adapters." not in optimizer_class(name).__module__]
 
@@ -72,9 +78,8 @@ def test_a_corrupted_checkpoint_is_refused_at_load(name, corruption, tmp_path):
     state = _trained_state(name)
     corrupt, match = CORRUPTIONS[corruption]
     corrupt(state)
-    path = save_state(state, tmp_path / "opt.npz")
-    with pytest.raises((ValueError, TypeError), match=match):
-        restore_optimizer(name, load_state(path))
+    with pytest.raises((ValueError, TypeError), match=match):  # a string cov is refused by save_state
+        restore_optimizer(name, load_state(save_state(state, tmp_path / "opt.npz")))
 
 
 @pytest.mark.parametrize("name", NATIVE)
@@ -265,3 +270,99 @@ def test_contexts_whose_features_overflow_are_refused_and_change_nothing(name):
     after = optimizer.state_dict()
     assert all(np.array_equal(after[key], value) for key, value in before.items())
     assert np.isfinite(optimizer.ask(np.ones((3, 1)))).all()
+
+
+# -- never pickle, bounded reads (issue 30, items 4, 6 and 12) ---------------------------------------------
+class _UserState(CREPSCMA):
+    """A user optimiser whose ``state_dict`` adds ``extra`` (None: nothing)."""
+
+    extra = None
+
+    def state_dict(self):
+        state = super().state_dict()
+        if self.extra is not None:
+            state["extra"] = self.extra
+        return state
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (
+            np.array([{"a": 1}, None], dtype=object),
+            r"state\['optimizer\.extra'\]: expected a numeric array .* object",
+        ),
+        (np.array(["a", "b"]), r"state\['optimizer\.extra'\]: expected a numeric array .* got dtype <U1"),
+        (
+            np.int64(3),
+            r"state\['optimizer\.extra'\]: expected a numeric array or a JSON value .* numpy\.int64",
+        ),
+        ({"deep": [1, {2}]}, r"state\['optimizer\.extra'\]\['deep'\]\[1\]: expected .* builtins\.set"),
+        ({1: 2}, r"state\['optimizer\.extra'\]: expected str keys \(JSON\), got int 1"),
+    ],
+    ids=["object array", "str array", "np.int64", "nested set", "int key"],
+)
+def test_a_user_state_that_needs_pickle_stops_the_run_at_its_first_checkpoint(tmp_path, extra, message):
+    """Before: np.savez pickled an object array into every checkpoint, and np.int64 named no key."""
+    optimizer = _UserState(2, 1, seed=0)
+    optimizer.extra = extra
+    with pytest.raises(TypeError, match=message):
+        run(
+            optimizer,
+            "creps_gym/Sphere-v0",
+            5,
+            8,
+            0,
+            env_kwargs={"dim": 2},
+            run_dir=tmp_path,
+            checkpoint_every=1,
+        )
+    assert not (tmp_path / "checkpoint.npz").exists() and not list(tmp_path.glob("*.tmp"))
+    entries = [json.loads(line) for line in (tmp_path / "log.jsonl").read_text().splitlines()]
+    assert [e["iteration"] for e in entries if "event" not in e] == [1]  # stopped at its first checkpoint
+
+
+def _add_bomb(path, size):
+    """Add to the .npz ``path`` an entry ``bomb.npy``: ``size`` zero bytes, deflated (about size / 1000)."""
+    with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as archive:
+        with archive.open("bomb.npy", "w", force_zip64=True) as stream:
+            chunk = bytes(2**20)
+            for _ in range(size // 2**20):
+                stream.write(chunk)
+
+
+def test_a_deflated_entry_is_refused_before_it_is_decompressed(tmp_path):
+    """Before: a 64 KB entry deflated from 64 MB was decompressed (and copied) by CREPSCMA.load."""
+    path = _UserState(2, 1, seed=0).save(tmp_path / "opt.npz")
+    _add_bomb(path, 64 * 2**20)
+    assert path.stat().st_size < 2**20
+    tracemalloc.start()
+    try:
+        with pytest.raises(
+            ValueError, match=r"entry 'bomb\.npy': expected an uncompressed array, got \d+ bytes"
+        ):
+            CREPSCMA.load(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 4 * 2**20
+
+
+def test_an_entry_the_state_does_not_list_is_refused(tmp_path):
+    path = _UserState(2, 1, seed=0).save(tmp_path / "opt.npz")
+    buffer = io.BytesIO()
+    np.save(buffer, np.zeros(3))
+    with zipfile.ZipFile(path, "a") as archive:  # stored, like np.savez's entries
+        archive.writestr("unknown.npy", buffer.getvalue())
+    with pytest.raises(ValueError, match=r"unknown entries \['unknown'\] \(its manifest '__arrays__' lists"):
+        CREPSCMA.load(path)
+    assert isinstance(CREPSCMA.from_state_dict(load_state(_UserState(2, 1, seed=0).save(path))), CREPSCMA)
+
+
+def test_resume_refuses_a_checkpoint_with_a_deflated_entry(tmp_path):
+    run("creps-cma-old", "creps_gym/Sphere-v0", 2, 8, 0, env_kwargs={"dim": 2}, run_dir=tmp_path)
+    _add_bomb(tmp_path / "checkpoint.npz", 8 * 2**20)
+    with pytest.raises(
+        RunDirError, match=r"checkpoint\.npz: damaged .*entry 'bomb\.npy': expected an uncompressed"
+    ):
+        resume(tmp_path)

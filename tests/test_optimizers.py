@@ -394,7 +394,7 @@ def test_ask_rejects_bad_contexts():
         ({"epsilon": 0.0}, ValueError, r"epsilon: expected a finite value in \(0.0, 50.0\], got 0.0"),
         ({"variant": "newest"}, ValueError, "variant: expected one of .*'old', 'current'.*got 'newest'"),
         ({"seed": 1.5}, TypeError, "seed: expected an int >= 0 or None, got float"),
-        ({"mean_features": "cubic"}, ValueError, "features: expected one of .*got 'cubic'"),
+        ({"mean_features": "cubic"}, ValueError, "mean_features: expected one of .*got 'cubic'"),
         ({"ridge": -1.0}, ValueError, r"ridge: expected a finite value in \[0.0, 1.0\], got -1.0"),
     ],
 )

@@ -486,3 +486,81 @@ def test_more_workers_than_samples_are_capped_at_the_samples():
         assert backend.num_envs == 8
     finally:
         backend.close()
+
+
+class _Misbehaving(CREPSCMA):
+    """CREPS-CMA whose ``ask`` or ``stop`` output breaks the protocol as ``fault`` says."""
+
+    fault = ""
+
+    def ask(self, contexts):
+        params = super().ask(contexts)
+        return params + 0j if self.fault == "complex ask" else params
+
+    def recommend(self, contexts):
+        params = super().recommend(contexts)
+        return params.astype(np.complex128) if self.fault == "complex recommend" else params
+
+    def stop(self):
+        return {"str": "bye", "list": ["tolx"], "name": {"$\\frac{$": 1}, "key": {1: 1}}.get(self.fault, {})
+
+
+@pytest.mark.parametrize(
+    ("fault", "error", "message"),
+    [
+        (
+            "complex ask",
+            TypeError,
+            r"optimizer\.ask\(\) output: expected an array of real numbers, got a complex",
+        ),
+        ("str", TypeError, r"optimizer\.stop\(\): expected a dict of the met stop criteria .* got str 'bye'"),
+        ("list", TypeError, r"optimizer\.stop\(\): expected a dict .* got list"),
+        ("name", ValueError, r"optimizer\.stop\(\): expected criterion names of letters"),
+        ("key", TypeError, r"optimizer\.stop\(\): expected str criterion names, got int 1"),
+    ],
+)
+def test_optimizer_output_that_breaks_the_protocol_is_refused_not_converted(fault, error, message):
+    optimizer = _Misbehaving(4, 1, seed=0)
+    optimizer.fault = fault
+    with pytest.raises(error, match=message):
+        run(optimizer, SPHERE, 2, 8, 0, env_kwargs={"dim": 4}, eval_every=1)
+
+
+def test_complex_recommendations_are_refused_in_episodes_of_a_plain_env():
+    optimizer = _Misbehaving(1, 1, seed=0)
+    optimizer.fault = "complex recommend"
+    message = r"TypeError: optimizer\.recommend\(\) output: expected an array of real numbers, got a complex"
+    with pytest.raises(EpisodeError, match=message):
+        run(optimizer, PlainEnv(), 2, 8, 0, eval_every=1)
+
+
+def test_finite_mean_never_overflows_and_keeps_the_bits_of_ordinary_means():
+    from creps_gym.envs.evaluation import finite_mean
+
+    values = np.full(14, -1.4283e308)
+    with np.errstate(over="ignore"):
+        assert np.isinf(values.mean())  # what the runner recorded before
+    assert finite_mean(values) == pytest.approx(-1.4283e308, rel=1e-12)
+    ordinary = np.random.default_rng(0).normal(size=101) * 1e3
+    assert finite_mean(ordinary) == float(ordinary.mean())  # bit for bit
+    assert finite_mean([1.0, -np.inf]) == -np.inf and math.isnan(finite_mean([np.nan, 1.0]))
+
+
+def test_returns_near_the_float_limit_give_finite_summaries_history_and_export(tmp_path):
+    """Before: every return was finite, but the mean overflowed to -inf in history.json and the export."""
+    history = run(
+        "creps",
+        SPHERE,
+        2,
+        14,
+        0,
+        env_kwargs={"dim": 3},
+        initial_mean=6.9e153,
+        initial_std=1e140,
+        run_dir=tmp_path,
+    )
+    for column in ("mean_return", "eval_return", "eval_regret"):
+        values = history.column(column)
+        assert np.isfinite(values).all() and np.abs(values).max() > 1e308, column
+    for name in ("history.json", "history.csv", "iohanalyzer.csv"):
+        assert "inf" not in (tmp_path / name).read_text().lower(), name

@@ -28,10 +28,33 @@ from numpy.typing import NDArray
 from creps_gym._validation import as_float_array, check_positive_int
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv, SupportsRegret
 
-__all__ = ["MODEL_KINDS", "PolicyEvaluation", "contextual_model", "evaluate_policy", "test_contexts"]
+__all__ = [
+    "MODEL_KINDS",
+    "PolicyEvaluation",
+    "contextual_model",
+    "evaluate_policy",
+    "finite_mean",
+    "test_contexts",
+]
 
 Array = NDArray[np.float64]
 Policy = Callable[[Array], Any]
+
+
+def finite_mean(values: Any) -> float:
+    """The mean of finite values, without overflow: finite whenever every value is.
+
+    ``np.mean`` sums first, so values near the float limit (returns of -1.4e308) give -inf; then the
+    mean is taken of the values scaled by their largest magnitude and scaled back (the plain mean is kept
+    whenever it is finite, so ordinary results keep their bits). Non-finite values give a non-finite mean.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        mean = float(values.mean())
+        if not np.isfinite(mean) and np.isfinite(values).all() and values.size:
+            scale = float(np.abs(values).max())
+            mean = float((values / scale).mean()) * scale
+    return mean
 
 
 @dataclass(frozen=True)
@@ -58,12 +81,12 @@ class PolicyEvaluation:
     @property
     def mean_return(self) -> float:
         """Mean return over the contexts."""
-        return float(self.returns.mean())
+        return finite_mean(self.returns)
 
     @property
     def mean_regret(self) -> float | None:
         """Mean regret over the contexts (the paper's error), or None if the env has no regret."""
-        return None if self.regrets is None else float(self.regrets.mean())
+        return None if self.regrets is None else finite_mean(self.regrets)
 
     @property
     def metric(self) -> str:

@@ -16,24 +16,22 @@ Protocol rules (enforced by :class:`ContextualOptimizer`, documented for users):
 * A second ``ask`` before ``tell`` replaces the pending batch: only the latest asked rows can be told.
 
 Checkpoints are ``.npz`` files holding the arrays plus one JSON document (``__state__.json``), never
-pickle. A restored optimiser continues with bit-identical asks.
+pickle (:mod:`creps_gym.optimizers.state_files`). A restored optimiser continues with bit-identical asks.
 """
 
 from __future__ import annotations
 
-import json
 import os
-import tempfile
-import zipfile
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, BinaryIO, ClassVar, Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_bool, check_positive_int, load_json
+from creps_gym._validation import as_float_array, check_bool, check_positive_int
+from creps_gym.optimizers.state_files import load_state, save_state
 
 __all__ = [
     "AskTellOptimizer",
@@ -44,7 +42,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-JSON_KEY = "__state__.json"
 #: Largest context magnitude accepted: s² and products of two contexts stay far below the float64 range.
 MAX_CONTEXT = 1e100
 
@@ -76,30 +73,6 @@ class AskTellOptimizer(Protocol):
         """Arrays and JSON-serialisable values that restore the optimiser exactly."""
 
 
-_NON_FINITE = {"inf": np.inf, "-inf": -np.inf, "nan": np.nan}
-
-
-def _encode_non_finite(value: Any) -> Any:
-    """Standard JSON has no inf/NaN: store non-finite floats as {"__float__": "inf"} (and back on load)."""
-    if isinstance(value, dict):
-        return {k: _encode_non_finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_encode_non_finite(v) for v in value]
-    if isinstance(value, (float, np.floating)) and not np.isfinite(value):
-        return {"__float__": str(float(value))}
-    return value
-
-
-def _decode_non_finite(value: Any) -> Any:
-    if isinstance(value, dict):
-        if set(value) == {"__float__"}:
-            return _NON_FINITE[value["__float__"]]
-        return {k: _decode_non_finite(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_decode_non_finite(v) for v in value]
-    return value
-
-
 def overflowing_contexts(contexts: NDArray[np.float64], what: str) -> ValueError:
     """The error for contexts that pass the magnitude check but make ``what`` non-finite."""
     return ValueError(
@@ -113,65 +86,6 @@ def _number(value: Any, key: Any) -> float:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"state['diagnostics'][{key!r}]: expected a number, got {type(value).__name__}")
     return float(value)
-
-
-def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
-    """Write a state dict atomically to ``path`` (``.npz``): arrays as entries, the rest as one JSON document.
-
-    The file is written to a temporary name in the same folder and renamed, so a crash never leaves a
-    half-written checkpoint behind.
-    """
-    path = Path(path)
-    arrays = {k: np.asarray(v) for k, v in state.items() if isinstance(v, np.ndarray)}
-    if JSON_KEY in arrays:
-        raise ValueError(f"state: the key {JSON_KEY!r} is reserved")
-    meta = _encode_non_finite({k: v for k, v in state.items() if not isinstance(v, np.ndarray)})
-    payload = json.dumps(meta, sort_keys=True, allow_nan=False).encode()
-    arrays[JSON_KEY] = np.frombuffer(payload, dtype=np.uint8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            np.savez(stream, **arrays)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
-
-
-def load_state(path: str | os.PathLike[str] | BinaryIO) -> dict[str, Any]:
-    """Read a state dict written by :func:`save_state` (never unpickles anything).
-
-    ``path`` may also be a binary file opened for reading (a seekable stream).
-
-    A file that is not such a checkpoint (truncated, empty, a ``.npy``, a JSON document that is not an
-    object, an unknown non-finite marker) raises ``ValueError`` naming ``path``; a missing one
-    ``FileNotFoundError``.
-    """
-    try:
-        data = np.load(path if hasattr(path, "read") else Path(path), allow_pickle=False)
-    except FileNotFoundError:
-        raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-        raise ValueError(f"path: expected a creps_gym checkpoint (.npz), got {path} ({exc})") from None
-    if not isinstance(data, np.lib.npyio.NpzFile):
-        raise ValueError(f"path: expected a creps_gym checkpoint (.npz), got a single array in {path}")
-    with data:
-        if JSON_KEY not in data.files:
-            raise ValueError(f"path: expected a creps_gym checkpoint with a {JSON_KEY!r} entry, got {path}")
-        try:
-            document = load_json(data[JSON_KEY].tobytes().decode(), f"{path}: {JSON_KEY}")
-            if not isinstance(document, dict):
-                raise ValueError(f"a JSON {type(document).__name__}, not an object")
-            state: dict[str, Any] = _decode_non_finite(document)
-            state.update({k: data[k].copy() for k in data.files if k != JSON_KEY})
-        except (ValueError, KeyError, UnicodeDecodeError, OSError, zipfile.BadZipFile) as exc:
-            why = f"got a damaged {path} ({exc!r})"
-            raise ValueError(f"path: expected a creps_gym checkpoint, {why}") from None
-    return state
 
 
 class ContextualOptimizer(ABC):

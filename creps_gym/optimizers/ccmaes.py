@@ -202,7 +202,7 @@ class CCMAESConfig:
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
         object.__setattr__(self, "seed", check_seed(self.seed))
-        mean_map = make_features(self.mean_features, self.n_context_dims)
+        mean_map = make_features(self.mean_features, self.n_context_dims, "mean_features")
         object.__setattr__(self, "mean_map", mean_map)
         object.__setattr__(
             self, "initial_mean", initial_coefficients(self.initial_mean, mean_map, self.n_params)

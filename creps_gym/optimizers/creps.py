@@ -132,8 +132,9 @@ class CREPSConfig:
             value = check_real_in_range(getattr(self, name), name, low, high, low_inclusive=low_inclusive)
             object.__setattr__(self, name, value)
         object.__setattr__(self, "seed", check_seed(self.seed))
-        object.__setattr__(self, "mean_map", make_features(self.mean_features, self.n_context_dims))
-        object.__setattr__(self, "baseline_map", make_features(self.baseline_features, self.n_context_dims))
+        for name in ("mean_features", "baseline_features"):
+            feature_map = make_features(getattr(self, name), self.n_context_dims, name)
+            object.__setattr__(self, name.replace("features", "map"), feature_map)
         for name, feature_map in (("mean_features", self.mean_map), ("baseline_features", self.baseline_map)):
             width = feature_map(np.zeros((2, self.n_context_dims))).shape
             if width != (2, feature_map.n_features):

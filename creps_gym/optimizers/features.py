@@ -24,18 +24,39 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._validation import check_fits_in_memory
+
 __all__ = [
+    "MAX_FEATURES",
     "AffineFeatures",
     "BaselineFeatures",
     "FeatureMap",
     "PolynomialFeatures",
     "QuadraticFeatures",
     "RBFFeatures",
+    "count_monomials",
     "make_features",
     "register_feature_map",
 ]
 
 Array = NDArray[np.float64]
+#: Most features a map may have: beyond it, even the features of one context would not fit in memory.
+MAX_FEATURES = 2**32
+
+
+def count_monomials(context_dim: int, degree: int, limit: int = MAX_FEATURES) -> int:
+    """The number C(z + d, d) of monomials of ``context_dim`` variables up to ``degree``, by formula.
+
+    Computed as a product of min(z, d) factors that stops at the first partial product above ``limit``
+    (then the returned count exceeds ``limit``), so it is fast for any size and never enumerates.
+    """
+    n, r = context_dim + degree, min(context_dim, degree)
+    count = 1
+    for i in range(1, r + 1):
+        count = count * (n - r + i) // i  # C(n - r + i, i), an integer at every step
+        if count > limit:
+            break
+    return count
 
 
 @dataclass(frozen=True)
@@ -137,6 +158,15 @@ class PolynomialFeatures(FeatureMap):
         if isinstance(self.degree, bool) or not isinstance(self.degree, (int, np.integer)) or self.degree < 0:
             raise ValueError(f"degree: expected an int >= 0, got {self.degree!r}")
         object.__setattr__(self, "degree", int(self.degree))
+        count = count_monomials(self.context_dim, self.degree)
+        if count > MAX_FEATURES:
+            raise ValueError(
+                f"degree: expected a degree whose monomials of {self.context_dim} context dimensions number "
+                f"at most {MAX_FEATURES}, got {self.degree} (over {MAX_FEATURES} features)"
+            )
+        # The monomials' index tuples (56 + 8 d bytes each) and the k x k Gram matrix of a weighted fit.
+        what = f"the {count} monomials of degree <= {self.degree} and their k x k Gram matrix (k = {count})"
+        check_fits_in_memory(count * (8.0 * count + 56.0 + 8.0 * self.degree), "degree", self.degree, what)
 
     @property
     def monomials(self) -> list[tuple[int, ...]]:
@@ -266,8 +296,12 @@ def register_feature_map(cls: type[FeatureMap]) -> type[FeatureMap]:
     return cls
 
 
-def make_features(spec: str | dict[str, Any] | FeatureMap, context_dim: int) -> FeatureMap:
+def make_features(
+    spec: str | dict[str, Any] | FeatureMap, context_dim: int, option: str = "features"
+) -> FeatureMap:
     """Build a feature map from a name (``"affine"``, ``"quadratic"``, ``"baseline"``), a spec dict or a map.
+
+    Errors name ``option`` (the optimiser option the spec was given as, e.g. ``"mean_features"``).
 
     Raises
     ------
@@ -277,16 +311,19 @@ def make_features(spec: str | dict[str, Any] | FeatureMap, context_dim: int) -> 
     if isinstance(spec, FeatureMap):
         feature_map = spec
     elif not isinstance(spec, (str, Mapping)):
-        raise TypeError(f"features: expected a name, a spec dict or a FeatureMap, got {type(spec).__name__}")
+        raise TypeError(f"{option}: expected a name, a spec dict or a FeatureMap, got {type(spec).__name__}")
     else:
         kwargs = {"name": spec} if isinstance(spec, str) else dict(spec)
         name = kwargs.pop("name", None)
         if name not in _REGISTRY:
-            raise ValueError(f"features: expected one of {sorted(_REGISTRY)}, got {name!r}")
+            raise ValueError(f"{option}: expected one of {sorted(_REGISTRY)}, got {name!r}")
         kwargs.setdefault("context_dim", context_dim)
-        feature_map = _REGISTRY[name](**kwargs)
+        try:
+            feature_map = _REGISTRY[name](**kwargs)
+        except (TypeError, ValueError) as exc:  # name the option: "mean_features: degree: expected ..."
+            raise type(exc)(f"{option}: {exc}") from None
     if feature_map.context_dim != context_dim:
         raise ValueError(
-            f"features: expected a map for context_dim={context_dim}, got one for {feature_map.context_dim}"
+            f"{option}: expected a map for context_dim={context_dim}, got one for {feature_map.context_dim}"
         )
     return feature_map

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -19,10 +20,19 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._validation import as_float_array
 from creps_gym.envs.evaluation import contextual_model
 from creps_gym.wrappers import FixedContexts, SampleContexts
 
-__all__ = ["MODEL_PRESERVING_WRAPPERS", "check_batch_size", "check_optimizer", "unwrapped_model"]
+__all__ = [
+    "CRITERION",
+    "MODEL_PRESERVING_WRAPPERS",
+    "check_batch_size",
+    "check_optimizer",
+    "real_params",
+    "stop_criteria",
+    "unwrapped_model",
+]
 
 PROTOCOL_METHODS = ("ask", "tell", "recommend", "stop", "state_dict")
 _ADAPTERS = {
@@ -30,6 +40,10 @@ _ADAPTERS = {
     "nevergrad": "creps_gym.optimizers.adapters.nevergrad.NevergradAdapter (registry name 'nevergrad')",
     "optuna": "creps_gym.optimizers.adapters.optuna.OptunaAdapter (registry name 'optuna')",
 }
+
+#: A stop criterion's name, as ``stop()`` may report it (pycma's ``tolfun``, ``max_std_growth``, ...):
+#: letters, digits, ``_``, ``.``, ``+`` and ``-``, so that a stop reason is plain text wherever it is shown.
+CRITERION = re.compile(r"[\w.+-]{1,100}")
 
 # Wrappers that change neither the observation, the action nor the reward of a one-step episode.
 MODEL_PRESERVING_WRAPPERS: tuple[type, ...] = (
@@ -105,6 +119,40 @@ def _tell_error(make: Callable[[], Any], contexts: NDArray[np.float64]) -> Value
     except Exception:  # only the batch size is checked here; the run reports any other failure
         return None
     return None
+
+
+def real_params(value: Any, method: str) -> NDArray[np.float64]:
+    """The output of an optimiser's ``ask`` or ``recommend`` as float64, never converted from complex.
+
+    ``TypeError`` naming ``method`` for complex, boolean, string or object output (numpy would drop an
+    imaginary part with only a warning); the shape and the values are checked where they are used.
+    """
+    return as_float_array(value, f"optimizer.{method}() output", finite=False)
+
+
+def stop_criteria(met: Any) -> list[str]:
+    """The names of the criteria an optimiser's ``stop()`` reports as met, sorted (empty: go on).
+
+    The protocol: a dict (or another mapping) whose keys are the names of the met criteria. A ``str``
+    (whose letters would be read as names), a non-mapping or a name that is not a short plain word
+    (:data:`CRITERION`) raises ``TypeError`` or ``ValueError`` naming ``stop()``.
+    """
+    if not isinstance(met, Mapping):
+        raise TypeError(
+            "optimizer.stop(): expected a dict of the met stop criteria (names as keys, empty to go on), "
+            f"got {type(met).__name__} {str(met)[:80]!r}"
+        )
+    for name in met:
+        if not isinstance(name, str):
+            raise TypeError(
+                f"optimizer.stop(): expected str criterion names, got {type(name).__name__} {name!r}"
+            )
+        if not CRITERION.fullmatch(name):
+            raise ValueError(
+                "optimizer.stop(): expected criterion names of letters, digits, '_', '.', '+' or '-' (at "
+                f"most 100), got {name[:120]!r}"
+            )
+    return sorted(met)
 
 
 def unwrapped_model(env: gym.Env) -> Any:

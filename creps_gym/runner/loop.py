@@ -40,8 +40,9 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym.envs.evaluation import evaluate_policy, test_contexts
+from creps_gym.envs.evaluation import evaluate_policy, finite_mean, test_contexts
 from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
+from creps_gym.runner import checks
 from creps_gym.runner.backends import Backend, EnvSource, EpisodeError, retry, run_episodes
 from creps_gym.runner.build import build_backend, build_optimizer, default_initial_distribution, split_seed
 from creps_gym.runner.callbacks import as_callback
@@ -277,7 +278,7 @@ class Runner:
             result = evaluate_policy(self._model, self.optimizer.recommend, self.test_contexts)
             regret = math.nan if result.mean_regret is None else result.mean_regret
             return result.mean_return, regret
-        params = np.asarray(self.optimizer.recommend(self.test_contexts), dtype=np.float64)
+        params = checks.real_params(self.optimizer.recommend(self.test_contexts), "recommend")
         returns = run_episodes(
             self.env,
             self.eval_seeds,
@@ -287,7 +288,7 @@ class Runner:
             label="evaluation",
             retries=self.config.retries,
         )
-        return float(returns.mean()), math.nan
+        return finite_mean(returns), math.nan
 
     def _stop_before_evaluation(self) -> str | None:
         config = self.config
@@ -297,14 +298,14 @@ class Runner:
             return "max_episodes"
         if config.max_time is not None and self.elapsed >= config.max_time:
             return "max_time"
-        met = self.optimizer.stop()
-        return f"optimizer: {', '.join(sorted(met))}" if met else None
+        met = checks.stop_criteria(self.optimizer.stop())
+        return f"optimizer: {', '.join(met)}" if met else None
 
     def step(self, backend: Backend) -> tuple[IterationRecord, str | None]:
         """Run one iteration on ``backend``; returns its record and the stop reason (None: go on)."""
         n, label = self.config.samples, f"iteration {self.iteration + 1}"
         seeds, contexts = self.draws.draw(self.env_rng, n, label)
-        params = np.asarray(self.optimizer.ask(contexts), dtype=np.float64)
+        params = checks.real_params(self.optimizer.ask(contexts), "ask")
         returns = backend.evaluate(seeds, contexts, params, label)
         self.optimizer.tell(contexts, params, returns)
         self.iteration += 1
@@ -317,7 +318,7 @@ class Runner:
             if reason is None and target is not None and eval_regret <= target:
                 reason = "target_regret"
         diagnostics = {str(k): float(v) for k, v in dict(self.optimizer.diagnostics).items()}
-        counts = (self.iteration, self.episodes, float(returns.mean()))
+        counts = (self.iteration, self.episodes, finite_mean(returns))
         record = IterationRecord(*counts, eval_return, eval_regret, self.elapsed, diagnostics)
         return record, reason
 
@@ -361,11 +362,8 @@ class Runner:
                 if any(wants_stop) and reason is None:
                     reason = "callback"
                 self.history.stop_reason = reason
-                if (
-                    reason is not None
-                    or interrupt.requested
-                    or self.iteration % self.config.checkpoint_every == 0
-                ):
+                due = self.iteration % self.config.checkpoint_every == 0
+                if reason is not None or interrupt.requested or due:
                     self.checkpoint()
                 if interrupt.requested and reason is None:
                     raise KeyboardInterrupt

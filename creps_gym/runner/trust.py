@@ -124,6 +124,24 @@ def check_trusted(config: RunConfig, source: str) -> None:
             raise refuse(field, text, f"no reference to a module that is not imported (here {module!r})")
     if config.env is not None and config.env.split(":", 1)[-1] not in gym.registry:  # module imported above
         raise refuse("env", config.env, "a registered env id")
+    _check_options_are_data(config, source)
+
+
+def _check_options_are_data(config: RunConfig, source: str) -> None:
+    """Refuse ``cma`` options that pycma would evaluate as code (``{"tolfun": "9**9**9"}``)."""
+    if config.optimizer != "cma":  # nevergrad and optuna accept only names from their allow-lists
+        return
+    from creps_gym.optimizers.adapters.pycma import check_option_value
+
+    options = dict(config.optimizer_options)
+    nested = options.pop("cma_options", {})
+    for key, value in {**(nested if isinstance(nested, dict) else {}), **options}.items():
+        try:
+            check_option_value(str(key), value)
+        except ValueError as exc:
+            raise RunDirError(
+                f"{source}: optimizer_options: {exc}; a run directory holds data only"
+            ) from None
 
 
 def check_run_memory(config: RunConfig, n_params: int, n_context_dims: int, *, covariance: bool) -> None:

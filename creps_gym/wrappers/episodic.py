@@ -46,6 +46,24 @@ from creps_gym.wrappers.controllers import Controller, make_controller
 
 __all__ = ["EpisodicEnv", "EpisodicVectorEnv"]
 
+
+def _real_reward(reward: Any, step: int) -> float:
+    """An inner step's reward as a float; ``TypeError`` naming it unless it is a real number.
+
+    Python or numpy ints and floats, or 0-d real arrays, are accepted; a str, a bool, a ``Decimal`` or a
+    complex number is refused, never converted.
+    """
+    real = isinstance(reward, (int, float, np.integer, np.floating)) and not isinstance(reward, bool)
+    if isinstance(reward, np.ndarray):
+        real = reward.shape == () and reward.dtype.kind in "iuf"
+    if not real:
+        raise TypeError(
+            f"reward: expected a real number (int or float) from the inner env's step(), got "
+            f"{type(reward).__name__} {reward!r} at inner step {step}"
+        )
+    return float(reward)
+
+
 Array = NDArray[np.float64]
 SEED_RANGE = 2**31
 
@@ -226,7 +244,7 @@ class EpisodicEnv(ContextualEpisodicEnv):
         while not (terminated or truncated):
             action = self._action(self.controller.act(step, flat), step)
             observation, reward, terminated, truncated, info = self.inner.step(action)
-            total += float(reward)
+            total += _real_reward(reward, step)
             step += 1
             truncated = bool(truncated) or (step >= self.horizon and not terminated)
             flat = spaces.flatten(self.inner.observation_space, observation).astype(np.float64)

@@ -13,15 +13,40 @@ from numpy.typing import NDArray
 
 from creps_gym.optimizers.adapters.base import MinimizerAdapter, import_optional
 
-__all__ = ["CMAAdapter"]
+__all__ = ["STRING_OPTIONS", "CMAAdapter", "check_option_value"]
 
 Array = NDArray[np.float64]
 _MANAGED = ("seed", "randn", "CMA_stds", "verbose", "verb_log", "verb_disp")
+#: The only strings an option may hold, by option (pycma evaluates a string option as Python code, so any
+#: other string is refused: an option is data, never an expression).
+STRING_OPTIONS = {"BoundaryHandler": ("BoundTransform",)}  # the one class name pycma reads as a safe word
+_DEPTH = 3  # lists of lists of lists at most (``bounds=[[-1, -2], [1, 2]]``)
 
 
 def _plain(value: Any) -> Any:
     """A numpy scalar as the Python number it holds (JSON-serialisable); anything else as is."""
     return value.item() if isinstance(value, np.generic) else value
+
+
+def _is_data(value: Any, depth: int = 0) -> bool:
+    """Whether ``value`` is None, a bool, an int, a float or a (nested) list of them (never evaluated)."""
+    if value is None or isinstance(value, (bool, int, float)):
+        return True
+    if isinstance(value, (list, tuple)) and depth < _DEPTH:
+        return all(_is_data(_plain(item), depth + 1) for item in value)
+    return False
+
+
+def check_option_value(name: str, value: Any) -> Any:
+    """``value`` if it is data (see :data:`STRING_OPTIONS`), else ``ValueError`` naming the option."""
+    allowed = STRING_OPTIONS.get(name, ())
+    if (isinstance(value, str) and value in allowed) or (not isinstance(value, str) and _is_data(value)):
+        return value
+    strings = f", or one of the strings {list(allowed)}" if allowed else ""
+    raise ValueError(
+        f"{name}: expected a number, a boolean, None or a list of them (pycma would evaluate a string as "
+        f"code){strings}, got {type(value).__name__} {str(value)[:80]!r}"
+    )
 
 
 class CMAAdapter(MinimizerAdapter):
@@ -41,7 +66,9 @@ class CMAAdapter(MinimizerAdapter):
         (for example ``tolfun=1e-12``, or ``--opt tolfun=1e-12`` on the command line); the names are checked
         against ``cma.CMAOptions()``. ``popsize``, if given, must equal the batch size (the runner's samples
         per iteration). ``seed``, ``randn``, ``CMA_stds`` and the verbosity options are set by the adapter.
-        The nested form ``cma_options={...}`` of earlier versions is still accepted. pycma sees normalised
+        The nested form ``cma_options={...}`` of earlier versions is still accepted. Values are data: numbers,
+        booleans, None and lists of them (pycma evaluates strings as Python code, so a string is refused,
+        except the names in :data:`STRING_OPTIONS`). pycma sees normalised
         coordinates u = (θ − initial_mean) / initial_std, so options on positions, such as ``bounds``, are
         in u: ``bounds=[-2, 2]`` keeps θ within initial_mean ± 2 initial_std. Numpy scalars are stored as
         the Python numbers they hold (the options are saved as JSON).
@@ -68,6 +95,7 @@ class CMAAdapter(MinimizerAdapter):
             raise TypeError(
                 f"options: expected pycma option names (see cma.CMAOptions()), got unknown {unknown}"
             )
+        merged = {key: check_option_value(key, value) for key, value in merged.items()}
         popsize = merged.get("popsize")
         if popsize is not None and (isinstance(popsize, bool) or not isinstance(popsize, int) or popsize < 2):
             raise ValueError(f"popsize: expected an int >= 2 (the batch size), got {popsize!r}")

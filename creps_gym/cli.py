@@ -1,4 +1,5 @@
-"""The ``creps-gym`` command line: list, run, resume, plot and export.
+"""The ``creps-gym`` command line: list, run, resume, plot, export, policy and evaluate
+(:mod:`creps_gym.cli_policy`).
 
 Exit codes
 ----------
@@ -31,15 +32,19 @@ from collections.abc import Sequence
 from dataclasses import fields
 from typing import Any
 
-from creps_gym.cli_types import initial_mean, integer, key_value, numbers, optimizer_name, positive_float
+from creps_gym.cli_types import (
+    UsageError,
+    initial_mean,
+    integer,
+    key_value,
+    numbers,
+    optimizer_name,
+    positive_float,
+)
 
 __all__ = ["EXIT_CODES", "build_parser", "main"]
 
 EXIT_CODES = {"ok": 0, "run_failed": 1, "usage": 2, "run_dir": 3, "missing_dependency": 4, "interrupted": 130}
-
-
-class UsageError(Exception):
-    """A bad command line (exit code 2)."""
 
 
 def _import_modules(args: argparse.Namespace) -> None:
@@ -189,6 +194,9 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("-o", "--output", required=True, metavar="FILE", help="CSV file")
     for command in (plot, export):
         command.add_argument("--mix-envs", action="store_true", help="allow runs of different envs")
+    from creps_gym.cli_policy import add_commands
+
+    add_commands(commands)  # policy, evaluate
     return parser
 
 
@@ -309,12 +317,20 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_policy(args: argparse.Namespace) -> int:
+    from creps_gym.cli_policy import COMMANDS
+
+    return COMMANDS[args.command](args)
+
+
 _COMMANDS = {
     "list": _cmd_list,
     "run": _cmd_run,
     "resume": _cmd_resume,
     "plot": _cmd_plot,
     "export": _cmd_export,
+    "policy": _cmd_policy,
+    "evaluate": _cmd_policy,
 }
 
 

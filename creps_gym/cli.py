@@ -12,7 +12,8 @@ Exit codes
     what was expected and what was given).
 3
     Run-directory error: ``--out`` holds a run or other files, ``resume``/``plot``/``export`` got a folder
-    that is not a run directory, a damaged file, a checkpoint of another run, a ``config.json`` that names
+    that is not a run directory (or ``policy``/``evaluate`` got no run folder or policy file), a damaged
+    file, a checkpoint of another run, a ``config.json`` that names
     a module that is not imported (``--import MODULE``), or another process writes the run directory.
 4
     An optional dependency is missing (e.g. ``pip install creps-gym[plot]`` for ``plot``).

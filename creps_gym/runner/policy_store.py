@@ -70,6 +70,8 @@ class RunPolicies:
         if make is None:
             return None
         policy = make()
+        if not isinstance(policy, Policy):
+            raise TypeError(f"optimizer.mean_policy(): expected a Policy, got {type(policy).__name__}")
         source = {"optimizer": self.optimizer_name or type(optimizer).__name__, "which": which}
         source["iteration"] = int(iteration)
         if record is not None:

@@ -225,3 +225,44 @@ def test_evaluate_records_a_video(reacher_run, tmp_path, suffix):
     result = _cli("evaluate", reacher_run, "--contexts", "2", "--video", video)
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["video"] == str(video) and video.stat().st_size > 1000
+
+
+def test_the_policy_files_temporaries_are_the_runs_own():
+    assert RunDir.TEMPORARY.match(f".{RunDir.BEST_POLICY}.123.tmp")
+    assert RunDir.TEMPORARY.match(f".{RunDir.POLICY}.123.tmp")
+
+
+class _NoPolicy:
+    """An optimiser object without mean_policy(): the run keeps no policy file."""
+
+    def __init__(self):
+        from creps_gym.optimizers import CREPS
+
+        self.inner = CREPS(3, 1, seed=0)
+        self.n_params, self.n_context_dims = 3, 1
+
+    def ask(self, contexts):
+        return self.inner.ask(contexts)
+
+    def tell(self, contexts, params, returns):
+        self.inner.tell(contexts, params, returns)
+
+    def recommend(self, contexts):
+        return self.inner.recommend(contexts)
+
+    def stop(self):
+        return {}
+
+    def state_dict(self):
+        return self.inner.state_dict()
+
+    @property
+    def diagnostics(self):
+        return self.inner.diagnostics
+
+
+def test_an_optimizer_without_mean_policy_runs_without_policy_files(tmp_path):
+    history = run(_NoPolicy(), SPHERE, 3, 12, 0, run_dir=tmp_path / "run", env_kwargs={"dim": 3})
+    assert history.best_iteration is not None
+    assert not (tmp_path / "run" / RunDir.BEST_POLICY).exists()
+    assert not (tmp_path / "run" / RunDir.POLICY).exists()

@@ -208,8 +208,13 @@ def _record(env: Any, policy: Any, seed: int, path: str) -> str:
     finally:
         env.close()
     frames = list(frames) if isinstance(frames, list) else [frames]
-    timing = {"duration": 1000.0 / fps, "loop": 0} if path.lower().endswith(".gif") else {"fps": fps}
-    imageio.mimwrite(path, [np.asarray(f, dtype=np.uint8) for f in frames], **timing)
+    frames = [np.asarray(f, dtype=np.uint8) for f in frames]
+    if path.lower().endswith(".gif"):
+        options: dict[str, Any] = {"duration": 1000.0 / fps, "loop": 0}
+    else:  # ffmpeg: even sizes suffice for yuv420p (no resizing to multiples of 16)
+        even = all(n % 2 == 0 for n in frames[0].shape[:2])
+        options = {"fps": fps, **({"macro_block_size": 1} if even else {})}
+    imageio.mimwrite(path, frames, **options)
     return path
 
 

@@ -19,7 +19,8 @@ bit-identical :class:`~creps_gym.runner.history.History` (wall times aside) on e
 resume.
 
 **Checkpoints** hold the optimiser's and the loop's state (env stream, counts, wall time, stop reason, a
-checksum of the records): O(1) in the run's length. A resume rebuilds the history from the log.
+checksum of the records, the best evaluated policy: :mod:`~creps_gym.runner.policy_store`): O(1) in the
+run's length. A resume rebuilds the history from the log.
 
 **Stop reasons** (``History.stop_reason``): ``"iterations"``, ``"max_episodes"`` (the next iteration would
 exceed the budget), ``"target_regret"``, ``"max_time"``, ``"optimizer: <criteria>"`` (the optimiser's own

@@ -7,6 +7,7 @@ Importing the package registers the ``creps_gym/...`` environment ids with Gymna
 """
 
 from importlib.metadata import PackageNotFoundError, version
+from typing import Any
 
 from creps_gym import envs  # noqa: F401  (registers the environment ids)
 from creps_gym.envs.registration import registered_ids
@@ -16,4 +17,17 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
     __version__ = "0.0.0"
 
-__all__ = ["__version__", "registered_ids"]
+__all__ = ["Policy", "__version__", "load_policy", "registered_ids"]
+
+
+def __getattr__(name: str) -> Any:
+    """``Policy`` and ``load_policy``, imported on first use (``import creps_gym`` stays light)."""
+    if name == "Policy":
+        from creps_gym.optimizers.policy_file import Policy
+
+        return Policy
+    if name == "load_policy":
+        from creps_gym.runner.policy_store import load_policy
+
+        return load_policy
+    raise AttributeError(f"module 'creps_gym' has no attribute {name!r}")

@@ -1,4 +1,5 @@
-"""The ``creps-gym`` command line: list, run, resume, plot and export.
+"""The ``creps-gym`` command line: list, run, resume, plot, export, policy and evaluate
+(:mod:`creps_gym.cli_policy`).
 
 Exit codes
 ----------
@@ -12,10 +13,11 @@ Exit codes
     a run directory's own file, a full disk, ...).
 3
     Run-directory error: ``--out`` holds a run or other files, ``resume``/``plot``/``export`` got a folder
-    that is not a run directory, a damaged file, a checkpoint of another run, a ``config.json`` that names
-    a module that is not imported (``--import MODULE``), or another process writes the run directory; a
-    file in it that is not a regular file (a link, a FIFO, a device, a folder) or is too large; or an
-    operating-system error on one of its files (disk full, read-only, ``ulimit -f``, a name too long).
+    that is not a run directory (or ``policy``/``evaluate`` got no run folder or policy file), a damaged
+    file, a checkpoint of another run, a ``config.json`` that names a module that is not imported
+    (``--import MODULE``), or another process writes the run directory; a file in it that is not a
+    regular file (a link, a FIFO, a device, a folder) or is too large; or an operating-system error on one
+    of its files (disk full, read-only, ``ulimit -f``, a name too long).
 4
     An optional dependency is missing (e.g. ``pip install creps-gym[plot]`` for ``plot``).
 130
@@ -35,15 +37,19 @@ from collections.abc import Sequence
 from dataclasses import fields
 from typing import Any
 
-from creps_gym.cli_types import initial_mean, integer, key_value, numbers, optimizer_name, positive_float
+from creps_gym.cli_types import (
+    UsageError,
+    initial_mean,
+    integer,
+    key_value,
+    numbers,
+    optimizer_name,
+    positive_float,
+)
 
 __all__ = ["EXIT_CODES", "build_parser", "main"]
 
 EXIT_CODES = {"ok": 0, "run_failed": 1, "usage": 2, "run_dir": 3, "missing_dependency": 4, "interrupted": 130}
-
-
-class UsageError(Exception):
-    """A bad command line (exit code 2)."""
 
 
 def _import_modules(args: argparse.Namespace) -> None:
@@ -193,6 +199,9 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("-o", "--output", required=True, metavar="FILE", help="CSV file")
     for command in (plot, export):
         command.add_argument("--mix-envs", action="store_true", help="allow runs of different envs")
+    from creps_gym.cli_policy import add_commands
+
+    add_commands(commands)  # policy, evaluate
     return parser
 
 
@@ -334,12 +343,20 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return _write_output(write, args, "IOHanalyzer CSV")
 
 
+def _cmd_policy(args: argparse.Namespace) -> int:
+    from creps_gym.cli_policy import COMMANDS
+
+    return COMMANDS[args.command](args)
+
+
 _COMMANDS = {
     "list": _cmd_list,
     "run": _cmd_run,
     "resume": _cmd_resume,
     "plot": _cmd_plot,
     "export": _cmd_export,
+    "policy": _cmd_policy,
+    "evaluate": _cmd_policy,
 }
 
 

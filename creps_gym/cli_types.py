@@ -7,7 +7,19 @@ import json
 import math
 from typing import Any
 
-__all__ = ["initial_mean", "integer", "key_value", "numbers", "optimizer_name", "positive_float"]
+__all__ = [
+    "UsageError",
+    "initial_mean",
+    "integer",
+    "key_value",
+    "numbers",
+    "optimizer_name",
+    "positive_float",
+]
+
+
+class UsageError(Exception):
+    """A bad command line (exit code 2); here so that every command module raises the same class."""
 
 
 def integer(minimum: int):

@@ -72,8 +72,12 @@ def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(
     finished = subprocess.run(resume, capture_output=True, text=True, timeout=120, check=False)
     assert finished.returncode == 0, finished.stderr
 
+    whole = tmp_path / "whole"
     expected = run(optimizer, SPHERE, s["iterations"], s["samples"], s["seed"], env_kwargs={"dim": 6},
-                   checkpoint_every=s["checkpoint_every"], eval_every=s["eval_every"])  # fmt: skip
+                   checkpoint_every=s["checkpoint_every"], eval_every=s["eval_every"],
+                   run_dir=whole)  # fmt: skip
+    for name in (RunDir.BEST_POLICY, RunDir.POLICY):  # the policies too, bit for bit
+        assert (out / name).read_bytes() == (whole / name).read_bytes()
     resumed = History.from_json(out / RunDir.HISTORY_JSON)
     assert resumed.equals(expected) and len(resumed) == s["iterations"]
     records, events = RunDir.open(out).read_log()  # re-done iterations appear twice; the last copy counts

@@ -30,6 +30,7 @@ from creps_gym.optimizers.features import (
     register_feature_map,
 )
 from creps_gym.optimizers.policies import LinearGaussianPolicy, spd_factor
+from creps_gym.optimizers.policy_file import Policy
 from creps_gym.optimizers.registry import (
     describe_optimizers,
     make_optimizer,
@@ -52,6 +53,7 @@ __all__ = [
     "ContextualOptimizer",
     "FeatureMap",
     "LinearGaussianPolicy",
+    "Policy",
     "PolynomialFeatures",
     "QuadraticFeatures",
     "RBFFeatures",

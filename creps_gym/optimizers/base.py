@@ -214,7 +214,8 @@ class ContextualOptimizer(ABC):
         wrong shape or with non-finite values, ...) raises ``ValueError`` or ``TypeError`` naming the key.
         """
         if state.get("kind") != cls.kind:
-            raise ValueError(f"state: expected a {cls.kind!r} checkpoint, got {state.get('kind')!r}")
+            hint = "" if "kind" in state else " (a run's learned policy: creps_gym.load_policy(run_folder))"
+            raise ValueError(f"state: expected a {cls.kind!r} checkpoint, got {state.get('kind')!r}{hint}")
         try:
             optimizer = cls._from_state(state)
             for counter in ("iteration", "evaluations"):
@@ -237,8 +238,14 @@ class ContextualOptimizer(ABC):
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> ContextualOptimizer:
-        """Restore an optimiser written by :meth:`save`."""
-        return cls.from_state_dict(load_state(path))
+        """Restore an optimiser written by :meth:`save`, or the optimiser of a run folder's
+        ``checkpoint.npz`` (its state at the last checkpoint; for the learned policy use
+        ``creps_gym.load_policy(run_folder)``)."""
+        state = load_state(path)
+        if str(state.get("format", "")).startswith("creps_gym.run/"):  # a runner checkpoint
+            prefix = "optimizer."
+            state = {k[len(prefix) :]: v for k, v in state.items() if k.startswith(prefix)}
+        return cls.from_state_dict(state)
 
     # -- subclass hooks ----------------------------------------------------------------------------------
     @abstractmethod

@@ -26,6 +26,7 @@ from creps_gym._validation import as_float_array, check_positive_int
 from creps_gym.optimizers.base import overflowing_contexts
 from creps_gym.optimizers.cma_rules import record_mean_return, stagnated, stagnation_window
 from creps_gym.optimizers.features import FeatureMap
+from creps_gym.optimizers.policy_file import Policy
 
 __all__ = [
     "LinearGaussianPolicy",
@@ -307,6 +308,12 @@ class PolicyAccess:
         if not np.isfinite(mean).all():
             raise overflowing_contexts(checked, "the mean policy")
         return mean
+
+    def mean_policy(self) -> Policy:
+        """The current mean policy Aᵀϕ(s) as a :class:`~creps_gym.optimizers.policy_file.Policy`: a copy,
+        independent of the optimiser, that gives ``recommend``'s parameters bit for bit."""
+        source = {"optimizer": self.kind, "iteration": self.iteration}  # type: ignore[attr-defined]
+        return Policy(self.policy.mean_map, self.policy.coefficients, source=source)
 
     def _sample(self, contexts: Array) -> Array:
         return self.policy.sample(contexts, self.rng)

@@ -10,6 +10,7 @@ Modules: :mod:`.config` (RunConfig), :mod:`.loop` (the Runner), :mod:`.build` (w
 :mod:`.backends` (failure policy, serial; :mod:`.vector_backend`, :mod:`.ray_backend`), :mod:`.callbacks`
 (callbacks, progress bar), :mod:`.rundir` (run directory), :mod:`.recovery` (the history from the log),
 :mod:`.session` (lock file, Ctrl-C), :mod:`.trust` (what a run directory may name, memory limits),
+:mod:`.policy_store` (the best and final policies a run keeps, ``load_policy``),
 :mod:`.export` (IOHanalyzer CSV), :mod:`.plots` (matplotlib).
 """
 

@@ -143,6 +143,16 @@ class History:
             raise ValueError(f"name: expected one of {list(FIELDS)} or 'diag.<key>', got {name!r}")
         return np.array([getattr(r, name) for r in self.records], dtype=np.float64)
 
+    @property
+    def best_iteration(self) -> int | None:
+        """The iteration whose evaluation had the highest mean return (the first on ties; None before the
+        first evaluation): the one ``best_policy.npz`` of a run folder comes from."""
+        best, found = -math.inf, None
+        for record in self.records:
+            if math.isfinite(record.eval_return) and record.eval_return > best:
+                best, found = record.eval_return, record.iteration
+        return found
+
     def equals(self, other: History, include_time: bool = False) -> bool:
         """Same records bit for bit (wall times ignored unless ``include_time``) and same stop reason."""
         return (
@@ -153,10 +163,11 @@ class History:
 
     # -- JSON ------------------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        """JSON-serialisable dict."""
+        """JSON-serialisable dict (``best_iteration`` is derived from the records, and not read back)."""
         return {
             "meta": dict(self.meta),
             "stop_reason": self.stop_reason,
+            "best_iteration": self.best_iteration,
             "records": [r.to_dict() for r in self.records],
         }
 

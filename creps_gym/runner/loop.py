@@ -19,7 +19,8 @@ bit-identical :class:`~creps_gym.runner.history.History` (wall times aside) on e
 resume.
 
 **Checkpoints** hold the optimiser's and the loop's state (env stream, counts, wall time, stop reason, a
-checksum of the records): O(1) in the run's length. A resume rebuilds the history from the log.
+checksum of the records, the best evaluated policy: :mod:`~creps_gym.runner.policy_store`): O(1) in the
+run's length. A resume rebuilds the history from the log.
 
 **Stop reasons** (``History.stop_reason``): ``"iterations"``, ``"max_episodes"`` (the next iteration would
 exceed the budget), ``"target_regret"``, ``"max_time"``, ``"optimizer: <criteria>"`` (the optimiser's own
@@ -40,16 +41,17 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym.envs.evaluation import evaluate_policy, finite_mean, test_contexts
+from creps_gym.envs.evaluation import finite_mean, test_contexts
 from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
 from creps_gym.runner import checks
-from creps_gym.runner.backends import Backend, EnvSource, EpisodeError, retry, run_episodes
+from creps_gym.runner.backends import Backend, EnvSource, EpisodeError, retry
 from creps_gym.runner.build import build_backend, build_optimizer, default_initial_distribution, split_seed
 from creps_gym.runner.callbacks import as_callback
 from creps_gym.runner.checks import check_batch_size, check_optimizer, unwrapped_model
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
 from creps_gym.runner.history import History, IterationRecord
+from creps_gym.runner.policy_store import RunPolicies, evaluate_contexts
 from creps_gym.runner.recovery import REBUILD, chain_crc, checkpoint_history, history_crc
 from creps_gym.runner.rundir import RESTART, RunDir, RunDirError
 from creps_gym.runner.session import DeferredInterrupt
@@ -123,6 +125,7 @@ class Runner:
                 f"got {config.target_regret}"
             )
         self.callbacks = [as_callback(c) for c in callbacks]
+        self.policies = RunPolicies(config, self.env)  # the best evaluated mean policy
         self.iteration = self.episodes = 0
         self._elapsed_before, self._log_crc = 0.0, 0
         self._clock = time.perf_counter()
@@ -215,6 +218,7 @@ class Runner:
             self._check_optimizer_sizes(self.optimizer, "optimizer state")
             self.env_rng.bit_generator.state = state["env_rng"]
             self.history = self._checkpoint_history(run_dir, state)
+            self.policies.restore(state.get("best_policy"))  # None in older checkpoints
             self.iteration, self.episodes = int(state["iteration"]), int(state["episodes"])
             self._elapsed_before = float(state["elapsed"])
         except RunDirError:
@@ -251,6 +255,7 @@ class Runner:
             "elapsed": self.elapsed,
             "stop_reason": self.history.stop_reason,
             "log_crc": self._log_crc,
+            "best_policy": self.policies.checkpoint_state(self.run_dir),
         }
         self.run_dir.save_checkpoint(state, self.optimizer.state_dict(), self.config)
 
@@ -274,21 +279,8 @@ class Runner:
         ) from last
 
     def _evaluate_once(self) -> tuple[float, float]:
-        if self._model is not None:
-            result = evaluate_policy(self._model, self.optimizer.recommend, self.test_contexts)
-            regret = math.nan if result.mean_regret is None else result.mean_regret
-            return result.mean_return, regret
-        params = checks.real_params(self.optimizer.recommend(self.test_contexts), "recommend")
-        returns = run_episodes(
-            self.env,
-            self.eval_seeds,
-            self.test_contexts,
-            params,
-            first=0,
-            label="evaluation",
-            retries=self.config.retries,
-        )
-        return finite_mean(returns), math.nan
+        where = (self.env, self._model, self.test_contexts, self.eval_seeds, self.config.retries)
+        return evaluate_contexts(self.optimizer.recommend, *where)
 
     def _stop_before_evaluation(self) -> str | None:
         config = self.config
@@ -314,6 +306,7 @@ class Runner:
         eval_return = eval_regret = math.nan
         if reason is not None or self.iteration % self.config.eval_every == 0:
             eval_return, eval_regret = self.evaluate()
+            self.policies.offer(self.optimizer, self.iteration, eval_return, eval_regret)
             target = self.config.target_regret
             if reason is None and target is not None and eval_regret <= target:
                 reason = "target_regret"
@@ -392,6 +385,7 @@ class Runner:
         end = {"event": "end", "iteration": self.iteration, "stop_reason": self.history.stop_reason}
         if not completing:
             self._log(end)
+        self.policies.write_final(self.run_dir, self.optimizer, self.history, only_changed=completing)
         written = self.run_dir.write_results(self.history, only_changed=completing)
         if completing and written:  # killed between its last checkpoint and its result files
             self._log({**end, "rewritten": written})

@@ -17,6 +17,8 @@ file                      content
                           is in the log: :mod:`creps_gym.runner.recovery`), and records the run's
                           :func:`~creps_gym.runner.trust.config_fingerprint`: another run's is refused
 ``run.lock``              the live writer's process id (see :mod:`creps_gym.runner.session`)
+``best_policy.npz``       the best evaluated mean policy, ``policy.npz`` the final one
+                          (:mod:`creps_gym.runner.policy_store`; ``creps_gym.load_policy(folder)``)
 ``history.json`` / .csv   the final :class:`~creps_gym.runner.history.History` (written at the end)
 ``iohanalyzer.csv``       the evaluations in IOHanalyzer's CSV layout (written at the end)
 ``learning_curve.png``    the plot written by ``creps-gym run`` (when matplotlib is installed)
@@ -88,7 +90,8 @@ class RunDir:
     IOH = "iohanalyzer.csv"
     PLOT = "learning_curve.png"
     LOCK = "run.lock"
-    FILES = (CONFIG, VERSIONS, LOG, CHECKPOINT, HISTORY_JSON, HISTORY_CSV, IOH, PLOT)
+    BEST_POLICY, POLICY = "best_policy.npz", "policy.npz"
+    FILES = (CONFIG, VERSIONS, LOG, CHECKPOINT, HISTORY_JSON, HISTORY_CSV, IOH, PLOT, BEST_POLICY, POLICY)
     #: The run's own temporary files: ``atomic_write_text``'s ``.NAME.PID.tmp`` and ``save_state``'s
     #: ``checkpoint.npzXXXXXXXX.tmp``. Other ``*.tmp`` files are the user's and are never touched.
     TEMPORARY = re.compile(

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array, check_positive_int
 from creps_gym.optimizers.base import ContextualOptimizer
+from creps_gym.optimizers.policy_file import Policy
 
 __all__ = ["MinimizerAdapter", "import_optional", "initial_variances"]
 
@@ -240,6 +241,13 @@ class MinimizerAdapter(ContextualOptimizer):
         contexts = self._check_contexts(contexts, "contexts")
         y = np.zeros(self.n_params) if self._lib is None else np.asarray(self._lib_recommend(), np.float64)
         return np.tile(self.initial_mean + self.initial_std * y, (contexts.shape[0], 1))
+
+    def mean_policy(self) -> Policy:
+        """The recommendation as a constant :class:`~creps_gym.optimizers.policy_file.Policy` (ϕ(s) = [1]):
+        the same parameters for every context, equal to ``recommend``'s bit for bit."""
+        params = self.recommend(np.zeros((1, self.n_context_dims)))[0]
+        source = {"optimizer": self.kind, "iteration": self.iteration}
+        return Policy.constant(params, self.n_context_dims, source=source)
 
     # -- checkpoints by replay -------------------------------------------------------------------------------
     def _state(self) -> dict[str, Any]:

@@ -1,0 +1,221 @@
+"""``creps-gym policy`` and ``creps-gym evaluate``: the learned policy of a run, out of the run folder.
+
+``policy RUN`` prints the policy of a run folder (or of a policy file) as JSON: its parameters for the
+``--context`` values given, else its coefficients; ``--save FILE`` writes it as a policy file.
+``evaluate RUN`` runs it on fresh, seeded test contexts of the run's env and prints the mean return and
+regret as JSON (``--run-contexts``: the run's own test contexts, which reproduce its evaluation); ``--video
+FILE`` records one episode where the env renders (needs the ``video`` extra). Exit codes are the CLI's
+(:mod:`creps_gym.cli`): 2 for a bad ``--context`` or option, 3 for a missing or damaged run folder or
+policy file, 4 for a missing extra, 1 when the env fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+from creps_gym.cli_types import UsageError, integer
+
+__all__ = ["COMMANDS", "add_commands"]
+
+
+def add_commands(commands: Any) -> None:
+    """Register the ``policy`` and ``evaluate`` subcommands on the CLI's subparsers."""
+    policy = commands.add_parser(
+        "policy",
+        help="print the learned policy of a run (or a policy file) as JSON",
+        description="Print the learned policy of a run folder or a policy file as JSON: its parameters for "
+        "each --context, else its coefficients.",
+    )
+    evaluate = commands.add_parser(
+        "evaluate",
+        help="evaluate the learned policy of a run on fresh test contexts",
+        description="Run the learned policy on fresh, seeded test contexts of the run's env and print the "
+        "mean return and regret as JSON.",
+    )
+    for parser in (policy, evaluate):
+        parser.add_argument("run", metavar="RUN", help="run folder, or a policy file (.npz)")
+        parser.add_argument(
+            "--which",
+            choices=("best", "final"),
+            default="best",
+            help="the best evaluated mean policy (default) or the final one",
+        )
+        parser.add_argument(
+            "--import",
+            dest="imports",
+            action="append",
+            default=[],
+            metavar="MODULE",
+            help="import MODULE first (e.g. the package that registers the env; repeatable)",
+        )
+    policy.add_argument(
+        "--context",
+        action="append",
+        nargs="+",
+        type=float,
+        default=[],
+        metavar="S",
+        help="one context: z numbers (repeat --context for more contexts)",
+    )
+    policy.add_argument("--extrapolate", action="store_true", help="accept contexts outside the context box")
+    policy.add_argument("--save", metavar="FILE", help="also write the policy as a policy file (.npz)")
+    evaluate.add_argument("--contexts", type=integer(1), default=100, metavar="N", help="test contexts (100)")
+    evaluate.add_argument("--seed", type=integer(0), default=0, help="seed of the test contexts (0)")
+    evaluate.add_argument(
+        "--run-contexts",
+        action="store_true",
+        help="use the run's own test contexts instead (reproduces the run's evaluation)",
+    )
+    evaluate.add_argument("--video", metavar="FILE", help="record one episode (.mp4 or .gif; extra 'video')")
+
+
+def _load(args: argparse.Namespace) -> Any:
+    """The policy asked for (a damaged or foreign file is a run-folder error, exit 3)."""
+    from creps_gym.runner.policy_store import load_policy
+    from creps_gym.runner.session import RunDirError
+    from creps_gym.runner.trust import import_modules
+
+    try:
+        import_modules(args.imports)
+    except ValueError as exc:
+        raise UsageError(f"argument --import: {exc}") from None
+    try:
+        return load_policy(args.run, args.which)
+    except RunDirError:
+        raise
+    except ValueError as exc:
+        raise RunDirError(f"RUN: {exc}") from None
+
+
+def _numbers(array: Any) -> Any:
+    return [[float(v) for v in row] for row in array]
+
+
+def _cmd_policy(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    policy = _load(args)
+    out: dict[str, Any] = {"env": policy.env, "which": args.which, "source": policy.source}
+    if args.context:
+        if any(len(row) != policy.context_dim for row in args.context):
+            lengths = sorted({len(row) for row in args.context})
+            raise UsageError(f"argument --context: expected {policy.context_dim} numbers (z), got {lengths}")
+        try:
+            params = policy(np.array(args.context, dtype=np.float64), extrapolate=args.extrapolate)
+        except ValueError as exc:
+            message = str(exc).removeprefix("contexts: ").replace("extrapolate=True", "--extrapolate")
+            raise UsageError(f"argument --context: {message}") from None
+        out.update(contexts=_numbers(args.context), params=_numbers(params))
+    else:
+        out.update(features=policy.features.spec(), coefficients=_numbers(policy.coefficients))
+    if args.save:
+        out["saved"] = str(policy.save(args.save))
+    print(json.dumps(out, allow_nan=False))
+    return 0
+
+
+def _environment(args: argparse.Namespace, policy: Any) -> tuple[str, dict[str, Any], Any]:
+    """The env id and keywords to evaluate on, and the run's config (None for a policy file)."""
+    from creps_gym.runner.rundir import RunDir
+    from creps_gym.runner.session import RunDirError
+    from creps_gym.runner.trust import module_reference
+
+    if Path(args.run).is_dir():
+        config = RunDir.open(args.run).config()  # checked: names no module that is not imported
+        if config.env is None:
+            raise UsageError(f"RUN: expected a run of an env id, got {args.run} (an env object's run)")
+        return config.env, dict(config.env_kwargs), config
+    if policy.env is None:
+        raise UsageError(f"RUN: expected a policy file that names its env, got {args.run}")
+    texts = [policy.env, *_strings(policy.env_kwargs)]
+    for text in texts:
+        module = module_reference(text)
+        if module is not None and module not in sys.modules:
+            raise RunDirError(
+                f"RUN: {args.run} names the module {module!r} ({text!r}), which is not imported; a policy "
+                "file never makes creps-gym import code: pass --import MODULE if you trust it"
+            )
+    return policy.env, dict(policy.env_kwargs), None
+
+
+def _strings(value: Any) -> list[str]:
+    if isinstance(value, str):
+        return [value]
+    if isinstance(value, dict):
+        return [s for key, item in value.items() for s in (str(key), *_strings(item))]
+    if isinstance(value, list):
+        return [s for item in value for s in _strings(item)]
+    return []
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    import gymnasium as gym
+
+    from creps_gym.runner.build import split_seed
+    from creps_gym.runner.policy_store import evaluate_on_env
+
+    policy = _load(args)
+    env_id, kwargs, config = _environment(args, policy)
+    n, seed = args.contexts, args.seed
+    if args.run_contexts:
+        if config is None:
+            raise UsageError("argument --run-contexts: expected a run folder as RUN, got a policy file")
+        n, seed = config.eval_contexts, split_seed(config.seed)[2]
+    env = gym.make(env_id, **kwargs)
+    if args.video:
+        mode = _render_mode(env, env_id)
+    try:
+        mean_return, mean_regret = evaluate_on_env(policy, env, n, seed)
+    finally:
+        env.close()
+    out = {"env": env_id, "which": args.which, "source": policy.source, "contexts": n, "seed": seed}
+    out.update(mean_return=mean_return, mean_regret=None if math.isnan(mean_regret) else mean_regret)
+    if args.video:
+        out["video"] = _record(gym.make(env_id, render_mode=mode, **kwargs), policy, seed, args.video)
+    print(json.dumps(out, allow_nan=False))
+    return 0
+
+
+def _render_mode(env: Any, env_id: str) -> str:
+    """The render mode that records an episode (the whole of it where the env can); checks the extra."""
+    from creps_gym.optimizers.adapters.base import import_optional
+
+    modes = list(env.metadata.get("render_modes", []))
+    mode = next((m for m in ("rgb_array_list", "rgb_array") if m in modes), None)
+    if mode is None:
+        raise UsageError(f"argument --video: expected an env that renders (rgb_array), got {env_id} {modes}")
+    import_optional("imageio", extra="video")
+    import_optional("imageio_ffmpeg", extra="video")
+    return mode
+
+
+def _record(env: Any, policy: Any, seed: int, path: str) -> str:
+    """Record one episode of ``env`` (context from ``env.reset(seed=seed)``) to ``path``; returns it."""
+    import imageio.v2 as imageio
+    import numpy as np
+
+    fps = env.metadata.get("render_fps", 4)
+    try:
+        context, info = env.reset(seed=seed)
+        context = np.asarray(info.get("context", context), dtype=np.float64).ravel()
+        env.step(policy(context, extrapolate=True))
+        frames = env.render()
+    finally:
+        env.close()
+    frames = list(frames) if isinstance(frames, list) else [frames]
+    frames = [np.asarray(f, dtype=np.uint8) for f in frames]
+    if path.lower().endswith(".gif"):
+        options: dict[str, Any] = {"duration": 1000.0 / fps, "loop": 0}
+    else:  # ffmpeg: even sizes suffice for yuv420p (no resizing to multiples of 16)
+        even = all(n % 2 == 0 for n in frames[0].shape[:2])
+        options = {"fps": fps, **({"macro_block_size": 1} if even else {})}
+    imageio.mimwrite(path, frames, **options)
+    return path
+
+
+COMMANDS = {"policy": _cmd_policy, "evaluate": _cmd_evaluate}

@@ -1,0 +1,150 @@
+"""Reading and writing policy files: an ``.npz`` of float64 arrays and one JSON document, never pickle.
+
+A policy file is untrusted input (it may come from a run folder or another machine), so reading one is
+bounded and strict: a regular file opened without following a symbolic link, at most
+:data:`MAX_POLICY_BYTES`; only the known entries, each read to at most its declared size, each array's
+header checked (dtype float64, shape matching its bytes) before anything is allocated; the JSON document
+at most :data:`MAX_JSON_BYTES`, without NaN or infinity. Every failure is a ``ValueError`` naming the file.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import stat
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["MAX_JSON_BYTES", "MAX_POLICY_BYTES", "read_policy_file", "write_policy_file"]
+
+MAX_POLICY_BYTES = 64 * 2**20
+MAX_JSON_BYTES = 8 * 2**20
+JSON_ENTRY = "__policy__.json"
+ARRAY_ENTRIES = ("coefficients", "context_low", "context_high", "param_low", "param_high")
+
+
+def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]], path: Any) -> Path:
+    """Write ``arrays`` and the JSON ``document`` to ``path`` through a temporary file and a rename.
+
+    The temporary file is ``.NAME.PID.tmp`` in the same folder (a run folder's own temporaries look so).
+    The bytes depend on the policy only (the entries carry a fixed date), so equal policies give equal files.
+    """
+    path = Path(path)
+    payload = json.dumps(document, sort_keys=True, allow_nan=False).encode()
+    entries = {k: np.asarray(v, dtype=np.float64) for k, v in arrays.items()}
+    entries[JSON_ENTRY] = np.frombuffer(payload, dtype=np.uint8)
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_STORED) as archive:
+        for name, array in entries.items():
+            npy = io.BytesIO()
+            np.lib.format.write_array(npy, np.ascontiguousarray(array), allow_pickle=False)
+            archive.writestr(zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0)), npy.getvalue())
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0)
+    handle = os.open(tmp, flags, 0o644)
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(buffer.getvalue())
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(tmp, path)
+    finally:
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def _read_bytes(path: Path) -> bytes:
+    """The bytes of a regular file (no symbolic link followed, no FIFO opened for good), bounded."""
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+    try:
+        handle = os.open(path, flags)
+    except FileNotFoundError:
+        raise
+    except OSError as exc:  # ELOOP: a symbolic link
+        kind = "a symbolic link" if path.is_symlink() else f"a file that cannot be opened ({exc.strerror})"
+        raise ValueError(f"path: expected a regular policy file, got {kind}: {path}") from None
+    with os.fdopen(handle, "rb") as stream:
+        info = os.fstat(stream.fileno())
+        if not stat.S_ISREG(info.st_mode):
+            raise ValueError(f"path: expected a regular policy file, got {path} (not a regular file)")
+        data = b"" if info.st_size > MAX_POLICY_BYTES else stream.read(MAX_POLICY_BYTES + 1)
+    if info.st_size > MAX_POLICY_BYTES or len(data) > MAX_POLICY_BYTES:
+        size = max(info.st_size, len(data))
+        limit = MAX_POLICY_BYTES
+        raise ValueError(f"path: expected a policy file of at most {limit} bytes, got {size}: {path}")
+    return data
+
+
+def _array(raw: bytes, name: str) -> NDArray[Any]:
+    """One ``.npy`` entry, its header checked before the data is read."""
+    stream = io.BytesIO(raw)
+    major, _ = np.lib.format.read_magic(stream)
+    if major == 1:
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(stream)
+    elif major == 2:
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(stream)
+    else:
+        raise ValueError(f"{name}: expected a .npy header of version 1 or 2, got {major}")
+    wanted = np.dtype(np.uint8) if name == JSON_ENTRY else np.dtype("<f8")
+    if dtype != wanted or dtype.hasobject:
+        raise ValueError(f"{name}: expected dtype {wanted}, got {dtype}")
+    if not all(isinstance(n, int) and n >= 0 for n in shape) or len(shape) > 2:
+        raise ValueError(f"{name}: expected a shape of at most two lengths, got {shape}")
+    count = int(np.prod(shape, dtype=object))
+    if count * dtype.itemsize != len(raw) - stream.tell():
+        raise ValueError(f"{name}: expected {count * dtype.itemsize} bytes of data for shape {shape}")
+    array = np.frombuffer(raw, dtype=dtype, offset=stream.tell())
+    array = array.reshape(shape, order="F" if fortran else "C")
+    return np.array(array, dtype=dtype, order="C")  # a writable copy
+
+
+def _finite_json(text: str) -> Any:
+    def refuse(constant: str) -> None:
+        raise ValueError(f"expected standard JSON, got {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def read_policy_file(path: Any) -> tuple[Any, dict[str, NDArray[np.float64]]]:
+    """The JSON document and the arrays of a policy file (see the module docstring for the checks).
+
+    Returns
+    -------
+    document : JSON value (the caller checks it)
+    arrays : dict of str to float64 ndarray
+    """
+    path = Path(path)
+    data = _read_bytes(path)
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as archive:
+            infos = archive.infolist()
+            names = [info.filename for info in infos]
+            allowed = {f"{name}.npy" for name in (*ARRAY_ENTRIES, JSON_ENTRY)}
+            unknown = sorted(set(names) - allowed)
+            if unknown or len(set(names)) != len(names) or f"{JSON_ENTRY}.npy" not in names:
+                raise ValueError(f"expected entries among {sorted(allowed)} (no repeats), got {names}")
+            entries = {}
+            for info in infos:
+                limit = MAX_JSON_BYTES if info.filename.startswith(JSON_ENTRY) else MAX_POLICY_BYTES
+                if info.file_size > limit:
+                    raise ValueError(f"{info.filename}: expected at most {limit} bytes, got {info.file_size}")
+                with archive.open(info) as stream:
+                    raw = stream.read(limit + 1)
+                if len(raw) > limit:
+                    raise ValueError(f"{info.filename}: expected at most {limit} bytes, got more")
+                entries[info.filename[: -len(".npy")]] = _array(raw, info.filename[: -len(".npy")])
+            payload = entries.pop(JSON_ENTRY)
+            if payload.ndim != 1:
+                raise ValueError(f"{JSON_ENTRY}: expected a 1-D uint8 array, got shape {payload.shape}")
+            document = _finite_json(payload.tobytes().decode("utf-8"))
+    except (ValueError, KeyError, EOFError, OSError, RecursionError, zipfile.BadZipFile, UnicodeError) as exc:
+        raise ValueError(f"path: expected a creps_gym policy file (.npz), got {path} ({exc})") from None
+    except (RuntimeError, NotImplementedError) as exc:  # zipfile: encrypted, unknown compression
+        raise ValueError(f"path: expected a creps_gym policy file (.npz), got {path} ({exc})") from None
+    return document, entries

@@ -1,0 +1,228 @@
+"""The policies a run keeps, :func:`load_policy`, and the evaluation of a policy on fresh test contexts.
+
+A run folder holds two policy files (:class:`~creps_gym.optimizers.policy_file.Policy`, ``.npz`` + JSON):
+
+``best_policy.npz``
+    The best evaluated mean policy (highest mean evaluation return on the run's test contexts, the first
+    one on ties), kept across the optimiser's restarts. The runner keeps it in its checkpoints, so a resumed
+    run keeps it too (bit for bit); the file is written at each checkpoint where it changed and at the end.
+    Its ``source`` says which iteration it came from (``History.best_iteration`` says so as well).
+``policy.npz``
+    The optimiser's mean policy at the end of the run.
+
+Both exist only for optimisers with a ``mean_policy()`` method (every registered one); they are written
+like the checkpoint (a temporary file and a rename). A run folder is untrusted input: the files are read
+bounded, without pickle and without following a symbolic link (:mod:`creps_gym.optimizers.policy_io`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym.envs.evaluation import evaluate_policy, finite_mean, test_contexts
+from creps_gym.optimizers.policy_file import Policy
+from creps_gym.runner.backends import run_episodes
+from creps_gym.runner.checks import real_params, unwrapped_model
+from creps_gym.runner.config import RunConfig
+from creps_gym.runner.contexts import ContextDraws
+from creps_gym.runner.history import History, encode_float
+from creps_gym.runner.rundir import RunDir
+
+__all__ = ["WHICH", "RunPolicies", "evaluate_contexts", "evaluate_on_env", "load_policy"]
+
+#: ``load_policy``'s choices: the run folder's file for each.
+WHICH = {"best": RunDir.BEST_POLICY, "final": RunDir.POLICY}
+
+
+class RunPolicies:
+    """What a :class:`~creps_gym.runner.loop.Runner` keeps of its policies: the best evaluated one.
+
+    Parameters
+    ----------
+    config : RunConfig
+    env : gymnasium.Env
+        The run's env: its id, keyword arguments, context box and parameter box go into each policy.
+    """
+
+    def __init__(self, config: RunConfig, env: gym.Env) -> None:
+        spec = getattr(env, "spec", None)
+        self.env_id = config.env or (spec.id if spec is not None and spec.id else None)
+        self.env_kwargs = dict(config.env_kwargs) if config.env else {}
+        self.boxes = {
+            f"{name}_box": (space.low.ravel().astype(np.float64), space.high.ravel().astype(np.float64))
+            for name, space in (("context", env.observation_space), ("param", env.action_space))
+        }
+        self.optimizer_name = config.optimizer
+        self.best: Policy | None = None
+        self.best_return = -math.inf
+        self._written: Policy | None = None  # the best policy last written to the run folder
+
+    def describe(self, optimizer: Any, iteration: int, which: str, record: Any = None) -> Policy | None:
+        """``optimizer.mean_policy()`` with the run's env and where it comes from; None without one."""
+        make = getattr(optimizer, "mean_policy", None)
+        if make is None:
+            return None
+        policy = make()
+        if not isinstance(policy, Policy):
+            raise TypeError(f"optimizer.mean_policy(): expected a Policy, got {type(policy).__name__}")
+        source = {"optimizer": self.optimizer_name or type(optimizer).__name__, "which": which}
+        source["iteration"] = int(iteration)
+        if record is not None:
+            source.update(eval_return=encode_float(record[0]), eval_regret=encode_float(record[1]))
+        arrays = {"features": policy.features, "coefficients": policy.coefficients}
+        return Policy(**arrays, env=self.env_id, env_kwargs=self.env_kwargs, source=source, **self.boxes)
+
+    def offer(self, optimizer: Any, iteration: int, eval_return: float, eval_regret: float) -> None:
+        """Keep the optimiser's mean policy if its evaluation return is the best so far (NaN: none)."""
+        if math.isfinite(eval_return) and eval_return > self.best_return:
+            best = self.describe(optimizer, iteration, "best", (eval_return, eval_regret))
+            if best is not None:
+                self.best, self.best_return = best, float(eval_return)
+
+    def checkpoint_state(self, run_dir: RunDir | None) -> dict[str, Any] | None:
+        """The best policy as a JSON document for the checkpoint (None before the first); writes
+        ``best_policy.npz`` first if the best policy changed since it was last written."""
+        if run_dir is not None and self.best is not None and self.best is not self._written:
+            _write(run_dir, RunDir.BEST_POLICY, self.best)
+            self._written = self.best
+        return None if self.best is None else self.best.to_dict()
+
+    def restore(self, document: Any) -> None:
+        """Take the best policy back from a checkpoint's :meth:`state` (``ValueError`` if damaged)."""
+        self.best, self.best_return = None, -math.inf
+        if document is not None:
+            best = Policy.from_dict(document)
+            value = best.source.get("eval_return")
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+                raise ValueError(f"best_policy: expected a finite eval_return in its source, got {value!r}")
+            self.best, self.best_return = best, float(value)
+        self._written = self.best
+
+    def write_final(
+        self, run_dir: RunDir | None, optimizer: Any, history: History, only_changed: bool
+    ) -> None:
+        """Write ``policy.npz`` (the optimiser's mean policy now) and ``best_policy.npz``; with
+        ``only_changed`` (completing a finished run), only files that are missing or differ."""
+        if run_dir is None:
+            return
+        last = history.records[-1] if history.records else None
+        record = None if last is None else (last.eval_return, last.eval_regret)
+        iteration = 0 if last is None else last.iteration
+        final = self.describe(optimizer, iteration, "final", record)
+        for name, policy in ((RunDir.POLICY, final), (RunDir.BEST_POLICY, self.best)):
+            if policy is not None and not (only_changed and _holds(run_dir, name, policy)):
+                _write(run_dir, name, policy)
+        self._written = self.best
+
+
+def _write(run_dir: RunDir, name: str, policy: Policy) -> None:
+    path = policy.save(run_dir.file(name))
+    os.chmod(path, run_dir.file(RunDir.CONFIG).stat().st_mode & 0o777)  # one mode for the run's files
+
+
+def _holds(run_dir: RunDir, name: str, policy: Policy) -> bool:
+    try:
+        return Policy.load(run_dir.file(name)).equals(policy)
+    except (OSError, ValueError):
+        return False
+
+
+def load_policy(path: str | os.PathLike[str], which: str = "best") -> Policy:
+    """The policy of a run folder (``which``: ``"best"`` or ``"final"``), or of a policy file.
+
+    Parameters
+    ----------
+    path : path-like
+        A run folder (``creps-gym run --out``, ``run(..., run_dir=...)``) or a file written by
+        :meth:`Policy.save` (then ``which`` is not used).
+    which : {"best", "final"}
+        The best evaluated mean policy (``best_policy.npz``) or the optimiser's mean policy at the end
+        (``policy.npz``). A run folder without ``policy.npz`` (unfinished, or written before policy files
+        existed) gives the policy of its last checkpoint for ``"final"``.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file or folder, or a run folder without the policy asked for.
+    RunDirError
+        A damaged policy file or checkpoint in a run folder (a ``ValueError``).
+    ValueError
+        ``which`` is not a choice, or ``path`` is not a policy file.
+    """
+    if which not in WHICH:
+        raise ValueError(f"which: expected one of {sorted(WHICH)}, got {which!r}")
+    path = Path(path)
+    if not path.is_dir():
+        return Policy.load(path)
+    directory = RunDir.open(path)
+    file = directory.file(WHICH[which])
+    if os.path.lexists(file):
+        try:
+            return Policy.load(file)
+        except ValueError as exc:
+            raise directory.damaged(WHICH[which], exc, "delete it, or restore it from a backup") from None
+    if which == "final":
+        policy = _checkpoint_policy(directory)
+        if policy is not None:
+            return policy
+    raise FileNotFoundError(
+        f"path: expected {WHICH[which]} in the run folder {path}, got none (a run without an evaluation "
+        "yet, with an optimiser that has no mean_policy(), or written before policy files existed); "
+        "try which='final'"
+    )
+
+
+def _checkpoint_policy(directory: RunDir) -> Policy | None:
+    """The mean policy of the run's optimiser at its last checkpoint, or None without a checkpoint."""
+    from creps_gym.optimizers.registry import restore_optimizer
+
+    config = directory.config()
+    loaded = directory.load_checkpoint(config)
+    if loaded is None or config.optimizer is None:
+        return None
+    state, optimizer_state = loaded
+    try:
+        optimizer = restore_optimizer(config.optimizer, optimizer_state)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        raise directory.damaged(RunDir.CHECKPOINT, exc, "restore it from a backup") from None
+    make = getattr(optimizer, "mean_policy", None)
+    if make is None:
+        return None
+    policy = make()
+    source = {"optimizer": config.optimizer, "which": "final", "iteration": int(state["iteration"])}
+    arrays = {"features": policy.features, "coefficients": policy.coefficients}
+    return Policy(**arrays, env=config.env, env_kwargs=config.env_kwargs, source=source)
+
+
+def evaluate_contexts(
+    policy: Any, env: gym.Env, model: Any, contexts: NDArray[np.float64], seeds: Any, retries: int
+) -> tuple[float, float]:
+    """Mean return and mean regret (NaN without one) of ``policy`` (contexts (n, z) -> params (n, p)): on
+    the creps_gym ``model`` behind ``env`` where there is one, else by episodes of ``env`` itself reset with
+    ``seeds`` (the runner's evaluation of its recommended policy)."""
+    if model is not None:
+        result = evaluate_policy(model, policy, contexts)
+        return result.mean_return, math.nan if result.mean_regret is None else result.mean_regret
+    params = real_params(policy(contexts), "recommend")
+    returns = run_episodes(env, seeds, contexts, params, first=0, label="evaluation", retries=retries)
+    return finite_mean(returns), math.nan
+
+
+def evaluate_on_env(policy: Policy, env: gym.Env, n: int, seed: int, retries: int = 0) -> tuple[float, float]:
+    """Mean return and mean regret (NaN without one) of ``policy`` on ``n`` test contexts of ``env``, drawn
+    as a run draws its test contexts from its evaluation seed (``seed`` here): with a run's evaluation seed
+    and count, the numbers are the run's."""
+    model = unwrapped_model(env)
+    seeds = np.random.default_rng(seed).integers(0, 2**63 - 1, size=n)
+    if model is not None:
+        contexts = test_contexts(model, n, seed)
+    else:
+        contexts = ContextDraws(env, "reset", retries).reset_contexts(seeds, "evaluation")
+    return evaluate_contexts(policy, env, model, contexts, seeds, retries)

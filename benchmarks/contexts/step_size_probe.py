@@ -1,4 +1,6 @@
-"""Probe: C-CMA-ES's step size on the steep Rosenbrock under uniform draws and under the bandit's.
+"""Probe: C-CMA-ES's step size on the steep Rosenbrock under uniform draws, under the bandit's, and under a
+fixed draw skewed towards the steep end like the bandit's (Beta(2, 1)): is it the skew or the moving
+distribution that makes the step size grow?
 
 Prints, for seeds 0-4 (the study's full-mode trials and budget), the step size (``diagnostics["step_size"]``)
 at iterations 1, 50, 100 and 150 and the final mean regret, per selector. ``docs/contexts.md`` quotes it.
@@ -23,15 +25,16 @@ CHECKPOINTS = (1, 50, 100, 150)
 
 def main() -> int:
     iterations, samples, every = MODES["full"]["steep-rosenbrock"]
-    for selector in ("uniform", "bandit"):
+    for selector, options in (("uniform", {}), ("bandit", {}), ("beta", {"a": 2.0, "b": 1.0})):
         for seed in range(MODES["full"]["trials"]):
             task = SteepFunction("Rosenbrock")
             history = run("c-cma-es", task, iterations, samples, seed, eval_every=every,
-                          eval_contexts=EVAL_CONTEXTS, context_selector=selector)  # fmt: skip
+                          eval_contexts=EVAL_CONTEXTS, context_selector=selector,
+                          context_selector_options=options)  # fmt: skip
             steps = {r.iteration: r.diagnostics["step_size"] for r in history.records}
             shown = ", ".join(f"{i}: {steps[i]:.3g}" for i in CHECKPOINTS if i in steps)
             final = history.records[-1].eval_regret
-            print(f"{selector} seed {seed}: step size {shown}; final regret {final:.3g}")
+            print(f"{selector} {options or ''} seed {seed}: step size {shown}; final regret {final:.3g}")
     return 0
 
 

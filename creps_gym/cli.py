@@ -45,6 +45,7 @@ from creps_gym.cli_types import (
     numbers,
     optimizer_name,
     positive_float,
+    selector_name,
 )
 
 __all__ = ["EXIT_CODES", "build_parser", "main"]
@@ -144,7 +145,20 @@ def _add_run(commands: Any) -> None:
     for flag, parse, text in optional:
         default = run_defaults[flag[2:].replace("-", "_")]
         run.add_argument(flag, type=parse, default=default, help=f"{text} (default {default})")
-    for flag, text in (("--opt", "optimiser option, e.g. --opt epsilon=1.0"), ("--env-kwarg", "e.g. dim=5")):
+    run.add_argument(
+        "--context-selector",
+        type=selector_name,
+        default=None,
+        metavar="NAME",
+        help="who chooses the training contexts (e.g. uniform, arcsine, bandit, progress; see "
+        "docs/contexts.md); default: the env's own draws",
+    )
+    flags = (
+        ("--opt", "optimiser option, e.g. --opt epsilon=1.0"),
+        ("--env-kwarg", "e.g. dim=5"),
+        ("--selector-opt", "context selector option, e.g. --selector-opt cells=4"),
+    )
+    for flag, text in flags:
         run.add_argument(
             flag,
             action="append",
@@ -218,7 +232,12 @@ def _cmd_list(_: argparse.Namespace) -> int:
     return 0
 
 
-_FLAGS = {"samples": "--samples", "optimizer_options": "--opt", "env_kwargs": "--env-kwarg"}
+_FLAGS = {
+    "samples": "--samples",
+    "optimizer_options": "--opt",
+    "env_kwargs": "--env-kwarg",
+    "context_selector_options": "--selector-opt",
+}
 
 
 def _as_usage_error(exc: Exception, args: argparse.Namespace) -> UsageError:
@@ -233,7 +252,8 @@ def _as_usage_error(exc: Exception, args: argparse.Namespace) -> UsageError:
     if sep and field in {f.name for f in fields(RunConfig)}:
         flag = _FLAGS.get(field, "--" + field.replace("_", "-"))
         return UsageError(f"argument {flag}:{rest}")
-    for flag, given in (("--opt", args.opt), ("--env-kwarg", args.env_kwarg)):
+    named = (("--opt", args.opt), ("--env-kwarg", args.env_kwarg), ("--selector-opt", args.selector_opt))
+    for flag, given in named:
         if any(key in message.split(":", 1)[0] or f"'{key}'" in message for key, _ in given):
             return UsageError(f"argument {flag}: {message}")
     return UsageError(message)
@@ -272,6 +292,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     _import_modules(args)
     options = {f.name: getattr(args, f.name) for f in fields(RunConfig) if hasattr(args, f.name)}
     options.update(optimizer_options=dict(args.opt), env_kwargs=dict(args.env_kwarg))
+    options.update(context_selector_options=dict(args.selector_opt))
     try:
         config = RunConfig(**options)
         runner = Runner(

@@ -15,6 +15,7 @@ __all__ = [
     "numbers",
     "optimizer_name",
     "positive_float",
+    "selector_name",
 ]
 
 
@@ -89,5 +90,16 @@ def optimizer_name(text: str) -> str:
         from creps_gym.listing import did_you_mean
 
         names = optimizer_names()
+        raise argparse.ArgumentTypeError(f"expected one of {names}, got {text!r}{did_you_mean(text, names)}")
+    return text
+
+
+def selector_name(text: str) -> str:
+    from creps_gym.selectors.registry import selector_names
+
+    if text not in selector_names():
+        from creps_gym.listing import did_you_mean
+
+        names = selector_names()
         raise argparse.ArgumentTypeError(f"expected one of {names}, got {text!r}{did_you_mean(text, names)}")
     return text

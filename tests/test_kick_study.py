@@ -312,3 +312,30 @@ def test_the_committed_summary_is_rendered_from_the_committed_results(mode: str,
     # that the current code would compute again (another env or setting) cannot stay in it.
     gathered = report.collect(folder, mode, run.MODES[mode])
     assert json.loads(json.dumps(gathered)) == document
+
+
+@pytest.mark.parametrize("selector", study.SELECTED_CONTEXTS)
+def test_a_learning_selector_trains_resumes_bit_identically_and_is_wired_to_the_command_line(
+    selector: str, precision_env, tmp_path: Path
+) -> None:
+    spec = study.RunSpec("precision", "creps-cma-old", 6, 4, options={"ridge": 1e-2}, contexts=selector)
+    straight = study.train_run(spec, precision_env, 0, 7, tmp_path / "straight", checkpoint_every=1)
+    half = study.RunSpec("precision", "creps-cma-old", 6, 2, options={"ridge": 1e-2}, contexts=selector)
+    study.train_run(half, precision_env, 0, 7, tmp_path / "resumed", checkpoint_every=1)
+    states = json.loads((tmp_path / "resumed" / "creps-cma-old-trial0.selector.json").read_text())
+    assert sorted(states, key=int) == ["1", "2"]  # the last two checkpoints' states
+    resumed = study.train_run(spec, precision_env, 0, 7, tmp_path / "resumed", checkpoint_every=1)
+    assert resumed["history"] == straight["history"] and resumed["values"] == straight["values"]
+    assert resumed["setting"]["contexts"] == selector
+    final = json.loads((tmp_path / "straight" / "creps-cma-old-trial0.selector.json").read_text())
+    assert sorted(final, key=int) == ["3", "4"] and final["4"] != final["3"]  # told every iteration
+    if selector == "bandit":  # ("progress" draws uniformly until it has seen two windows of 3 iterations)
+        uniform = study.RunSpec("precision", "creps-cma-old", 6, 4, options={"ridge": 1e-2})
+        other = study.train_run(uniform, precision_env, 0, 7, tmp_path / "uniform", checkpoint_every=1)
+        assert other["history"]["batch"] != straight["history"]["batch"]
+    args = run.parse_args(
+        ["--full", "--only", "precision", "--methods", "creps-cma-old", "--contexts", selector]
+    )
+    ((spec_full, trials),) = run.run_specs(args)
+    assert spec_full.contexts == selector and spec_full.iterations == 1000 and trials == 3
+    assert args.out == run.RESULTS / f"full-{selector}"

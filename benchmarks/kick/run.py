@@ -21,6 +21,11 @@ different ``--only`` can run side by side.
     python benchmarks/kick/run.py --quick                      # minutes on 2 cores
     python benchmarks/kick/run.py --full --only precision      # hours; resumable
     python benchmarks/kick/run.py --full --render-only         # results.json, summary.md, figures
+
+``--contexts NAME`` trains every selected method on other training contexts: ``uniform``, ``arcsine`` or a
+learning selector of :mod:`creps_gym.selectors` (``bandit``, ``progress``); its runs go to
+``results/<mode>-<NAME>`` unless ``--out`` says otherwise, e.g.
+``python benchmarks/kick/run.py --full --only precision --methods creps-cma-old --contexts bandit``.
 """
 
 from __future__ import annotations
@@ -37,7 +42,14 @@ if not __package__:
 
 from benchmarks.kick.oracle import oracle_point
 from benchmarks.kick.report import render
-from benchmarks.kick.study import RunSpec, evaluation_contexts, make_env, train_run
+from benchmarks.kick.study import (
+    SELECTED_CONTEXTS,
+    TRAINING_CONTEXTS,
+    RunSpec,
+    evaluation_contexts,
+    make_env,
+    train_run,
+)
 from benchmarks.study_tools import NO_STAGNATION
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -100,10 +112,14 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--threads", type=int, default=0, help="simulation threads (0: all CPUs)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--checkpoint-every", type=int, default=10)
+    parser.add_argument(
+        "--contexts", choices=[*TRAINING_CONTEXTS, *SELECTED_CONTEXTS], default=None,
+        help="training contexts of every experiment (default: TRAINING's); runs go to results/<mode>-<NAME>",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     args.mode = "full" if args.full else "quick"
     if args.out is None:
-        args.out = RESULTS / args.mode
+        args.out = RESULTS / (args.mode if args.contexts is None else f"{args.mode}-{args.contexts}")
     if args.trials is not None and args.trials < 1:
         parser.error(f"--trials: expected an int >= 1, got {args.trials}")
     if args.trial_indices is not None and min(args.trial_indices) < 0:
@@ -121,7 +137,7 @@ def run_specs(args: argparse.Namespace) -> list[tuple[RunSpec, int]]:
         for name, features, options in methods:
             if args.methods is None or name in args.methods:
                 spec = RunSpec(experiment, name, SAMPLES[experiment], iterations, features, options,
-                               TRAINING[experiment])  # fmt: skip
+                               args.contexts or TRAINING[experiment])  # fmt: skip
                 runs.append((spec, args.trials or trials))
     return runs
 

@@ -8,7 +8,9 @@ reference kick (see ``docs/wrappers.md``).
 
 A run is (experiment, optimiser, trial). Its training contexts at iteration ``t`` are drawn from
 ``default_rng([seed, key, trial, t])``, uniformly in the env's context box (the env's own draw) or from
-Beta(½, ½) scaled into it (``contexts="arcsine"``, :class:`~creps_gym.wrappers.BetaContexts`), and its
+Beta(½, ½) scaled into it (``contexts="arcsine"``, :class:`~creps_gym.wrappers.BetaContexts`), or by a
+learning context selector (``contexts="bandit"`` or ``"progress"``, :mod:`creps_gym.selectors`, told every
+iteration's returns and checkpointed in ``<name>-trial<k>.selector.json``), and its
 optimiser's seed comes from ``SeedSequence([seed, key, trial])``, where ``key`` is a CRC-32 of
 ``"<experiment>/<name>"``, so adding a method never changes another one's numbers. The optimiser's
 checkpoint (``.npz``) holds its own generator, and the history (``.history.json``) is written with it, so a
@@ -32,6 +34,7 @@ import creps_gym  # noqa: F401  (registers the ids)
 from creps_gym.envs.base import initial_distribution
 from creps_gym.optimizers.features import RBFFeatures
 from creps_gym.optimizers.registry import make_optimizer, optimizer_class
+from creps_gym.selectors import make_selector
 from creps_gym.wrappers import BetaContexts, OffsetParams
 
 __all__ = [
@@ -39,10 +42,12 @@ __all__ = [
     "GRID_X",
     "GRID_Y",
     "LEGACY_ENV_IDS",
+    "SELECTED_CONTEXTS",
     "TARGETS",
     "TRAINING_CONTEXTS",
     "RunSpec",
     "context_sampler",
+    "context_selector",
     "episode_metric",
     "evaluate",
     "evaluation_contexts",
@@ -63,6 +68,8 @@ EVAL_EVERY = 50  # iterations between evaluations of the mean policy (the learni
 #: How a run draws its training contexts: the shape parameter a = b of a Beta(a, b) scaled into the env's
 #: context box, or None for the env's own (uniform) draw. Run files that name none drew "uniform".
 TRAINING_CONTEXTS = {"uniform": None, "arcsine": 0.5}
+#: Training contexts chosen by a learning selector (registry names of :mod:`creps_gym.selectors`).
+SELECTED_CONTEXTS = ("bandit", "progress")
 
 
 @dataclass(frozen=True)
@@ -79,8 +86,9 @@ class RunSpec:
     contexts: str = "uniform"
 
     def __post_init__(self) -> None:
-        if self.contexts not in TRAINING_CONTEXTS:
-            raise ValueError(f"contexts: expected one of {sorted(TRAINING_CONTEXTS)}, got {self.contexts!r}")
+        if self.contexts not in (*TRAINING_CONTEXTS, *SELECTED_CONTEXTS):
+            expected = [*sorted(TRAINING_CONTEXTS), *SELECTED_CONTEXTS]
+            raise ValueError(f"contexts: expected one of {expected}, got {self.contexts!r}")
 
     @property
     def key(self) -> int:
@@ -108,6 +116,24 @@ def context_sampler(spec: RunSpec, env: OffsetParams) -> Any:
         return env.unwrapped.sample_contexts
     box = env.unwrapped.observation_space
     return BetaContexts(box.low, box.high, shape)
+
+
+def context_selector(spec: RunSpec, env: OffsetParams) -> Any:
+    """The learning selector of ``spec`` bound to the env's context box, or None (a fixed law)."""
+    if spec.contexts not in SELECTED_CONTEXTS:
+        return None
+    selector, box = make_selector(spec.contexts), env.unwrapped.observation_space
+    selector.bind(box.low.astype(np.float64), box.high.astype(np.float64), env.unwrapped.sample_contexts)
+    return selector
+
+
+def _selector_states(path: Path, selector: Any, iteration: int, states: dict[str, Any]) -> dict[str, Any]:
+    """Write the selector's state at ``iteration`` beside the previous checkpoint's (a kill before the
+    optimiser's checkpoint is saved leaves that one the one to resume from); returns the states kept."""
+    kept = {**{k: v for k, v in states.items() if int(k) < iteration}, str(iteration): selector.state_dict()}
+    kept = dict(sorted(kept.items(), key=lambda item: int(item[0]))[-2:])
+    write_json(path, kept)
+    return kept
 
 
 def evaluate(env: OffsetParams, contexts: np.ndarray, offsets: np.ndarray) -> tuple[Any, Any]:
@@ -189,6 +215,7 @@ def train_run(
     folder.mkdir(parents=True, exist_ok=True)
     stem = folder / f"{spec.name}-trial{trial}"
     result_path, ckpt, history_path = (stem.with_suffix(s) for s in (".json", ".npz", ".history.json"))
+    selector, selector_path = context_selector(spec, env), stem.with_suffix(".selector.json")
     setting = {"env": ENV_IDS[spec.experiment], "contexts": spec.contexts, "features": spec.features,
                "options": spec.options, "samples": spec.samples}  # fmt: skip
     if result_path.exists():
@@ -197,26 +224,35 @@ def train_run(
             return done
     base_seed = [seed, spec.key, trial]
     history = json.loads(history_path.read_text()) if ckpt.exists() else {}
-    if stored_setting(history, spec.experiment) == setting:  # a checkpoint of another setting starts over
-        opt = load_run(stem)
-    else:
+    states = json.loads(selector_path.read_text()) if selector and selector_path.exists() else {}
+    opt = load_run(stem) if stored_setting(history, spec.experiment) == setting else None
+    if opt is not None and selector is not None and str(opt.iteration) not in states:
+        opt = None  # no selector state at the checkpoint: start over
+    if opt is not None and selector is not None:
+        selector.load_state_dict(states[str(opt.iteration)])
+    if opt is None:  # a checkpoint of another setting starts over
         opt = _new_optimizer(spec, env, int(np.random.SeedSequence(base_seed).generate_state(1)[0]))
         history = {"setting": setting, "batch": [], "evaluations": []}
     # The history is written before the checkpoint, so after a kill it may run ahead of it: cut it back.
     history["batch"] = history["batch"][: opt.iteration]
     history["evaluations"] = [e for e in history["evaluations"] if e[0] <= opt.iteration]
-    draw_contexts, start = context_sampler(spec, env), time.perf_counter()
+    draw_contexts = context_sampler(spec, env) if selector is None else selector.select
+    start = time.perf_counter()
     while opt.iteration < spec.iterations and not opt.stop():
         rng = np.random.default_rng([*base_seed, opt.iteration])
         contexts = draw_contexts(rng, spec.samples)
         offsets = opt.ask(contexts)
         returns, info = evaluate(env, contexts, offsets)
         opt.tell(contexts, offsets, returns)
+        if selector is not None:
+            selector.tell(contexts, returns, {k: float(v) for k, v in dict(opt.diagnostics).items()})
         history["batch"].append([float(returns.mean()), float(info["fell"].mean())])
         if opt.iteration % EVAL_EVERY == 0:
             history["evaluations"].append([opt.iteration, mean_policy_metric(env, spec.experiment, opt)])
         if opt.iteration % checkpoint_every == 0 or opt.iteration == spec.iterations or opt.stop():
             write_json(history_path, history)
+            if selector is not None:
+                states = _selector_states(selector_path, selector, opt.iteration, states)
             opt.save(ckpt)
     result = {
         "experiment": spec.experiment,

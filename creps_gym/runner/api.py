@@ -27,6 +27,7 @@ def run(
     callbacks: Sequence[Any] = (),
     env_kwargs: dict[str, Any] | None = None,
     optimizer_options: dict[str, Any] | None = None,
+    context_selector: Any = None,
     **options: Any,
 ) -> History:
     """Run an ask/tell optimiser on a contextual episodic env.
@@ -54,11 +55,15 @@ def run(
     callbacks : sequence of Callback or callables ``f(record, history) -> bool | None``
     env_kwargs, optimizer_options : dict, optional
         Keyword arguments of ``gymnasium.make`` (id envs) and of the optimiser (name optimisers).
+    context_selector : str or ContextSelector, optional
+        Who chooses the training contexts instead of the env's sampler: a registered name
+        (:func:`creps_gym.selectors.selector_names`, with ``context_selector_options``) or an object (see
+        ``docs/contexts.md``). The evaluation stays on the env's test contexts.
     **options
         The other :class:`~creps_gym.runner.config.RunConfig` fields: ``eval_every``, ``eval_contexts``,
         ``context_draws``, ``backend``, ``workers``, ``vector_mode``, ``retries``, ``max_episodes``,
         ``target_regret``, ``max_time``, ``checkpoint_every``, ``initial_mean``, ``initial_std``,
-        ``ray_address``.
+        ``ray_address``, ``context_selector_options``.
 
     Returns
     -------
@@ -74,9 +79,19 @@ def run(
     names = {"env": env if by_id else None, "optimizer": optimizer if by_name else None}
     sizes = {"iterations": iterations, "samples": samples_per_iteration, "seed": seed}
     kwargs = {"env_kwargs": env_kwargs or {}, "optimizer_options": optimizer_options or {}}
-    config = RunConfig(**names, **sizes, **kwargs, **options)
+    selector_name = context_selector if isinstance(context_selector, str) else None
+    config = RunConfig(**names, **sizes, **kwargs, context_selector=selector_name, **options)
     objects = {"env": None if by_id else env, "optimizer": None if by_name else optimizer}
-    return Runner(config, **objects, callbacks=callbacks, run_dir=run_dir, overwrite=overwrite).run()
+    selector = None if selector_name is not None else context_selector
+    runner = Runner(
+        config,
+        **objects,
+        callbacks=callbacks,
+        run_dir=run_dir,
+        overwrite=overwrite,
+        context_selector=selector,
+    )
+    return runner.run()
 
 
 def resume(
@@ -85,6 +100,7 @@ def resume(
     env: Any = None,
     optimizer_class: Any = None,
     callbacks: Sequence[Any] = (),
+    context_selector: Any = None,
 ) -> History:
     """Continue a run from its last checkpoint (or from the start if it has none); returns the History.
 
@@ -105,6 +121,9 @@ def resume(
         Required when the run was started with an optimiser object: the class whose ``from_state_dict``
         restores it. Such runs resume from a checkpoint only.
     callbacks : sequence of Callback or callables
+    context_selector : ContextSelector, optional
+        Required when the run was started with a selector object: a new one of the same kind (its state
+        is restored from the checkpoint).
     """
     directory = RunDir.open(run_dir)
     config = directory.config()
@@ -112,7 +131,14 @@ def resume(
         raise ValueError("env: expected the env object this run was started with (its config has no env id)")
     if config.optimizer is None and optimizer_class is None:
         raise ValueError("optimizer_class: expected the class of the run's optimiser object, got None")
-    runner = resumed_runner(directory, config, env=env, optimizer_class=optimizer_class, callbacks=callbacks)
+    runner = resumed_runner(
+        directory,
+        config,
+        env=env,
+        optimizer_class=optimizer_class,
+        callbacks=callbacks,
+        context_selector=context_selector,
+    )
     return runner.run()
 
 
@@ -123,6 +149,7 @@ def resumed_runner(
     env: Any = None,
     optimizer_class: Any = None,
     callbacks: Sequence[Any] = (),
+    context_selector: Any = None,
 ) -> Runner:
     """The :class:`Runner` that continues ``directory`` (its ``config``, already checked for trust).
 
@@ -138,6 +165,7 @@ def resumed_runner(
             optimizer_class=optimizer_class,
             run_dir=directory,
             callbacks=callbacks,
+            context_selector=context_selector,
         )
     except (TypeError, ValueError) as exc:
         if isinstance(exc, RunDirError) or config.env is None or config.optimizer is None:

@@ -128,6 +128,12 @@ class RunConfig:
         variable's cluster if set, else a local Ray started and stopped by the run (see
         :mod:`creps_gym.runner.ray_backend`). Not part of the run's identity: a resumed run never joins
         the address its ``config.json`` records.
+    context_selector : str or None
+        A registered context selector (:func:`creps_gym.selectors.selector_names`) that chooses the
+        training contexts instead of the env's sampler (``context_draws="batch"`` only; see
+        ``docs/contexts.md``). None: the env's own draws (or a selector object given to the runner).
+    context_selector_options : dict
+        The selector's keyword arguments, as JSON data.
     """
 
     env: str | None
@@ -151,6 +157,8 @@ class RunConfig:
     initial_mean: Any = None
     initial_std: Any = None
     ray_address: str | None = None
+    context_selector: str | None = None
+    context_selector_options: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         for name in ("env", "optimizer"):
@@ -184,6 +192,7 @@ class RunConfig:
                     f"ray_address: expected None unless backend='ray' (backend is {self.backend!r}), "
                     f"got {self.ray_address!r}"
                 )
+        self._check_selector()
         _optional_positive(self.workers, "workers", integer=True)
         _optional_positive(self.max_episodes, "max_episodes", integer=True)
         for name in ("target_regret", "max_time"):
@@ -197,6 +206,25 @@ class RunConfig:
             raise ValueError(
                 f"max_episodes: expected at least one iteration's samples ({self.samples}), "
                 f"got {self.max_episodes}"
+            )
+
+    def _check_selector(self) -> None:
+        if self.context_selector is None:
+            if self.context_selector_options:
+                raise ValueError(
+                    "context_selector_options: expected none without a context_selector, got "
+                    f"{self.context_selector_options!r}"
+                )
+            object.__setattr__(self, "context_selector_options", dict(self.context_selector_options))
+            return
+        from creps_gym.selectors.registry import check_options
+
+        options = check_options(self.context_selector, self.context_selector_options)
+        object.__setattr__(self, "context_selector_options", options)
+        if self.context_draws != "batch":
+            raise ValueError(
+                f"context_draws: expected 'batch' with a context_selector (it sets every context), "
+                f"got {self.context_draws!r}"
             )
 
     def to_dict(self) -> dict[str, Any]:

@@ -9,19 +9,14 @@ env supports it, mean return otherwise). For envs that are not creps_gym models,
 that may change what the agent sees, sends or gets (e.g. ``TransformReward``, ``NormalizeParams``; see
 :func:`creps_gym.runner.checks.unwrapped_model`), the evaluation runs test episodes of the env itself
 with seeded resets, so it sees what training sees.
-
 **Failures.** Resets that read contexts and the evaluation are retried like episodes (``config.retries``
 times, then :class:`~creps_gym.runner.backends.EpisodeError`); episodes follow the backends' policy.
-
-**Seeds.** The master seed is split by :func:`~creps_gym.runner.build.split_seed` into the env stream
-(episode seeds and contexts), the optimiser's seed and the test contexts' seed. The same seed gives a
-bit-identical :class:`~creps_gym.runner.history.History` (wall times aside) on every backend and after any
-resume.
-
-**Checkpoints** hold the optimiser's and the loop's state (env stream, counts, wall time, stop reason, a
-checksum of the records, the best evaluated policy: :mod:`~creps_gym.runner.policy_store`): O(1) in the
-run's length. A resume rebuilds the history from the log.
-
+**Seeds.** :func:`~creps_gym.runner.build.split_seed` splits the master seed into the env stream (episode
+seeds and contexts), the optimiser's seed and the test contexts' seed (a context selector has its own, see
+:mod:`creps_gym.runner.selection`). The same seed gives a bit-identical History (wall times aside) on
+every backend and after any resume. **Checkpoints** hold the optimiser's and the loop's state (env stream,
+counts, wall time, stop reason, a checksum of the records, the best evaluated policy:
+:mod:`~creps_gym.runner.policy_store`): O(1). A resume rebuilds the history from the log.
 **Stop reasons** (``History.stop_reason``): ``"iterations"``, ``"max_episodes"`` (the next iteration would
 exceed the budget), ``"target_regret"``, ``"max_time"``, ``"optimizer: <criteria>"`` (the optimiser's own
 ``stop()``), ``"callback"``.
@@ -84,6 +79,8 @@ class Runner:
     callbacks : sequence of Callback or callables
     optimizer_class : type, optional
         Class whose ``from_state_dict`` restores an object optimiser's checkpoint.
+    context_selector : ContextSelector, optional
+        A selector object, instead of ``config.context_selector``.
     """
 
     def __init__(
@@ -96,6 +93,7 @@ class Runner:
         overwrite: bool = False,
         callbacks: Sequence[Any] = (),
         optimizer_class: Any = None,
+        context_selector: Any = None,
     ) -> None:
         self.config = config
         if (config.env is None) == (env is None):
@@ -114,7 +112,7 @@ class Runner:
             batch = recommended_samples(config.optimizer or optimizer, self.n_params, self.n_context_dims)
             self.config = config = replace(config, samples=batch)
         check_run_memory(config, self.n_params, self.n_context_dims, covariance=config.optimizer is not None)
-        self.draws = ContextDraws(self.env, config.context_draws, config.retries)
+        self.draws = ContextDraws.for_run(self.env, config, context_selector)
         obj = None if config.env else self.env
         self.source = EnvSource(config.env, dict(config.env_kwargs), obj, set_context=self.draws.batched)
         self._model = unwrapped_model(self.env)
@@ -217,6 +215,7 @@ class Runner:
                 self.optimizer = (optimizer_class or type(optimizer)).from_state_dict(optimizer_state)
             self._check_optimizer_sizes(self.optimizer, "optimizer state")
             self.env_rng.bit_generator.state = state["env_rng"]
+            self.draws.selection.load(state)
             self.history = self._checkpoint_history(run_dir, state)
             self.policies.restore(state.get("best_policy"))  # None in older checkpoints
             self.iteration, self.episodes = int(state["iteration"]), int(state["episodes"])
@@ -256,6 +255,7 @@ class Runner:
             "stop_reason": self.history.stop_reason,
             "log_crc": self._log_crc,
             "best_policy": self.policies.checkpoint_state(self.run_dir),
+            **self.draws.selection.state(),
         }
         self.run_dir.save_checkpoint(state, self.optimizer.state_dict(), self.config)
 
@@ -300,6 +300,7 @@ class Runner:
         params = checks.real_params(self.optimizer.ask(contexts), "ask")
         returns = backend.evaluate(seeds, contexts, params, label)
         self.optimizer.tell(contexts, params, returns)
+        self.draws.tell(contexts, returns, self.optimizer)
         self.iteration += 1
         self.episodes += n
         reason = self._stop_before_evaluation()

@@ -34,9 +34,11 @@ from creps_gym._validation import check_fits_in_memory
 from creps_gym.optimizers.registry import optimizer_names
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.session import RunDirError
+from creps_gym.selectors.registry import selector_names
 
 __all__ = [
     "CHECKPOINT_FORMAT",
+    "FINGERPRINT_FIELDS_IF_SET",
     "check_checkpoint",
     "check_run_memory",
     "check_trusted",
@@ -54,6 +56,9 @@ LEGACY_FORMATS = ("creps_gym.run/2", "creps_gym.run/1")
 FINGERPRINT_FIELDS = ("env", "env_kwargs", "optimizer", "optimizer_options", "seed", "samples", "iterations",
                       "eval_every", "eval_contexts", "context_draws", "initial_mean", "initial_std",
                       "max_episodes", "target_regret", "max_time")  # fmt: skip
+#: Fields fingerprinted only when set (``context_selector`` not None): runs without a selector keep the
+#: fingerprint they had before the fields existed, so their checkpoints still load.
+FINGERPRINT_FIELDS_IF_SET = ("context_selector", "context_selector_options")
 #: The fields format ``creps_gym.run/2`` fingerprinted (it had no ``context_draws``: always ``"reset"``).
 FINGERPRINT_FIELDS_2 = tuple(name for name in FINGERPRINT_FIELDS if name != "context_draws")
 
@@ -115,9 +120,12 @@ def check_trusted(config: RunConfig, source: str) -> None:
 
     if config.optimizer is not None and config.optimizer not in optimizer_names():
         raise refuse("optimizer", config.optimizer, f"a registered optimiser name {optimizer_names()}")
+    if config.context_selector is not None and config.context_selector not in selector_names():
+        raise refuse("context_selector", config.context_selector, f"a registered selector {selector_names()}")
     found = [("env", config.env)] if config.env is not None else []
     found += _strings(config.env_kwargs, "env_kwargs")
     found += _strings(config.optimizer_options, "optimizer_options")
+    found += _strings(config.context_selector_options, "context_selector_options")
     for field, text in found:
         module = module_reference(text)
         if module is not None and module not in sys.modules:
@@ -169,6 +177,8 @@ def config_fingerprint(config: RunConfig, checkpoint_format: str = CHECKPOINT_FO
     data = config.to_dict()
     names = FINGERPRINT_FIELDS if checkpoint_format == CHECKPOINT_FORMAT else FINGERPRINT_FIELDS_2
     document = {"format": checkpoint_format, **{name: data[name] for name in names}}
+    if data.get("context_selector") is not None:
+        document.update({name: data[name] for name in FINGERPRINT_FIELDS_IF_SET})
     return hashlib.sha256(json.dumps(document, sort_keys=True, allow_nan=False).encode()).hexdigest()
 
 

@@ -1,0 +1,72 @@
+"""The context selection study (``benchmarks/contexts``): its tasks, its summary, and that the committed
+tables and docs/contexts.md are what the committed code renders from the committed results."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import python_blocks
+
+from benchmarks.contexts import report, run
+from benchmarks.contexts.tasks import SteepFunction
+
+RESULTS = Path(run.__file__).resolve().parent / "results"
+
+
+@pytest.mark.parametrize("mode", ["quick", "full"])
+def test_the_committed_tables_and_doc_are_rendered_from_the_committed_results(mode):
+    document = json.loads((RESULTS / f"{mode}.json").read_text())
+    assert (RESULTS / f"{mode}.md").read_text() == report.render(document)
+    assert document["budgets"] == json.loads(json.dumps(run.MODES[mode]))  # the code's budgets
+    keys = {f"{t}/{o}/{s}/{k}" for t in run.MODES[mode] if t != "trials" for o in run.OPTIMIZERS
+            for s in run.SELECTORS for k in range(run.MODES[mode]["trials"])}  # fmt: skip
+    assert set(document["runs"]) == keys and document["budgets"]["trials"] >= 3
+    if mode == "full":
+        text = run.DOC.read_text()
+        assert report.with_headline(text, document) == text
+
+
+def test_the_summary_counts_episodes_to_uniforms_final_loss():
+    curve = {"episodes": [10, 20, 30, 40], "budget": [4, 10], "seconds": 0.0}
+    document = {"runs": {}}
+    for trial, (u, b) in enumerate([([9, 6, 5, 4], [9, 4, 2, 1]), ([8, 7, 6, 5], [8, 5, 3, 2]),
+                                    ([9, 8, 7, 6], [9, 6, 4, 3])]):  # fmt: skip
+        document["runs"][f"t/o/uniform/{trial}"] = {**curve, "loss": u}
+        document["runs"][f"t/o/bandit/{trial}"] = {**curve, "loss": b}
+    rows = {row["selector"]: row for row in report.summary(document, "t", "o", ["uniform", "bandit"])}
+    assert rows["uniform"]["target"] == 5.0  # the median of uniform's final losses
+    assert rows["uniform"]["episodes_to_target"] == 40 and rows["uniform"]["ratio"] == 1.0  # median curve
+    assert rows["bandit"]["episodes_to_target"] == 20 and rows["bandit"]["ratio"] == 0.5
+    assert rows["bandit"]["trials_reaching"] == 3 and rows["bandit"]["trial_episodes_mean"] == pytest.approx(
+        70 / 3
+    )
+    assert rows["uniform"]["trials_reaching"] == 2  # trial 2 ends at 6 > 5
+    assert report.first_at_or_below([1, 2], [3.0, 2.0], 1.0) is None
+
+
+def test_a_steep_function_is_the_function_scaled_by_the_context():
+    env = SteepFunction("Sphere", dim=3)
+    ends = np.array([[0.0], [3.0]])
+    assert env.weight(ends).tolist() == [1.0, 100.0]
+    params = np.ones((2, 3))
+    assert (env.regret(ends, params) == env.weight(ends) * env.model.regret(ends, params)).all()
+    assert (env.evaluate(ends, params)[0] == -env.regret(ends, params)).all()
+    assert (env.regret(ends, env.optimal_params(ends)) == 0).all()
+    with pytest.raises(ValueError, match="steepness: expected a number >= 1"):
+        SteepFunction("Sphere", steepness=0.5)
+
+
+def test_the_doc_example_runs():
+    for block in python_blocks(run.DOC):
+        exec(compile(block, "docs/contexts.md", "exec"), {})
+
+
+@pytest.mark.parametrize("key", ["steep-sphere/c-cma-es/bandit/1", "reacher/creps-cma-old/progress/0"])
+def test_a_committed_quick_run_is_what_the_code_computes(key):
+    committed = json.loads((RESULTS / "quick.json").read_text())["runs"][key]
+    task, optimizer, selector, trial = key.split("/")
+    computed = run.one_run(task, optimizer, selector, int(trial), "quick")
+    assert {**computed, "seconds": 0} == {**committed, "seconds": 0}

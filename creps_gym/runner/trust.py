@@ -230,7 +230,7 @@ def _consistent(flat: dict[str, Any], config: RunConfig) -> bool:
     ok = (
         ok
         and len(records) == iteration
-        and possible_stop_reason(flat["history"]["stop_reason"], config, iteration)
+        and possible_stop_reason(flat["history"].get("stop_reason"), config, iteration)
     )
     for number, record in enumerate(records, 1):
         counts = record["iteration"], record["episodes"]

@@ -448,3 +448,38 @@ def test_resume_refuses_cma_options_in_config_json_that_are_not_data(tmp_path, c
     assert cli.main(["resume", str(tmp_path), "--no-progress", "--no-plot"]) == 3
     err = capsys.readouterr().err
     assert "config.json: optimizer_options: tolfun: expected a number" in err and "got str '9**9'" in err
+
+
+# -- a restored pending batch is the one the replay asks (issue 30, item 8) --------------------------------
+def _pending_state(name):
+    adapter = registry.make_optimizer(name, 3, 1, 0)
+    _drive(adapter, 2)
+    adapter.ask(np.zeros((8, 1)))
+    return adapter.state_dict()
+
+
+@EXTRAS
+@pytest.mark.parametrize("name", sorted(ADAPTERS))
+def test_a_pending_batch_that_the_replay_does_not_ask_is_refused(name):
+    """Before: forged pending rows were restored, and could then be told as if the library asked them."""
+    state = _pending_state(name)
+    assert np.array_equal(ADAPTERS[name].from_state_dict(state)._pending[1], state["pending_params"])
+    shifted = {**state, "pending_params": state["pending_params"] + 1e-9}
+    with pytest.raises(ValueError, match=r"state\['pending_params'\]: expected the batch of the last ask"):
+        ADAPTERS[name].from_state_dict(shifted)
+    fewer = {
+        **state,
+        "pending_contexts": state["pending_contexts"][:4],
+        "pending_params": state["pending_params"][:4],
+    }
+    with pytest.raises(ValueError, match=r"state\['pending_params'\]: expected .* \(8 rows\), got 4 rows"):
+        ADAPTERS[name].from_state_dict(fewer)
+    told = registry.make_optimizer(name, 3, 1, 0)
+    _drive(told, 2)
+    after_tell = {
+        **told.state_dict(),
+        "pending_contexts": state["pending_contexts"],
+        "pending_params": state["pending_params"],
+    }
+    with pytest.raises(ValueError, match=r"state\['pending_params'\]: expected .* \(0 rows\), got 8 rows"):
+        ADAPTERS[name].from_state_dict(after_tell)

@@ -161,3 +161,12 @@ def test_config_json_records_the_resolved_configuration(tmp_path):
     assert config["optimizer_options"] == {"epsilon": 0.8} and config["initial_std"] == 0.5
     assert config["env_kwargs"] == {"dim": 4} and config["retries"] == 2 and config["backend"] == "auto"
     assert document["meta"]["n_params"] == 4 and document["meta"]["metric"] == "regret"
+
+
+def test_an_empty_out_is_refused_with_exit_2_not_taken_as_the_current_folder(tmp_path, monkeypatch, capsys):
+    """Before: ``--out ""`` wrote the run into the current folder."""
+    monkeypatch.chdir(tmp_path)
+    argv = ["run", "--env", "creps_gym/Sphere-v0", "--optimizer", "creps", "--iterations", "1", "--seed", "0"]
+    assert main([*argv, "--out", "", "--no-progress", "--no-plot"]) == 2
+    assert "out: expected a directory path, got ''" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

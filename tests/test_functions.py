@@ -398,3 +398,12 @@ def test_evaluate_policy_is_the_mean_regret_of_the_mean_policy():
     plane = evaluate_policy(gym.make("creps_gym/Plane-v0", dim=4, context_dim=2), np.zeros(4), contexts)
     assert plane.metric == "return" and plane.mean_regret is None
     assert plane.value == plane.mean_return
+
+
+def test_a_num_envs_whose_arrays_cannot_fit_is_refused_naming_it():
+    """Before: ``make_vec(id, num_envs=10**12)`` raised a raw MemoryError."""
+    with pytest.raises(
+        ValueError, match=r"num_envs: expected a size whose arrays fit in memory .* got 1000000000000"
+    ):
+        gym.make_vec("creps_gym/Sphere-v0", num_envs=10**12)
+    assert gym.make_vec("creps_gym/Sphere-v0", num_envs=3, autoreset_mode="Disabled").num_envs == 3

@@ -56,6 +56,10 @@ def _string_cov(state):
     state["cov"] = np.array([["a"] * 4] * 4)
 
 
+def _overflowing_cov(state):
+    state["cov"] = np.eye(4) * 1e308  # positive definite, but Σ + Σᵀ overflows: every sample is inf
+
+
 def _zero_step_size(state):
     state["step_size"] = 0.0
 
@@ -67,6 +71,7 @@ CORRUPTIONS = {
     "wrong shape": (_wrong_shape, "state\\['coefficients'\\]: expected shape \\(2, 4\\)"),
     "asymmetric cov": (_asymmetric, "state\\['cov'\\]: expected a symmetric"),
     "string cov": (_string_cov, "state\\['cov'\\]"),
+    "overflowing cov": (_overflowing_cov, "state\\['cov'\\]: expected a covariance whose doubled entries"),
     "zero step size": (_zero_step_size, "state\\['step_size'\\]: expected a finite value > 0"),
 }
 
@@ -366,3 +371,11 @@ def test_resume_refuses_a_checkpoint_with_a_deflated_entry(tmp_path):
         RunDirError, match=r"checkpoint\.npz: damaged .*entry 'bomb\.npy': expected an uncompressed"
     ):
         resume(tmp_path)
+
+
+@pytest.mark.parametrize("name", NATIVE)
+def test_an_initial_covariance_that_overflows_is_refused_naming_it(name):
+    """Before: an initial_cov of 1e308 was accepted and the first ask blamed the contexts."""
+    with pytest.raises(ValueError, match=r"initial_cov: expected a covariance whose doubled entries"):
+        make_optimizer(name, 2, 1, 0, initial_cov=1e308)
+    make_optimizer(name, 2, 1, 0, initial_cov=1e280).ask(np.zeros((4, 1)))  # large but usable

@@ -360,3 +360,87 @@ def test_the_cli_documents_ray_address(capsys):
         main(["run", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
     assert "--ray-address HOST:PORT" in help_text and "$RAY_ADDRESS" in help_text
+
+
+# -- an address where something that is not Ray answers (issue 30, item 5) ---------------------------------
+@pytest.fixture
+def http_server():
+    """``python -m http.server`` on a free loopback port, in a thread; yields its ``HOST:PORT``."""
+    import http.server
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"127.0.0.1:{server.server_address[1]}"
+    finally:
+        server.shutdown()
+        server.server_close()
+        thread.join(timeout=5)
+
+
+def _listener(reply: bytes | None):
+    """A loopback listener that answers each connection with ``reply`` (None: accepts and stays silent)."""
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    sock.listen()
+    held = []
+
+    def serve():
+        while True:
+            try:
+                connection, _ = sock.accept()
+            except OSError:
+                return
+            held.append(connection)
+            if reply is not None:
+                connection.sendall(reply)
+
+    threading.Thread(target=serve, daemon=True).start()
+    return sock, held
+
+
+def test_a_listener_that_is_not_ray_is_refused_within_seconds(http_server):
+    from creps_gym.runner.ray_backend import check_reachable
+
+    start = time.monotonic()
+    with pytest.raises(
+        ValueError, match=r"ray_address: expected the address of a running Ray cluster .* not Ray's"
+    ):
+        check_reachable(http_server, "ray_address")
+    silent, held = _listener(None)
+    address = f"127.0.0.1:{silent.getsockname()[1]}"
+    with pytest.raises(
+        ValueError,
+        match=r"got '127\.0\.0\.1:\d+', where a server that is not Ray's answers \(first bytes b''",
+    ):
+        check_reachable(address, "ray_address", timeout=1.0)
+    grpc_like, _ = _listener(bytes([0, 0, 0, 4, 0, 0, 0, 0, 0]))  # an HTTP/2 server's first frame: SETTINGS
+    check_reachable(f"127.0.0.1:{grpc_like.getsockname()[1]}", "ray_address", timeout=5.0)
+    for sock in (silent, grpc_like, *held):
+        sock.close()
+    assert time.monotonic() - start < 30
+
+
+def test_run_with_a_ray_address_that_is_not_ray_exits_2_and_leaves_no_run_folder(
+    http_server, tmp_path, capsys
+):
+    """Before: ``--ray-address`` of an http.server waited for ever, after creating the run folder."""
+    argv = ["run", "--env", "creps_gym/Sphere-v0", "--optimizer", "creps", "--iterations", "1", "--seed", "0"]
+    argv += [
+        "--backend",
+        "ray",
+        "--ray-address",
+        http_server,
+        "--out",
+        str(tmp_path / "run"),
+        "--no-progress",
+    ]
+    start = time.monotonic()
+    assert main(argv) == 2
+    assert time.monotonic() - start < 30
+    err = capsys.readouterr().err
+    assert (
+        "argument --ray-address: expected the address of a running Ray cluster" in err and http_server in err
+    )
+    assert not (tmp_path / "run").exists()

@@ -204,6 +204,17 @@ def test_fixed_contexts_bad_inputs():
         FixedContexts(gym.make("CartPole-v1"), SET)
 
 
+@pytest.mark.parametrize("contexts", [[0.5, 1.0], 0.5, [[[0.5]]]], ids=["1-D", "scalar", "3-D"])
+def test_fixed_contexts_of_the_wrong_rank_name_the_expected_shape_n_by_z(contexts):
+    """Before: the message said ``expected shape (n, n)`` for a one-dimensional context box."""
+    env = gym.make("creps_gym/Sphere-v0")  # z = 1
+    with pytest.raises(ValueError, match=r"contexts: expected shape \(n, 1\), got "):
+        FixedContexts(env, contexts)
+    vector = gym.make_vec("creps_gym/Sphere-v0", 2)
+    with pytest.raises(ValueError, match=r"contexts: expected shape \(n, 1\), got "):
+        FixedContextsVector(vector, contexts)
+
+
 def test_sample_contexts_draws_from_the_env_np_random():
     sampler = GaussianContexts([0.2, -0.3], 0.1, low=[-1, -1], high=[1, 1])
     env = SampleContexts(Bowl(), sampler)

@@ -36,7 +36,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_positive_int
+from creps_gym._validation import as_float_array, check_fits_in_memory, check_positive_int
 
 __all__ = [
     "ContextualEpisodicEnv",
@@ -306,16 +306,15 @@ class ContextualEpisodicVectorEnv(VectorEnv):
         **env_kwargs: Any,
     ) -> None:
         self.num_envs = check_positive_int(num_envs, "num_envs")
-        try:
-            mode = AutoresetMode(autoreset_mode)
-        except ValueError:
-            mode = None
-        if mode not in self._MODES:
+        mode = next((m for m in self._MODES if autoreset_mode in (m, m.value)), None)
+        if mode is None:
             raise ValueError(
                 f"autoreset_mode: expected one of {[m.value for m in self._MODES]}, got {autoreset_mode!r}"
             )
         self.autoreset_mode = mode
         self.model = self.single_env_class(**env_kwargs)
+        floats = 4 * (self.model.context_dim + self.model.param_dim) + 4  # per env: spaces, contexts, results
+        check_fits_in_memory(8.0 * floats * self.num_envs, "num_envs", self.num_envs, "the batched arrays")
         self.metadata = {**self.model.metadata, "autoreset_mode": mode}
         self.render_mode = self.model.render_mode
         self.single_observation_space = self.model.observation_space

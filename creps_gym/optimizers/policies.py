@@ -32,6 +32,7 @@ __all__ = [
     "LinearGaussianPolicy",
     "PolicyAccess",
     "check_option_names",
+    "check_usable_covariance",
     "initial_coefficients",
     "initial_covariance",
     "spd_factor",
@@ -142,7 +143,9 @@ def initial_covariance(value: Any, n_params: int, name: str = "initial_cov") -> 
     if array.shape == (n_params,):
         if (array <= 0).any():
             raise ValueError(f"{name}: expected variances > 0, got min {array.min()}")
-        return np.diag(array)
+        array = np.diag(array)
+        check_usable_covariance(array, name)
+        return array
     if array.shape != (n_params, n_params):
         raise ValueError(
             f"{name}: expected a scalar, shape ({n_params},) or ({n_params}, {n_params}), got {array.shape}"
@@ -155,7 +158,25 @@ def initial_covariance(value: Any, n_params: int, name: str = "initial_cov") -> 
         raise ValueError(
             f"{name}: expected a symmetric positive-definite matrix, got one that is not"
         ) from None
+    check_usable_covariance(array, name)
     return array.copy()
+
+
+def check_usable_covariance(cov: Array, name: str, step_size: float = 1.0) -> None:
+    """``ValueError`` naming ``name`` unless the SPD ``cov`` can be sampled and updated without overflow.
+
+    Its doubled entries (the symmetrisation Σ + Σᵀ) and its eigenvalues times ``step_size²`` must be finite:
+    a covariance of 1e308 passes Cholesky but makes every sample non-finite.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        largest = float(np.abs(cov).max()) if cov.size else 0.0
+        eigenvalues = np.linalg.eigvalsh(cov) if np.isfinite(2.0 * largest) else np.full(1, np.inf)
+        scaled = float(step_size) ** 2 * eigenvalues
+    if not np.isfinite(scaled).all():
+        raise ValueError(
+            f"{name}: expected a covariance whose doubled entries and eigenvalues (times the step size²) are "
+            f"finite, got entries up to {largest:.4g} (step size {step_size:.4g})"
+        )
 
 
 def split_step_size(cov: Array) -> tuple[float, Array]:
@@ -263,6 +284,7 @@ class LinearGaussianPolicy:
         step_size = float(step_size)
         if not (np.isfinite(step_size) and step_size > 0.0):
             raise ValueError(f"state['step_size']: expected a finite value > 0, got {step_size}")
+        check_usable_covariance(cov, "state['cov']", step_size)
         return cls(mean_map, coefficients, cov, step_size)
 
 

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -28,7 +29,9 @@ __all__ = [
     "CRITERION",
     "MODEL_PRESERVING_WRAPPERS",
     "check_batch_size",
+    "check_box_spaces",
     "check_optimizer",
+    "check_ray_cluster",
     "real_params",
     "stop_criteria",
     "unwrapped_model",
@@ -119,6 +122,28 @@ def _tell_error(make: Callable[[], Any], contexts: NDArray[np.float64]) -> Value
     except Exception:  # only the batch size is checked here; the run reports any other failure
         return None
     return None
+
+
+def check_box_spaces(env: gym.Env) -> None:
+    """``TypeError`` unless the env's observation and action spaces are Boxes (contexts and θ)."""
+    for name in ("observation_space", "action_space"):
+        space = getattr(env, name)
+        if not isinstance(space, gym.spaces.Box):
+            raise TypeError(f"env: expected a Box {name} (contexts and parameters θ), got {space}")
+
+
+def check_ray_cluster(config: Any) -> None:
+    """For the Ray backend joining a cluster: ``ValueError`` naming the address unless Ray answers there.
+
+    Called before a new run directory is created, so a wrong address leaves nothing behind.
+    """
+    if config.backend != "ray":
+        return
+    from creps_gym.runner.ray_backend import check_reachable, resolve_address
+
+    address, origin = resolve_address(config.ray_address, os.environ)
+    if address is not None and address != "auto":
+        check_reachable(address, origin)
 
 
 def real_params(value: Any, method: str) -> NDArray[np.float64]:

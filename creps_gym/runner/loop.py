@@ -96,15 +96,14 @@ class Runner:
         context_selector: Any = None,
     ) -> None:
         self.config = config
+        if run_dir is not None and not isinstance(run_dir, RunDir) and not os.fspath(run_dir):
+            raise ValueError("out: expected a directory path, got '' (write '.' for the current directory)")
         if (config.env is None) == (env is None):
             raise TypeError("env: expected an env id in the config or an env object (exactly one)")
         if (config.optimizer is None) == (optimizer is None) and optimizer_class is None:
             raise TypeError("optimizer: expected a registry name or an optimiser object (exactly one)")
         self.env = env if env is not None else gym.make(config.env, **config.env_kwargs)
-        for name in ("observation_space", "action_space"):
-            space = getattr(self.env, name)
-            if not isinstance(space, gym.spaces.Box):
-                raise TypeError(f"env: expected a Box {name} (contexts and parameters θ), got {space}")
+        checks.check_box_spaces(self.env)
         self.env_rng, optimizer_seed, eval_seed = split_seed(config.seed)
         self.n_context_dims = int(np.prod(self.env.observation_space.shape))
         self.n_params = int(np.prod(self.env.action_space.shape))
@@ -132,6 +131,7 @@ class Runner:
             self.optimizer = self._new_optimizer(optimizer, optimizer_seed, check=True)
             self.history = History(meta=self._meta())
             if run_dir is not None:
+                checks.check_ray_cluster(self.config)  # a wrong address fails before the folder is created
                 self.run_dir = RunDir.create(run_dir, self.config, self.history.meta, overwrite=overwrite)
             return
         self.run_dir.lock.acquire()  # held until run() ends: one writer per run directory

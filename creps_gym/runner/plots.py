@@ -26,6 +26,7 @@ from creps_gym.runner.export import check_one_env, env_key
 from creps_gym.runner.files import output_target, write_output
 from creps_gym.runner.history import History
 from creps_gym.runner.rundir import RunDir
+from creps_gym.runner.trust import escape_text
 
 __all__ = ["figure_bytes", "load_history", "plot_histories", "plot_run_dirs", "save_figure"]
 
@@ -37,6 +38,11 @@ def _stack(runs: Sequence[History], name: str) -> tuple[NDArray[np.float64], NDA
     for i, run in enumerate(runs):
         values[i, : len(run)] = run.column(name)
     return longest.column("episodes"), values
+
+
+def _plain(text: str) -> str:
+    """Text from a run folder as matplotlib shows it literally: escaped controls, no mathtext (``$``)."""
+    return escape_text(text).replace("$", r"\$")
 
 
 def _stop_text(runs: Sequence[History]) -> str:
@@ -103,7 +109,7 @@ def plot_histories(
     regret = all(run.meta.get("metric") == "regret" for runs in groups.values() for run in runs)
     metric = "eval_regret" if regret else "eval_return"
     for label, runs in groups.items():
-        text = f"{label} (n={len(runs)}; stop: {_stop_text(runs)})"
+        text = _plain(f"{label} (n={len(runs)}; stop: {_stop_text(runs)})")
         _draw(left, *_stack(runs, "mean_return"), text, band)
         _draw(right, *_stack(runs, metric), text, band)
     _symlog(left, np.concatenate([run.column("mean_return") for runs in groups.values() for run in runs]))
@@ -120,7 +126,7 @@ def plot_histories(
     for axis in (left, right):
         axis.grid(True, alpha=0.3)
         axis.legend(fontsize="small")
-    figure.suptitle(title if title is not None else " / ".join(envs))
+    figure.suptitle(title if title is not None else _plain(" / ".join(envs)))
     if path is not None:
         save_figure(figure, path)
     return figure

@@ -8,7 +8,9 @@ Ray is imported only when a :class:`RayBackend` is built. Which Ray it uses, in 
    or else at the ``RAY_ADDRESS`` environment variable (Ray's convention; ``"local"`` or empty means
    unset): ``"HOST:PORT"`` as ``ray start --head`` prints it, or ``"auto"``. The run joins it as a
    driver and, at its end, only disconnects: the cluster keeps running for the next run. An address
-   where nothing answers raises ``ValueError`` at once (Ray itself would retry for minutes).
+   where nothing answers, or where a server that is not Ray's does, raises ``ValueError`` within seconds
+   (:func:`check_reachable`; Ray itself would retry for minutes, or wait for ever). A new run checks it
+   before it creates its run directory.
 3. **Otherwise a local Ray** (``ray.init(address="local")``, so a cluster that ``ray start`` left on
    this machine is never joined by accident), which :meth:`RayBackend.close` shuts down at the end.
 
@@ -48,7 +50,7 @@ from creps_gym.runner.backends import Array, Backend, EnvSource, EpisodeError, r
 from creps_gym.runner.config import check_ray_address
 from creps_gym.runner.watchdog import Watchdog, child_pids
 
-__all__ = ["RayBackend", "cluster_cpus", "plan_chunks", "resolve_address"]
+__all__ = ["RayBackend", "check_reachable", "cluster_cpus", "plan_chunks", "resolve_address"]
 
 _RAY_ENVS: dict[str, gym.Env] = {}
 CONNECT_TIMEOUT = 5.0  # seconds to wait for a cluster's GCS port to answer before ray.init
@@ -84,16 +86,42 @@ def plan_chunks(episodes: int, chunks: int) -> list[tuple[int, int]]:
     return list(itertools.pairwise(int(b) for b in bounds))
 
 
-def _check_reachable(address: str, name: str) -> None:
-    """``ValueError`` naming ``name`` when nothing answers at ``HOST:PORT`` (fast, unlike ``ray.init``)."""
+#: What an HTTP/2 client sends first (RFC 9113, 3.4), then an empty SETTINGS frame; a gRPC server such as
+#: Ray's GCS answers with a SETTINGS frame (type 4), any other listener with something else or nothing.
+_HTTP2_HELLO = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+
+
+def check_reachable(address: str, name: str, timeout: float = CONNECT_TIMEOUT) -> None:
+    """``ValueError`` naming ``name`` unless a gRPC server (a Ray GCS) answers at ``HOST:PORT``.
+
+    Fast, unlike ``ray.init``, which retries for minutes where nothing answers and waits for ever on a
+    listener that is not Ray (``python -m http.server``): at most ``timeout`` seconds to connect and as
+    many for the first HTTP/2 frame.
+    """
     host, _, port = address.rpartition(":")
     try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=CONNECT_TIMEOUT).close()
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout) as sock:
+            reply = b""
+            try:
+                sock.sendall(_HTTP2_HELLO)
+                while len(reply) < 9:
+                    chunk = sock.recv(9 - len(reply))
+                    if not chunk:
+                        break
+                    reply += chunk
+            except OSError:  # a reset or no answer in time: not a gRPC server
+                pass
     except OSError as exc:
         raise ValueError(
             f"{name}: expected the address of a running Ray cluster (`ray start --head` prints it), got "
             f"{address!r}, where nothing answers ({type(exc).__name__}: {exc})"
         ) from None
+    if len(reply) < 9 or reply[3] != 4:
+        raise ValueError(
+            f"{name}: expected the address of a running Ray cluster (`ray start --head` prints it), got "
+            f"{address!r}, where a server that is not Ray's answers (first bytes {reply[:9]!r}, not an "
+            "HTTP/2 SETTINGS frame)"
+        )
 
 
 def _canonical(address: str, local_ip: str) -> tuple[str, str]:
@@ -169,7 +197,7 @@ class RayBackend(Backend):
     def _join(self, address: str, origin: str) -> None:
         """Connect this process to the running cluster at ``address`` as a driver."""
         if address != "auto":
-            _check_reachable(address, origin)
+            check_reachable(address, origin)
         try:
             self._ray.init(address=address, logging_level="ERROR")
         except Exception as exc:  # Ray raises ConnectionError, AuthenticationError, RuntimeError, ...

@@ -32,6 +32,7 @@ import gymnasium as gym
 
 from creps_gym._validation import check_fits_in_memory
 from creps_gym.optimizers.registry import optimizer_names
+from creps_gym.runner.checks import CRITERION
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.session import RunDirError
 from creps_gym.selectors.registry import selector_names
@@ -43,8 +44,10 @@ __all__ = [
     "check_run_memory",
     "check_trusted",
     "config_fingerprint",
+    "escape_text",
     "import_modules",
     "module_reference",
+    "possible_stop_reason",
     "registered_env_id",
 ]
 
@@ -192,6 +195,38 @@ def _same_run(flat: dict[str, Any], config: RunConfig) -> bool:
     return all(meta.get(key) == value for key, value in expected.items())
 
 
+def possible_stop_reason(stop: Any, config: RunConfig, iteration: int) -> bool:
+    """Whether the loop can have stopped a run of ``config`` after ``iteration`` iterations with ``stop``.
+
+    ``stop`` None means not stopped. The loop (:mod:`creps_gym.runner.loop`) checks its reasons in order:
+    at ``config.iterations`` the reason is ``"iterations"``, and only there; where the next iteration would
+    exceed ``max_episodes`` it is ``"max_episodes"``; the others need their option (``target_regret``,
+    ``max_time``) or are ``"callback"`` or ``"optimizer: "`` with plain sorted criterion names.
+    """
+    if stop is not None and not isinstance(stop, str):
+        return False
+    budget = config.max_episodes
+    over_budget = budget is not None and (iteration + 1) * config.samples > budget
+    if iteration >= config.iterations or (over_budget and iteration > 0):
+        return stop == ("iterations" if iteration >= config.iterations else "max_episodes")
+    if stop is None:
+        return True
+    needs = {"target_regret": config.target_regret, "max_time": config.max_time, "callback": True}
+    if stop in needs:
+        return iteration > 0 and needs[stop] is not None
+    criteria = stop.removeprefix("optimizer: ").split(", ")
+    named = stop.startswith("optimizer: ") and all(CRITERION.fullmatch(name) for name in criteria)
+    return iteration > 0 and named and criteria == sorted(set(criteria))
+
+
+def escape_text(text: Any) -> str:
+    """``str(text)`` safe to print: control characters (ANSI escapes, newlines) as Python escapes."""
+    text = str(text)
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
 def _consistent(flat: dict[str, Any], config: RunConfig) -> bool:
     """Counts, types and records that a run of ``config`` can have written."""
     iteration, episodes, elapsed = flat["iteration"], flat["episodes"], flat["elapsed"]
@@ -200,9 +235,13 @@ def _consistent(flat: dict[str, Any], config: RunConfig) -> bool:
     ok = ok and type(elapsed) in (int, float) and 0 <= elapsed < float("inf")
     if flat["format"] == CHECKPOINT_FORMAT:  # the history is in the log: its checksum and stop reason
         stop = flat["stop_reason"]
-        return ok and type(flat["log_crc"]) is int and (stop is None or isinstance(stop, str))
+        return ok and type(flat["log_crc"]) is int and possible_stop_reason(stop, config, iteration)
     records = flat["history"]["records"]
-    ok = ok and len(records) == iteration
+    ok = (
+        ok
+        and len(records) == iteration
+        and possible_stop_reason(flat["history"].get("stop_reason"), config, iteration)
+    )
     for number, record in enumerate(records, 1):
         counts = record["iteration"], record["episodes"]
         ok = ok and all(type(v) is int for v in counts) and counts == (number, number * config.samples)

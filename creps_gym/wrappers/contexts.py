@@ -100,7 +100,7 @@ class FixedContexts(_ContextChoice, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env, contexts: Any, order: str = "cycle", name: str | None = None) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, contexts=contexts, order=order, name=name)
         _ContextChoice.__init__(self, env)
-        checked = self.model.check_contexts(as_float_array(contexts, "contexts", (None, None)), "contexts")
+        checked = self.model.check_contexts(contexts, "contexts")
         self.source = FixedSource(checked, order)
         self.name = name
 

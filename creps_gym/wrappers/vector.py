@@ -114,7 +114,7 @@ class FixedContextsVector(_ContextChoiceVector):
 
     def __init__(self, env: VectorEnv, contexts: Any, order: str = "cycle", name: str | None = None) -> None:
         super().__init__(env)
-        checked = self.model.check_contexts(as_float_array(contexts, "contexts", (None, None)), "contexts")
+        checked = self.model.check_contexts(contexts, "contexts")
         self.source = FixedSource(checked, order)
         self.name = name
 

@@ -23,7 +23,7 @@ import importlib
 import math
 from abc import abstractmethod
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -266,6 +266,25 @@ class MinimizerAdapter(ContextualOptimizer):
             "told_index": np.concatenate(self._told_index) if self._told_index else np.zeros(0, np.int64),
             "told_losses": np.concatenate(self._told_losses) if self._told_losses else np.zeros(0),
         }
+
+    @classmethod
+    def from_state_dict(cls, state: Mapping[str, Any]) -> MinimizerAdapter:
+        """Rebuild the adapter by replay; a pending batch must be the last ask that the replay repeats.
+
+        ``ValueError`` naming ``state['pending_params']`` otherwise (rows the library did not ask could be
+        told), on top of the checks of :meth:`ContextualOptimizer.from_state_dict`.
+        """
+        adapter = cast(MinimizerAdapter, super().from_state_dict(state))
+        if adapter._pending is not None:
+            events, params = adapter._events, adapter._pending[1]
+            asked = events[-1] if events and events[-1] > 0 else 0
+            expected = adapter.initial_mean + adapter.initial_std * adapter._asked[-1] if asked else None
+            if expected is None or not np.array_equal(params, expected):
+                raise ValueError(
+                    f"state['pending_params']: expected the batch of the last ask that replaying {cls.kind} "
+                    f"gives ({asked} rows), got {params.shape[0]} rows that differ from it"
+                )
+        return adapter
 
     @classmethod
     def _from_state(cls, state: Mapping[str, Any]) -> MinimizerAdapter:

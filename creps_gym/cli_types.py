@@ -1,4 +1,8 @@
-"""Argument types of the ``creps-gym`` command line: each names what it expected and what it got."""
+"""Argument types of the ``creps-gym`` command line: each names what it expected and what it got.
+
+Names that a module may register (``--env``, ``--optimizer``) are checked after ``--import``, in
+:mod:`creps_gym.cli`, not here.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,7 @@ import json
 import math
 from typing import Any
 
-__all__ = ["initial_mean", "integer", "key_value", "numbers", "optimizer_name", "positive_float"]
+__all__ = ["initial_mean", "integer", "key_value", "numbers", "positive_float"]
 
 
 def integer(minimum: int):
@@ -64,14 +68,3 @@ def key_value(text: str) -> tuple[str, Any]:
         return key, json.loads(raw)
     except json.JSONDecodeError:
         return key, raw
-
-
-def optimizer_name(text: str) -> str:
-    from creps_gym.optimizers.registry import optimizer_names
-
-    if text not in optimizer_names():
-        from creps_gym.listing import did_you_mean
-
-        names = optimizer_names()
-        raise argparse.ArgumentTypeError(f"expected one of {names}, got {text!r}{did_you_mean(text, names)}")
-    return text

@@ -8,7 +8,7 @@ import subprocess
 from dataclasses import fields
 
 import pytest
-from helpers import SPHERE, cli_command
+from helpers import EXTRAS, SPHERE, cli_command
 
 import creps_gym
 from creps_gym.cli import main
@@ -161,3 +161,17 @@ def test_config_json_records_the_resolved_configuration(tmp_path):
     assert config["optimizer_options"] == {"epsilon": 0.8} and config["initial_std"] == 0.5
     assert config["env_kwargs"] == {"dim": 4} and config["retries"] == 2 and config["backend"] == "auto"
     assert document["meta"]["n_params"] == 4 and document["meta"]["metric"] == "regret"
+
+
+@EXTRAS
+def test_a_bad_nevergrad_optimizer_option_blames_opt_and_suggests_close_names(tmp_path, capsys):
+    pytest.importorskip("nevergrad")
+    args = [str(a) for a in run_args(tmp_path / "run", "--opt", "optimizer=TwoPointDE")]
+    args[args.index("--optimizer") + 1] = "nevergrad"
+    assert main(args) == 2
+    error = capsys.readouterr().err
+    assert (
+        "argument --opt: optimizer: expected a name in nevergrad.optimizers.registry, got 'TwoPointDE' "
+        in error
+    )
+    assert "(did you mean 'TwoPointsDE'" in error and "argument --optimizer" not in error

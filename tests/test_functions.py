@@ -398,3 +398,11 @@ def test_evaluate_policy_is_the_mean_regret_of_the_mean_policy():
     plane = evaluate_policy(gym.make("creps_gym/Plane-v0", dim=4, context_dim=2), np.zeros(4), contexts)
     assert plane.metric == "return" and plane.mean_regret is None
     assert plane.value == plane.mean_return
+
+
+def test_the_return_at_the_optimum_is_plus_zero_as_the_readme_prints_it():
+    """Issue 31: the README's env snippet printed ``-0.0`` for the return at the optimum (``-f`` of 0)."""
+    env = gym.make("creps_gym/Rosenbrock-v0", dim=10, context_dim=2)
+    context, _ = env.reset(seed=0)
+    _, reward, _, _, info = env.step(env.unwrapped.optimal_params(context[None])[0])
+    assert f"{reward} {info['regret']}" == "0.0 0.0"

@@ -122,3 +122,11 @@ def test_list_marks_envs_whose_optional_modules_are_missing(monkeypatch):
     rows = available_env_rows([["a", "c", "p", "i", "d", []], ["b", "c", "p", "i", "d", ["mujoco"]]])
     assert rows[1] == ["a", "c", "p", "i", "d"]
     assert rows[2] == ["b", "?", "?", "?", "(not available: pip install creps-gym[mujoco])"]
+
+
+def test_settings_that_print_alike_are_numbered_never_pooled():
+    from creps_gym.runner import History, RunConfig
+
+    configs = [RunConfig(SPHERE, "creps", 3, 8, 0, optimizer_options={"epsilon": v}) for v in (1, "1")]
+    groups, labels = group_runs([(config, History()) for config in configs])
+    assert labels == ["creps, epsilon=1 #1", "creps, epsilon=1 #2"] and len(groups) == 2

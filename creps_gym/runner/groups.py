@@ -63,7 +63,7 @@ def _text(value: Any) -> str:
 def _default_labels(settings: list[dict[str, Any]], histories: list[History]) -> list[str]:
     """Each group's optimiser and the settings that differ between the groups (see the module)."""
     keys = sorted({key for flat in settings for key in flat})
-    differ = [key for key in keys if len({_text(flat.get(key, "default")) for flat in settings}) > 1]
+    differ = [key for key in keys if len({json.dumps(flat.get(key, None)) for flat in settings}) > 1]
     several_envs = len({env_key(history) for history in histories}) > 1
     labels = []
     for flat, history in zip(settings, histories, strict=True):
@@ -74,6 +74,8 @@ def _default_labels(settings: list[dict[str, Any]], histories: list[History]) ->
             name = key.split(".", 1)[1] if key.startswith(_SHOWN_BY_NAME) else key
             parts.append(f"{name}={_text(flat.get(key, 'default'))}")
         labels.append(", ".join(parts) + (f" on {env_key(history)}" if several_envs else ""))
+    if len(set(labels)) < len(labels):  # settings that print alike (1 and "1"): numbered, never pooled
+        labels = [f"{label} #{k}" for k, label in enumerate(labels, 1)]
     return labels
 
 

@@ -85,11 +85,17 @@ def _overlap(a, b):
     return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
 
 
+MANY = ("n8-0", "n12-0", "eps-0", "p4", "n12-1", "n8-1")
+
+
 @EXTRAS
-@pytest.mark.parametrize("names", [("n8-0", "n8-1"), ("n8-0", "n12-0", "eps-0", "p4", "n12-1", "n8-1")])
-def test_the_legend_lies_in_the_figure_and_covers_no_axes(runs, tmp_path, names):
+@pytest.mark.parametrize(
+    ("names", "labels"),
+    [(("n8-0", "n8-1"), None), (MANY, None), (MANY, ["a", "b", "c", "d", "b", "a"])],  # 1, 1 and 2 columns
+)
+def test_the_legend_lies_in_the_figure_and_covers_no_axes(runs, tmp_path, names, labels):
     pytest.importorskip("matplotlib")
-    figure = plot_run_dirs(_paths(runs, *names), tmp_path / "curves.png", mix_envs=True)
+    figure = plot_run_dirs(_paths(runs, *names), tmp_path / "curves.png", mix_envs=True, labels=labels)
     figure.draw_without_rendering()  # the layout as saved
     renderer = figure._get_renderer()
     (legend,) = [legend for sub in figure.subfigs for legend in sub.legends]
@@ -99,7 +105,8 @@ def test_the_legend_lies_in_the_figure_and_covers_no_axes(runs, tmp_path, names)
         assert not _overlap(box, axis.get_tightbbox(renderer)), axis.get_title()
     texts = [text.get_text() for text in legend.get_texts()]
     assert len(texts) == len({*names} - {"n8-1", "n12-1"})
-    if "p4" in names:
+    assert legend._ncols == (2 if labels else 1)
+    if "p4" in names and labels is None:
         assert any(" on creps_gym/Sphere-v0 (p = 4, z = 1)" in text for text in texts)
 
 

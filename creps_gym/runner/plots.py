@@ -56,13 +56,30 @@ def _draw(axis: Any, x: NDArray[np.float64], values: NDArray[np.float64], style:
     return line
 
 
-def _legend_layout(texts: Sequence[str]) -> tuple[float, float, int]:
-    """Figure width, legend strip height (inches) and legend columns for entries ``texts``."""
+def _draw_groups(axes: tuple, groups: Mapping[str, Sequence[History]], regret: bool, band: tuple) -> list:
+    """Draw each group (legend text -> runs) on both panels in its own colour; (line, text) legend entries."""
+    metric = "eval_regret" if regret else "eval_return"
+    entries = []
+    for k, (text, runs) in enumerate(groups.items()):
+        style = {"color": f"C{k % 10}", "linestyle": ("-", "--", ":", "-.")[k // 10 % 4]}
+        lines = [_draw(axes[0], *_stack(runs, "mean_return"), style, band),
+                 _draw(axes[1], *_stack(runs, metric), style, band)]  # fmt: skip
+        drawn = [line for line in lines if line is not None]
+        entries += [(drawn[0], text)] if drawn else []
+    return entries
+
+
+def _figure(texts: Sequence[str]) -> tuple[Any, Any, Any, Any, int]:
+    """The figure, its two panels and the strip below them, sized for a legend of ``texts``; its columns."""
     longest = max(len(text) for text in texts)
     columns = 2 if len(texts) > 3 and longest <= 55 else 1
-    rows = -(-len(texts) // columns)
     width = max(11.0, 0.075 * longest * columns + 1.0)  # about 0.075 inch per character at "small" size
-    return width, 0.22 * rows + 0.3, columns
+    strip = 0.22 * -(-len(texts) // columns) + 0.3  # 0.22 inch per legend row
+    figure = import_optional("matplotlib.figure", "plot").Figure(
+        figsize=(width, 4.2 + strip), layout="constrained"
+    )
+    panels, below = figure.subfigures(2, 1, height_ratios=[4.2, strip])
+    return figure, *panels.subplots(1, 2), below, columns
 
 
 def _symlog(axis: Any, values: NDArray[np.float64]) -> None:
@@ -110,19 +127,8 @@ def plot_histories(
     regret = all(run.meta.get("metric") == "regret" for runs in groups.values() for run in runs)
     texts = [f"{label} (n={len(runs)}; stop: {_stop_text(runs)})" for label, runs in groups.items()]
     target = regret and target_regret is not None
-    width, strip, columns = _legend_layout(texts + (["target regret"] if target else []))
-    figure_module = import_optional("matplotlib.figure", "plot")
-    figure = figure_module.Figure(figsize=(width, 4.2 + strip), layout="constrained")
-    panels, below = figure.subfigures(2, 1, height_ratios=[4.2, strip])
-    left, right = panels.subplots(1, 2)
-    metric = "eval_regret" if regret else "eval_return"
-    entries = []
-    for k, (text, runs) in enumerate(zip(texts, groups.values(), strict=True)):
-        style = {"color": f"C{k % 10}", "linestyle": ("-", "--", ":", "-.")[k // 10 % 4]}
-        lines = [_draw(left, *_stack(runs, "mean_return"), style, band),
-                 _draw(right, *_stack(runs, metric), style, band)]  # fmt: skip
-        drawn = [line for line in lines if line is not None]
-        entries += [(drawn[0], text)] if drawn else []
+    figure, left, right, below, columns = _figure(texts + (["target regret"] if target else []))
+    entries = _draw_groups((left, right), dict(zip(texts, groups.values(), strict=True)), regret, band)
     _symlog(left, np.concatenate([run.column("mean_return") for runs in groups.values() for run in runs]))
     left.set(xlabel="episodes", ylabel="mean sample return (symlog)", title="samples")
     right.set(xlabel="episodes", title="recommended (mean) policy on the test contexts")

@@ -61,7 +61,7 @@ def _draw_groups(axes: tuple, groups: Mapping[str, Sequence[History]], regret: b
     metric = "eval_regret" if regret else "eval_return"
     entries = []
     for k, (text, runs) in enumerate(groups.items()):
-        style = {"color": f"C{k % 10}", "linestyle": ("-", "--", ":", "-.")[k // 10 % 4]}
+        style = {"color": f"C{k % 10}", "linestyle": ("-", "--", ":", "-.")[k // 10 % 4], "label": text}
         lines = [_draw(axes[0], *_stack(runs, "mean_return"), style, band),
                  _draw(axes[1], *_stack(runs, metric), style, band)]  # fmt: skip
         drawn = [line for line in lines if line is not None]

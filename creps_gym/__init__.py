@@ -3,31 +3,75 @@
 Abdolmaleki et al., "Contextual Direct Policy Search With Regularized Covariance Matrix Estimation",
 J. Intell. Robot. Syst. (2019), doi:10.1007/s10846-018-0968-4.
 
-Importing the package registers the ``creps_gym/...`` environment ids with Gymnasium.
+Importing the package registers the ``creps_gym/...`` environment ids with Gymnasium: at once when
+Gymnasium is already imported, else as soon as it is (so ``import creps_gym`` alone imports neither
+Gymnasium nor numpy, and ``creps-gym --help`` starts fast). The subpackages and :func:`registered_ids`
+are imported on first use.
 """
 
-from importlib.metadata import PackageNotFoundError, version
+from __future__ import annotations
+
+import importlib
+import importlib.abc
+import importlib.util
+import sys
 from typing import Any
-
-from creps_gym import envs  # noqa: F401  (registers the environment ids)
-from creps_gym.envs.registration import registered_ids
-
-try:
-    __version__ = version("creps-gym")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
-    __version__ = "0.0.0"
 
 __all__ = ["Policy", "__version__", "load_policy", "registered_ids"]
 
+_LAZY = {
+    "registered_ids": "creps_gym.envs.registration",
+    "Policy": "creps_gym.optimizers.policy_file",  # the learned policy, loadable anywhere
+    "load_policy": "creps_gym.runner.policy_store",
+}
+_SUBPACKAGES = ("envs", "movement", "optimizers", "runner", "selectors", "wrappers")
+
+
+class _RegisterAfterGymnasium(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Registers the ids right after Gymnasium's own module runs (the first ``import gymnasium``)."""
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
+        if name != "gymnasium":
+            return None
+        sys.meta_path.remove(self)  # once; the real finders locate Gymnasium
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.loader is None:
+            return spec
+        self._loader = spec.loader
+        spec.loader = self
+        return spec
+
+    def create_module(self, spec: Any) -> Any:
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module: Any) -> None:
+        module.__loader__ = module.__spec__.loader = self._loader  # Gymnasium's own loader from now on
+        self._loader.exec_module(module)
+        importlib.import_module("creps_gym.envs")  # registers every id (creps_gym.envs.register_envs)
+
+
+def _register_when_gymnasium_loads() -> None:
+    if "gymnasium" in sys.modules:
+        importlib.import_module("creps_gym.envs")
+    elif not any(isinstance(finder, _RegisterAfterGymnasium) for finder in sys.meta_path):
+        sys.meta_path.insert(0, _RegisterAfterGymnasium())
+
 
 def __getattr__(name: str) -> Any:
-    """``Policy`` and ``load_policy``, imported on first use (``import creps_gym`` stays light)."""
-    if name == "Policy":
-        from creps_gym.optimizers.policy_file import Policy
+    if name == "__version__":
+        from importlib.metadata import PackageNotFoundError, version
 
-        return Policy
-    if name == "load_policy":
-        from creps_gym.runner.policy_store import load_policy
-
-        return load_policy
+        try:
+            value = version("creps-gym")
+        except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
+            value = "0.0.0"
+        globals()[name] = value
+        return value
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    if name in _SUBPACKAGES:
+        return importlib.import_module(f"creps_gym.{name}")
     raise AttributeError(f"module 'creps_gym' has no attribute {name!r}")
+
+
+_register_when_gymnasium_loads()

@@ -1,5 +1,5 @@
 """The ``creps-gym`` command line: list, run, resume, plot, export, policy and evaluate
-(:mod:`creps_gym.cli_policy`).
+(:mod:`creps_gym.cli_results`, :mod:`creps_gym.cli_policy`).
 
 Exit codes
 ----------
@@ -30,23 +30,16 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shlex
 import signal
 import sys
 import warnings
 from collections.abc import Sequence
-from dataclasses import fields
 from typing import Any
 
-from creps_gym.cli_types import (
-    UsageError,
-    initial_mean,
-    integer,
-    key_value,
-    numbers,
-    optimizer_name,
-    positive_float,
-    selector_name,
-)
+from creps_gym.cli_parsers import add_import, add_progress, add_run
+from creps_gym.cli_results import RESULT_COMMANDS, add_result_commands
+from creps_gym.cli_types import UsageError
 
 __all__ = ["EXIT_CODES", "build_parser", "main"]
 
@@ -54,12 +47,22 @@ EXIT_CODES = {"ok": 0, "run_failed": 1, "usage": 2, "run_dir": 3, "missing_depen
 
 
 def _import_modules(args: argparse.Namespace) -> None:
-    """Import the ``--import`` modules, then check ``--env`` (a ``module:Env-v0``'s module is imported)."""
+    """Import the ``--import`` modules, then check the names they may register: ``--env`` (a
+    ``module:Env-v0``'s module is imported) and ``--optimizer``.
+
+    The current directory is searched for an ``--import`` module, after every other path entry (so it
+    never shadows an installed module); nothing is ever imported from a run directory.
+    """
+    from creps_gym.listing import did_you_mean
     from creps_gym.runner.trust import import_modules, registered_env_id
 
+    if args.imports and os.getcwd() not in sys.path:
+        sys.path.append(os.getcwd())
     checks = [("--import", lambda: import_modules(args.imports))]
     if getattr(args, "env", None) is not None:
         checks.append(("--env", lambda: registered_env_id(args.env, import_module=True)))
+    if getattr(args, "optimizer", None) is not None:
+        checks.append(("--optimizer", lambda: _registered_optimizer(args.optimizer)))
     for flag, check in checks:
         try:
             check()
@@ -67,119 +70,29 @@ def _import_modules(args: argparse.Namespace) -> None:
             hint = ""
             if flag == "--env":  # a mistyped id: suggest the registered ones it resembles
                 import creps_gym
-                from creps_gym.listing import did_you_mean
 
                 hint = did_you_mean(args.env, creps_gym.registered_ids())
             raise UsageError(f"argument {flag}: {exc}{hint}") from None
 
 
+def _registered_optimizer(name: str) -> None:
+    from creps_gym.listing import did_you_mean
+    from creps_gym.optimizers.registry import optimizer_names
+
+    names = optimizer_names()
+    if name not in names:
+        raise ValueError(f"expected one of {names}, got {name!r}{did_you_mean(name, names)}")
+
+
 # -- parser -------------------------------------------------------------------------------------------------
-def _add_progress(parser: argparse.ArgumentParser) -> None:
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument(
-        "--progress",
-        dest="progress",
-        action="store_true",
-        default=None,
-        help="show the progress bar even when not on a terminal",
-    )
-    group.add_argument(
-        "--no-progress", dest="progress", action="store_false", help="never show the progress bar"
-    )
-    parser.add_argument("--no-plot", action="store_true", help="do not write learning_curve.png at the end")
-    _add_import(parser)
+class _Version(argparse.Action):
+    """``--version``, looked up only when asked (``importlib.metadata`` is slow to import)."""
 
+    def __call__(self, parser: argparse.ArgumentParser, *_: Any, **__: Any) -> None:
+        from creps_gym import __version__
 
-def _add_run(commands: Any) -> None:
-    from creps_gym.runner.config import BACKENDS, VECTOR_MODES, RunConfig
-
-    run_defaults = {f.name: f.default for f in fields(RunConfig)}  # one source for the defaults
-
-    run = commands.add_parser(
-        "run", help="run an optimiser on an env", description="Run an optimiser on an env."
-    )
-    required = [
-        ("--env", str, "registered env id (see `creps-gym list`), or module:Env-v0"),
-        ("--optimizer", optimizer_name, "optimiser name (see `creps-gym list`)"),
-        ("--iterations", integer(1), "maximum number of iterations"),
-        ("--seed", integer(0), "master seed (>= 0)"),
-        ("--out", str, "new run directory"),
-    ]
-    for flag, parse, text in required:
-        run.add_argument(flag, required=True, type=parse, help=text)
-    run.add_argument(
-        "--samples",
-        type=integer(2),
-        default=None,
-        help="episodes per iteration (>= 2; default: the optimiser's recommended batch size)",
-    )
-    run.add_argument("--overwrite", action="store_true", help="replace a run already in --out (deletes it)")
-    run.add_argument(
-        "--backend", default=run_defaults["backend"], choices=BACKENDS, help="where episodes run"
-    )
-    run.add_argument(
-        "--ray-address",
-        default=None,
-        metavar="HOST:PORT",
-        help="--backend ray: join the running Ray cluster at HOST:PORT (or 'auto') and leave it running "
-        "(default: $RAY_ADDRESS if set, else a local Ray for this run)",
-    )
-    run.add_argument(
-        "--vector-mode",
-        default=run_defaults["vector_mode"],
-        choices=VECTOR_MODES,
-        help="vector backend flavour",
-    )
-    optional = [
-        ("--workers", integer(1), "vector sub-envs or Ray tasks per iteration"),
-        ("--retries", integer(0), "re-runs of a failed episode"),
-        ("--eval-every", integer(1), "evaluate the mean policy every N iterations"),
-        ("--eval-contexts", integer(1), "number of test contexts"),
-        ("--checkpoint-every", integer(1), "checkpoint every N iterations"),
-        ("--max-episodes", integer(2), "episode budget"),
-        ("--target-regret", positive_float, "stop once the mean regret is at most this"),
-        ("--max-time", positive_float, "stop after this many seconds"),
-        ("--initial-mean", initial_mean, "a number, p comma-separated numbers, or 'uniform' in the box"),
-        ("--initial-std", numbers, "initial standard deviation(s); default: the env-declared one"),
-    ]
-    for flag, parse, text in optional:
-        default = run_defaults[flag[2:].replace("-", "_")]
-        run.add_argument(flag, type=parse, default=default, help=f"{text} (default {default})")
-    run.add_argument(
-        "--context-selector",
-        type=selector_name,
-        default=None,
-        metavar="NAME",
-        help="who chooses the training contexts (e.g. uniform, arcsine, bandit, progress; see "
-        "docs/contexts.md); default: the env's own draws",
-    )
-    flags = (
-        ("--opt", "optimiser option, e.g. --opt epsilon=1.0"),
-        ("--env-kwarg", "e.g. dim=5"),
-        ("--selector-opt", "context selector option, e.g. --selector-opt cells=4"),
-    )
-    for flag, text in flags:
-        run.add_argument(
-            flag,
-            action="append",
-            type=key_value,
-            default=[],
-            metavar="KEY=VALUE",
-            help=f"{text}; VALUE is JSON or a string (repeatable)",
-        )
-    _add_progress(run)
-
-
-def _add_import(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--import",
-        dest="imports",
-        action="append",
-        default=[],
-        metavar="MODULE",
-        help="import MODULE first (e.g. the package that registers the env; repeatable); a run directory "
-        "never makes creps-gym import anything",
-    )
+        print(f"creps-gym {__version__}")
+        parser.exit()
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -190,29 +103,13 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Exit codes: 0 ok, 1 run failed, 2 usage error, 3 run-directory error, "
         "4 missing optional dependency, 130 interrupted.",
     )
-    from creps_gym import __version__
-
-    parser.add_argument("--version", action="version", version=f"creps-gym {__version__}")
+    parser.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    commands.add_parser(
-        "list",
-        help="list the envs and optimisers",
-        description="List the envs (context and parameter spaces, the default initial search distribution) "
-        "and the optimisers.",
-    )
-    _add_run(commands)
+    add_run(commands)
     resume = commands.add_parser("resume", help="continue a run from its last checkpoint")
     resume.add_argument("run_dir", metavar="DIR")
-    _add_progress(resume)
-    plot = commands.add_parser("plot", help="plot learning curves of run directories")
-    plot.add_argument("run_dirs", nargs="+", metavar="DIR")
-    plot.add_argument("-o", "--output", required=True, metavar="FILE", help="image file, e.g. curves.png")
-    plot.add_argument("--title", help="figure title (default: the env and its dimensions)")
-    export = commands.add_parser("export", help="write run directories as one IOHanalyzer CSV")
-    export.add_argument("run_dirs", nargs="+", metavar="DIR")
-    export.add_argument("-o", "--output", required=True, metavar="FILE", help="CSV file")
-    for command in (plot, export):
-        command.add_argument("--mix-envs", action="store_true", help="allow runs of different envs")
+    add_progress(resume)
+    add_result_commands(commands, add_import)
     from creps_gym.cli_policy import add_commands
 
     add_commands(commands)  # policy, evaluate
@@ -220,18 +117,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # -- commands -----------------------------------------------------------------------------------------------
-def _cmd_list(_: argparse.Namespace) -> int:
-    import creps_gym
-    from creps_gym.listing import env_rows, optimizer_rows, table
-    from creps_gym.optimizers.registry import describe_optimizers
-
-    print("Environments:")
-    print(table(env_rows(creps_gym.registered_ids())))
-    print("Optimizers:")
-    print(table(optimizer_rows(describe_optimizers())))
-    return 0
-
-
 _FLAGS = {
     "samples": "--samples",
     "optimizer_options": "--opt",
@@ -245,10 +130,14 @@ def _as_usage_error(exc: Exception, args: argparse.Namespace) -> UsageError:
 
     Errors about an optimiser option or an env keyword argument name ``--opt`` or ``--env-kwarg``.
     """
+    from dataclasses import fields
+
     from creps_gym.runner.config import RunConfig
 
     message = str(exc)
     field, sep, rest = message.partition(":")
+    if sep and field in dict(getattr(args, "opt", [])):
+        return UsageError(f"argument --opt: {message}")  # e.g. nevergrad's own `optimizer` option
     if sep and field in {f.name for f in fields(RunConfig)}:
         flag = _FLAGS.get(field, "--" + field.replace("_", "-"))
         return UsageError(f"argument {flag}:{rest}")
@@ -284,6 +173,8 @@ def _finish(runner: Any, args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from dataclasses import fields
+
     from creps_gym.runner.callbacks import ProgressBar
     from creps_gym.runner.config import RunConfig
     from creps_gym.runner.loop import Runner
@@ -321,73 +212,47 @@ def _cmd_resume(args: argparse.Namespace) -> int:
     return _finish(runner, args)
 
 
-def _write_output(write: Any, args: argparse.Namespace, what: str) -> int:
-    """Write ``-o`` with ``write(path)`` (exit 2 if it cannot be) and print the file actually written."""
-    try:
-        written = write(args.output)
-    except (ValueError, OSError) as exc:
-        cause = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        cause = cause.removeprefix("path: ")
-        where = f"cannot write {args.output}: " if isinstance(exc, OSError) else ""
-        raise UsageError(f"argument -o/--output: {where}{cause}") from None
-    named = os.path.abspath(args.output) == str(written)
-    print(f"{what}: {args.output}" if named else f"{what}: {written} (through the link {args.output})")
-    return 0
-
-
-def _cmd_plot(args: argparse.Namespace) -> int:
-    from creps_gym.runner.plots import plot_run_dirs, save_figure
-    from creps_gym.runner.session import RunDirError
-
-    try:
-        figure = plot_run_dirs(args.run_dirs, title=args.title, mix_envs=args.mix_envs)
-    except RunDirError:
-        raise
-    except ValueError as exc:  # e.g. runs of different envs without --mix-envs
-        raise UsageError(str(exc)) from None
-    return _write_output(lambda path: save_figure(figure, path), args, "plot")
-
-
-def _cmd_export(args: argparse.Namespace) -> int:
-    from creps_gym.runner.export import iohanalyzer_text, write_iohanalyzer
-    from creps_gym.runner.plots import load_history
-    from creps_gym.runner.session import RunDirError
-
-    try:
-        histories = [load_history(p) for p in args.run_dirs]
-        iohanalyzer_text(histories, args.mix_envs)
-    except RunDirError:
-        raise
-    except ValueError as exc:  # e.g. runs of different envs without --mix-envs
-        raise UsageError(str(exc)) from None
-    write = lambda path: write_iohanalyzer(histories, path, mix_envs=args.mix_envs)  # noqa: E731
-    return _write_output(write, args, "IOHanalyzer CSV")
-
-
 def _cmd_policy(args: argparse.Namespace) -> int:
     from creps_gym.cli_policy import COMMANDS
 
     return COMMANDS[args.command](args)
 
 
-_COMMANDS = {
-    "list": _cmd_list,
-    "run": _cmd_run,
-    "resume": _cmd_resume,
-    "plot": _cmd_plot,
-    "export": _cmd_export,
-    "policy": _cmd_policy,
-    "evaluate": _cmd_policy,
-}
+_COMMANDS = {"run": _cmd_run, "resume": _cmd_resume, "policy": _cmd_policy, "evaluate": _cmd_policy}
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``creps-gym`` console script; returns the exit code (see the module docstring)."""
+def _drop_cwd_from_path() -> None:
+    """``python -m creps_gym.cli`` puts the current directory first on ``sys.path``: drop it, so that no
+    file there (or in a run directory the user works in) shadows a module; ``--import`` looks there last."""
+    if not sys.flags.safe_path and sys.path and sys.path[0] in ("", os.getcwd()):
+        del sys.path[0]
+
+
+def _failure(exc: Exception, prog: str) -> int | None:
+    """Print ``exc`` and return its exit code, or None for an exception that is a bug (a traceback)."""
     from gymnasium.error import Error as GymnasiumError
 
     from creps_gym.runner.backends import EpisodeError
     from creps_gym.runner.session import RunDirError
 
+    if isinstance(exc, (FileExistsError, FileNotFoundError, NotADirectoryError, RunDirError)):
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return EXIT_CODES["run_dir"]
+    if isinstance(exc, ImportError):
+        print(f"{prog}: error: missing optional dependency: {exc}", file=sys.stderr)
+        return EXIT_CODES["missing_dependency"]
+    if isinstance(exc, (EpisodeError, RuntimeError, ValueError, TypeError, ArithmeticError, GymnasiumError)):
+        print(f"{prog}: run failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return EXIT_CODES["run_failed"]
+    if isinstance(exc, OSError):  # a file that the run directory's checks did not name (those: RunDirError)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"{prog}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_CODES["run_dir"]
+    return None
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``creps-gym`` console script; returns the exit code (see the module docstring)."""
     if hasattr(signal, "SIGXFSZ"):  # `ulimit -f`: a write past it fails with EFBIG (named, exit 3)
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     parser = build_parser()
@@ -400,32 +265,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with warnings.catch_warnings():
             warnings.showwarning = show_warning
+            if args.command in RESULT_COMMANDS:
+                if getattr(args, "imports", None):
+                    _import_modules(args)
+                return RESULT_COMMANDS[args.command](args, UsageError)
             return _COMMANDS[args.command](args)
     except UsageError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_CODES["usage"]
-    except (FileExistsError, FileNotFoundError, NotADirectoryError, RunDirError) as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return EXIT_CODES["run_dir"]
-    except ImportError as exc:
-        print(f"{prog}: error: missing optional dependency: {exc}", file=sys.stderr)
-        return EXIT_CODES["missing_dependency"]
     except BrokenPipeError:  # e.g. `creps-gym list | head`: the reader left, which is not an error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_CODES["ok"]
     except KeyboardInterrupt:
-        print(
-            f"{prog}: interrupted; `creps-gym resume DIR` continues from the last checkpoint", file=sys.stderr
-        )
+        run_dir = getattr(args, "out", None) or getattr(args, "run_dir", None)
+        advice = f"; `creps-gym resume {shlex.quote(str(run_dir))}` continues from the last checkpoint"
+        print(f"{prog}: interrupted{advice if run_dir else ''}", file=sys.stderr)
         return EXIT_CODES["interrupted"]
-    except (EpisodeError, RuntimeError, ValueError, TypeError, ArithmeticError, GymnasiumError) as exc:
-        print(f"{prog}: run failed: {type(exc).__name__}: {exc}", file=sys.stderr)
-        return EXIT_CODES["run_failed"]
-    except OSError as exc:  # a file the run directory's own checks did not name (they raise RunDirError)
-        where = f"{exc.filename}: " if exc.filename else ""
-        print(f"{prog}: error: {where}{exc.strerror or exc}", file=sys.stderr)
-        return EXIT_CODES["run_dir"]
+    except Exception as exc:
+        code = _failure(exc, prog)
+        if code is None:
+            raise
+        return code
 
 
 if __name__ == "__main__":
+    _drop_cwd_from_path()
     sys.exit(main())

@@ -1,4 +1,8 @@
-"""Argument types of the ``creps-gym`` command line: each names what it expected and what it got."""
+"""Argument types of the ``creps-gym`` command line: each names what it expected and what it got.
+
+Names that a module may register (``--env``, ``--optimizer``) are checked after ``--import``, in
+:mod:`creps_gym.cli`, not here.
+"""
 
 from __future__ import annotations
 
@@ -13,7 +17,6 @@ __all__ = [
     "integer",
     "key_value",
     "numbers",
-    "optimizer_name",
     "positive_float",
     "selector_name",
 ]
@@ -81,17 +84,6 @@ def key_value(text: str) -> tuple[str, Any]:
         return key, raw
     except ValueError as exc:  # nested too deeply
         raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def optimizer_name(text: str) -> str:
-    from creps_gym.optimizers.registry import optimizer_names
-
-    if text not in optimizer_names():
-        from creps_gym.listing import did_you_mean
-
-        names = optimizer_names()
-        raise argparse.ArgumentTypeError(f"expected one of {names}, got {text!r}{did_you_mean(text, names)}")
-    return text
 
 
 def selector_name(text: str) -> str:

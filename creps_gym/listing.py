@@ -2,21 +2,41 @@
 
 Each env row shows the context space, the parameter space and the initial search distribution the runner
 starts from by default (:func:`initial_hint`: the env-declared initial distribution).
+
+``creps-gym list`` and ``creps-gym --help`` must start fast, so they print a static table,
+:mod:`creps_gym.cli_table`, instead of importing numpy, Gymnasium and every env. That module is generated
+from the live registry by ``python -m creps_gym.listing --write`` (:func:`live_table`), and
+``python -m creps_gym.listing --check`` (run by ``tests/test_cli_startup.py``) fails when they disagree.
 """
 
 from __future__ import annotations
 
 import difflib
+import importlib.util
 import re
+import sys
 import warnings
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-import numpy as np
-
-__all__ = ["box_text", "did_you_mean", "env_rows", "initial_hint", "optimizer_rows", "plain", "table"]
+__all__ = [
+    "OPTIONAL_MODULES",
+    "available_env_rows",
+    "box_text",
+    "did_you_mean",
+    "env_rows",
+    "initial_hint",
+    "live_table",
+    "optimizer_rows",
+    "plain",
+    "table",
+]
 
 _ROLE = re.compile(r":[a-z]+:`~?(?:[\w.]*\.)?([^`]+)`")  # :class:`~a.b.C` -> C
+#: Optional modules an env may need, and the extra that installs them.
+OPTIONAL_MODULES = {"mujoco": "mujoco", "gymnasium_robotics": "mujoco"}
+ENV_HEADER = ["id", "context", "parameters θ", "initial (default)", "description"]
+OPTIMIZER_HEADER = ["name", "description"]
 
 
 def plain(text: str) -> str:
@@ -24,25 +44,34 @@ def plain(text: str) -> str:
     return _ROLE.sub(r"\1", text).replace("``", "").replace("`", "")
 
 
-def _number(value: float) -> str:
-    return f"{value:.3g}"
+def _number(value: float, digits: int = 3) -> str:
+    return f"{value:.{digits}g}"
 
 
 def box_text(space: Any) -> str:
-    """A Box as ``[low, high]^n`` (equal bounds) or ``n dims in [min low, max high]``; others as ``str``."""
+    """A Box exactly, per dimension: ``[low, high]^n`` when every dimension has the same bounds, else the
+    product of each run of equal intervals, e.g. ``[0.15, 0.3]×[-0.15, 0.15]`` or ``[-5, 5]^12×[-5.99059,
+    5]×[-5, 5]^2`` (bounds to 6 significant digits); other spaces as ``str``."""
+    import numpy as np
+
     low = np.asarray(getattr(space, "low", np.nan), np.float64).ravel()
     high = np.asarray(getattr(space, "high", np.nan), np.float64).ravel()
     if low.size == 0 or np.isnan(low).any():
         return str(space)
-    n = low.size
-    if (low == low[0]).all() and (high == high[0]).all():
-        interval = f"[{_number(low[0])}, {_number(high[0])}]"
-        return interval if n == 1 else f"{interval}^{n}"
-    return f"{n} dims in [{_number(low.min())}, {_number(high.max())}]"
+    runs: list[list[Any]] = []  # [interval text, count]
+    for lo, hi in zip(low, high, strict=True):
+        interval = f"[{_number(lo, 6)}, {_number(hi, 6)}]"
+        if runs and runs[-1][0] == interval:
+            runs[-1][1] += 1
+        else:
+            runs.append([interval, 1])
+    return "×".join(text if count == 1 else f"{text}^{count}" for text, count in runs)
 
 
 def initial_hint(env: Any) -> str:
     """The runner's default initial search distribution for ``env`` (the env-declared one): N(mean, std²)."""
+    import numpy as np
+
     from creps_gym.envs.base import box_initial_distribution, initial_distribution
 
     mean, std = initial_distribution(env)
@@ -64,7 +93,7 @@ def env_rows(env_ids: Iterable[str]) -> list[list[str]]:
     """One row per env: id, context space, parameter space, initial distribution, description."""
     import gymnasium as gym
 
-    rows = [["id", "context", "parameters θ", "initial (default)", "description"]]
+    rows = [list(ENV_HEADER)]
     for env_id in env_ids:
         try:
             with warnings.catch_warnings():  # listing the older versions is not using them
@@ -81,7 +110,7 @@ def env_rows(env_ids: Iterable[str]) -> list[list[str]]:
 
 def optimizer_rows(descriptions: dict[str, str]) -> list[list[str]]:
     """One row per optimiser: name, description."""
-    return [["name", "description"]] + [[name, plain(text)] for name, text in descriptions.items()]
+    return [list(OPTIMIZER_HEADER)] + [[name, plain(text)] for name, text in descriptions.items()]
 
 
 def table(rows: Sequence[Sequence[str]], indent: str = "  ") -> str:
@@ -104,3 +133,112 @@ def did_you_mean(text: str, choices: Sequence[str]) -> str:
     if not suggestions:
         return ""
     return " (did you mean " + " or ".join(repr(s) for s in suggestions) + "?)"
+
+
+# -- the static table of the fast commands --------------------------------------------------------------
+def _needed_modules(env_ids: Sequence[str]) -> dict[str, list[str]]:
+    """For each id, the :data:`OPTIONAL_MODULES` without which ``gymnasium.make`` fails.
+
+    Each module is blocked in turn (``sys.modules[name] = None``) while every env is made, so this must
+    run before any of them is imported (a fresh process: ``python -m creps_gym.listing``).
+    """
+    import gymnasium as gym
+
+    loaded = sorted(set(OPTIONAL_MODULES) & set(sys.modules))
+    if loaded:
+        raise RuntimeError(
+            f"expected a process that has not imported {loaded} (run python -m creps_gym.listing)"
+        )
+    needs: dict[str, list[str]] = {env_id: [] for env_id in env_ids}
+    for module in OPTIONAL_MODULES:
+        sys.modules[module] = None  # type: ignore[assignment]  # `import module` raises ImportError
+        try:
+            for env_id in env_ids:
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        gym.make(env_id).close()
+                except Exception:  # any failure: the env cannot be made without the module
+                    needs[env_id].append(module)
+        finally:
+            del sys.modules[module]
+    return needs
+
+
+def live_table() -> dict[str, Any]:
+    """What :mod:`creps_gym.cli_table` holds, computed from the registries and ``RunConfig``."""
+    from dataclasses import MISSING, fields
+
+    import creps_gym
+    from creps_gym.optimizers.registry import describe_optimizers
+    from creps_gym.runner.config import BACKENDS, VECTOR_MODES, RunConfig
+
+    ids = creps_gym.registered_ids()
+    needs = _needed_modules(ids)
+    envs = [[*row, needs[row[0]]] for row in env_rows(ids)[1:]]
+    return {
+        "ENVS": envs,
+        "OPTIMIZERS": optimizer_rows(describe_optimizers())[1:],
+        "BACKENDS": list(BACKENDS),
+        "VECTOR_MODES": list(VECTOR_MODES),
+        "RUN_DEFAULTS": {f.name: f.default for f in fields(RunConfig) if f.default is not MISSING},
+    }
+
+
+def table_source(data: dict[str, Any]) -> str:
+    """The Python source of :mod:`creps_gym.cli_table` holding ``data``."""
+    import pprint
+
+    lines = [
+        "# ruff: noqa: E501",
+        '"""What `creps-gym list` and `--help` print, without importing numpy, Gymnasium or any env.',
+        "",
+        "Generated from the registries and RunConfig by `python -m creps_gym.listing --write`: do not edit.",
+        "ENVS rows: id, context, parameters, initial distribution, description, optional modules it needs.",
+        '"""',
+        "",
+        "__all__ = [" + ", ".join(f'"{name}"' for name in sorted(data)) + "]",
+        "",
+        "# fmt: off",
+    ]
+    for name, value in data.items():
+        lines.append(f"{name} = {pprint.pformat(value, width=400, sort_dicts=False)}")
+    return "\n".join(lines) + "\n# fmt: on\n"
+
+
+def available_env_rows(envs: Sequence[Sequence[Any]]) -> list[list[str]]:
+    """Table rows (with the header) of static env rows; envs whose optional modules are not installed
+    are marked ``(not available: pip install creps-gym[extra])``."""
+    rows = [list(ENV_HEADER)]
+    for *cells, needs in envs:
+        missing = [module for module in needs if importlib.util.find_spec(module) is None]
+        if missing:
+            extras = sorted({OPTIONAL_MODULES[module] for module in missing})
+            cells = [cells[0], "?", "?", "?", f"(not available: pip install creps-gym[{','.join(extras)}])"]
+        rows.append(list(cells))
+    return rows
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m creps_gym.listing --write | --check``: regenerate or check :mod:`creps_gym.cli_table`."""
+    from pathlib import Path
+
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args not in (["--write"], ["--check"]):
+        print("usage: python -m creps_gym.listing --write | --check", file=sys.stderr)
+        return 2
+    path = Path(__file__).with_name("cli_table.py")
+    source = table_source(live_table())
+    if args == ["--write"]:
+        path.write_text(source, encoding="utf-8")
+        print(f"wrote {path}")
+        return 0
+    if path.read_text(encoding="utf-8") != source:
+        print(f"{path} is out of date: run python -m creps_gym.listing --write", file=sys.stderr)
+        return 1
+    print(f"{path} agrees with the registries")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -8,7 +8,7 @@ import subprocess
 from dataclasses import fields
 
 import pytest
-from helpers import SPHERE, cli_command
+from helpers import EXTRAS, SPHERE, cli_command
 
 import creps_gym
 from creps_gym.cli import main
@@ -170,3 +170,17 @@ def test_an_empty_out_is_refused_with_exit_2_not_taken_as_the_current_folder(tmp
     assert main([*argv, "--out", "", "--no-progress", "--no-plot"]) == 2
     assert "out: expected a directory path, got ''" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+@EXTRAS
+def test_a_bad_nevergrad_optimizer_option_blames_opt_and_suggests_close_names(tmp_path, capsys):
+    pytest.importorskip("nevergrad")
+    args = [str(a) for a in run_args(tmp_path / "run", "--opt", "optimizer=TwoPointDE")]
+    args[args.index("--optimizer") + 1] = "nevergrad"
+    assert main(args) == 2
+    error = capsys.readouterr().err
+    assert (
+        "argument --opt: optimizer: expected a name in nevergrad.optimizers.registry, got 'TwoPointDE' "
+        in error
+    )
+    assert "(did you mean 'TwoPointsDE'" in error and "argument --optimizer" not in error

@@ -407,3 +407,11 @@ def test_a_num_envs_whose_arrays_cannot_fit_is_refused_naming_it():
     ):
         gym.make_vec("creps_gym/Sphere-v0", num_envs=10**12)
     assert gym.make_vec("creps_gym/Sphere-v0", num_envs=3, autoreset_mode="Disabled").num_envs == 3
+
+
+def test_the_return_at_the_optimum_is_plus_zero_as_the_readme_prints_it():
+    """Issue 31: the README's env snippet printed ``-0.0`` for the return at the optimum (``-f`` of 0)."""
+    env = gym.make("creps_gym/Rosenbrock-v0", dim=10, context_dim=2)
+    context, _ = env.reset(seed=0)
+    _, reward, _, _, info = env.step(env.unwrapped.optimal_params(context[None])[0])
+    assert f"{reward} {info['regret']}" == "0.0 0.0"

@@ -34,14 +34,20 @@ def test_the_learning_curve_names_the_env_shows_the_target_and_the_stop_reasons(
     pytest.importorskip("matplotlib")
     figure = plot_run_dirs([runs / "a", runs / "b"])
     assert figure._suptitle.get_text() == f"{SPHERE} (p = 3, z = 1)"
-    left, right = figure.axes
+    left, right = figure.get_axes()
     assert left.get_yscale() == "symlog" and right.get_yscale() == "log"
     reasons = sorted(str(load_history(runs / n).stop_reason) for n in "ab")
-    label = left.get_legend().get_texts()[0].get_text()
-    assert label.startswith("creps-cma-old (n=2; stop: ") and all(r in label for r in reasons)
+    texts = legend_texts(figure)
+    assert texts[0].startswith("creps-cma-old (n=2; stop: ") and all(r in texts[0] for r in reasons)
     target = [line for line in right.get_lines() if line.get_linestyle() == "--"]
     assert len(target) == 1 and np.allclose(target[0].get_ydata(), 2.0)
-    assert "target regret 2" in [t.get_text() for t in right.get_legend().get_texts()]
+    assert texts[1:] == ["target regret 2"]
+
+
+def legend_texts(figure):
+    """The texts of the figure's one legend (below the panels)."""
+    (legend,) = [legend for sub in figure.subfigs for legend in sub.legends]
+    return [text.get_text() for text in legend.get_texts()]
 
 
 def test_plot_and_export_refuse_to_mix_envs_unless_told(runs, tmp_path, capsys):

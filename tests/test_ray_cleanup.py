@@ -113,3 +113,39 @@ def test_a_killed_driver_leaves_no_ray_process_behind(tmp_path):
         driver.kill()
         driver.wait()
     assert _wait_until_gone(tracked, 20.0) == []
+
+
+@pytest.mark.slow
+def test_a_local_ray_is_started_once_per_process_and_stopped_at_its_exit(tmp_path):
+    """Issue 31: the second run of a process reuses the local Ray the first started; exit stops it."""
+    pytest.importorskip("ray")
+    driver = _driver(
+        tmp_path,
+        f"""
+        import json, os
+        import ray
+        from creps_gym.runner import run
+        from creps_gym.runner.watchdog import child_pids
+
+        def cluster(path):
+            return next(e for e in map(json.loads, open(path + "/log.jsonl")) if e["event"] == "ray")
+
+        args = ("creps-cma-old", "creps_gym/Sphere-v0", 2, 8, 0)
+        kwargs = dict(env_kwargs={{"dim": 3}}, backend="ray", workers=2)
+        run(*args, **kwargs, run_dir={str(tmp_path / "one")!r})
+        after_first = ray.is_initialized()
+        run(*args, **kwargs, run_dir={str(tmp_path / "two")!r})
+        first, second = (cluster({str(tmp_path)!r} + name) for name in ("/one", "/two"))
+        print(after_first, first["ray"], first["address"] == second["address"], flush=True)
+        print(*child_pids(os.getpid()), flush=True)
+        """,
+    )
+    try:
+        reused = driver.stdout.readline().split()
+        children = [int(pid) for pid in driver.stdout.readline().split()]
+        tracked = process_tree(children)
+    finally:
+        driver.wait(timeout=120)
+    assert reused == ["True", "local", "True"]
+    assert driver.returncode == 0 and len(tracked) >= 2  # Ray's processes and the watchdog
+    assert _wait_until_gone(tracked, 30.0) == []  # the exit shut Ray down and released the watchdog

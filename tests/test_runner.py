@@ -334,6 +334,17 @@ def test_progress_bar_shows_the_regret_only_when_asked():
     assert quiet.getvalue() == ""
 
 
+@EXTRAS
+def test_progress_bar_of_an_early_stop_ends_at_100_percent_with_its_reason():
+    """Issue 31: a run that met its target after 2 of 40 iterations left its bar at "5%"."""
+    stream = io.StringIO()
+    history = run("creps-cma-old", SPHERE, 40, 8, 0, callbacks=[ProgressBar(True, stream)], target_regret=1e3,
+                  **SMALL)  # fmt: skip
+    last = stream.getvalue().split("\r")[-1]
+    assert history.stop_reason == "target_regret" and len(history) < 40
+    assert "100%" in last and f"{len(history)}/{len(history)}" in last and "stop=target_regret" in last
+
+
 def test_iohanalyzer_export(tmp_path):
     histories = [run("creps-cma-old", SPHERE, 4, 8, seed, eval_every=2, **SMALL) for seed in (0, 1)]
     path = write_iohanalyzer(histories, tmp_path / "ioh.csv")

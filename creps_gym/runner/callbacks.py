@@ -95,6 +95,11 @@ class ProgressBar(Callback):
         return None
 
     def on_end(self, history: History) -> None:
-        if self._bar is not None:
-            self._bar.close()
-            self._bar = None
+        """Close the bar; a finished run's bar ends at 100% with its stop reason (an early stop too)."""
+        if self._bar is None:
+            return
+        if history.stop_reason is not None:
+            self._bar.total = self._bar.n
+            self._bar.set_postfix({**self._shown, "stop": history.stop_reason}, refresh=False)
+        self._bar.close()
+        self._bar = None

@@ -1,9 +1,10 @@
 """Export histories to the CSV layout IOHanalyzer reads (COCO-style comparisons).
 
 One row per evaluation of the recommended policy, with the columns ``evaluations`` (training episodes so
-far), ``value``, ``function_id`` (env id), ``algorithm_id`` (optimiser), ``dimension`` (parameters p)
-and ``run_id`` (the master seed). ``value`` is the mean regret when every history has one (minimised), else
-the mean evaluation return (maximised). Load the file in IOHanalyzer's R package with::
+far), ``value``, ``function_id`` (env id), ``algorithm_id`` (the optimiser, or the run's label: ``creps-gym
+export`` labels each run by its setting group, see :mod:`creps_gym.runner.groups`), ``dimension``
+(parameters p) and ``run_id`` (the master seed). ``value`` is the mean regret when every history has one
+(minimised), else the mean evaluation return (maximised). Load the file in IOHanalyzer's R package with::
 
     read_pure_csv("iohanalyzer.csv", "evaluations", "value", "function_id", "algorithm_id",
                   "dimension", "run_id", maximization = FALSE)   # TRUE for returns
@@ -56,16 +57,24 @@ def check_one_env(histories: Sequence[History], mix_envs: bool = False) -> list[
     return envs
 
 
-def iohanalyzer_rows(histories: Sequence[History], mix_envs: bool = False) -> tuple[list[tuple], str]:
-    """Rows (in :data:`IOH_COLUMNS` order) and the metric (``"regret"`` or ``"return"``)."""
+def iohanalyzer_rows(
+    histories: Sequence[History], mix_envs: bool = False, labels: Sequence[str] | None = None
+) -> tuple[list[tuple], str]:
+    """Rows (in :data:`IOH_COLUMNS` order) and the metric (``"regret"`` or ``"return"``).
+
+    ``labels``: each history's ``algorithm_id`` (default its optimiser).
+    """
     if not histories:
         raise ValueError("histories: expected at least one History, got none")
+    if labels is not None and len(labels) != len(histories):
+        raise ValueError(f"labels: expected one per history ({len(histories)}), got {len(labels)}")
     check_one_env(histories, mix_envs)
     use_regret = all(h.meta.get("metric") == "regret" for h in histories)
     rows = []
-    for history in histories:
+    for k, history in enumerate(histories):
         meta = history.meta
-        ids = (meta.get("env", "unknown"), meta.get("optimizer", "unknown"), meta.get("n_params", 0))
+        algorithm = meta.get("optimizer", "unknown") if labels is None else labels[k]
+        ids = (meta.get("env", "unknown"), algorithm, meta.get("n_params", 0))
         for record in history:
             value = record.eval_regret if use_regret else record.eval_return
             if not math.isnan(value):
@@ -73,9 +82,11 @@ def iohanalyzer_rows(histories: Sequence[History], mix_envs: bool = False) -> tu
     return rows, "regret" if use_regret else "return"
 
 
-def iohanalyzer_text(histories: Sequence[History], mix_envs: bool = False) -> str:
+def iohanalyzer_text(
+    histories: Sequence[History], mix_envs: bool = False, labels: Sequence[str] | None = None
+) -> str:
     """The CSV text of :func:`write_iohanalyzer`."""
-    rows, _ = iohanalyzer_rows(histories, mix_envs)
+    rows, _ = iohanalyzer_rows(histories, mix_envs, labels)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(IOH_COLUMNS)
@@ -84,7 +95,11 @@ def iohanalyzer_text(histories: Sequence[History], mix_envs: bool = False) -> st
 
 
 def write_iohanalyzer(
-    histories: Sequence[History], path: str | os.PathLike[str], *, mix_envs: bool = False
+    histories: Sequence[History],
+    path: str | os.PathLike[str],
+    *,
+    mix_envs: bool = False,
+    labels: Sequence[str] | None = None,
 ) -> Path:
     """Write the rows of :func:`iohanalyzer_rows` to ``path`` (atomically); returns the file written.
 
@@ -94,5 +109,5 @@ def write_iohanalyzer(
     from creps_gym.runner.files import write_output
     from creps_gym.runner.rundir import RunDir
 
-    text = iohanalyzer_text(histories, mix_envs)
+    text = iohanalyzer_text(histories, mix_envs, labels)
     return write_output(path, text.encode("utf-8"), protected=RunDir.owns)

@@ -3,10 +3,11 @@
 :func:`plot_histories` draws, for each group of runs (one optimiser over several seeds), the median and a
 quantile band over the runs of (left) the mean sample return on a symlog axis and (right) the evaluated
 regret of the recommended policy on a log axis with the target regret as a dashed line, or its evaluation
-return when the env has no regret. The x axis is the number of training episodes; the legend gives each
-group's stop reasons and the title names the env and its dimensions. :func:`plot_run_dirs` does the same
-from run directories, grouping them by optimiser. Runs of different envs are refused unless
-``mix_envs=True`` (then grouped by optimiser and env).
+return when the env has no regret. The x axis is the number of training episodes; the legend, below both
+panels (it never covers a curve: the figure grows with it), gives each group's size and stop reasons,
+and the title names the env and its dimensions. :func:`plot_run_dirs` does the same from run
+directories, one group per setting (:mod:`creps_gym.runner.groups`: everything fingerprinted but the
+seed), or as ``labels`` say. Runs of different envs are refused unless ``mix_envs=True``.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym.optimizers.adapters.base import import_optional
-from creps_gym.runner.export import check_one_env, env_key
+from creps_gym.runner.export import check_one_env
 from creps_gym.runner.files import output_target, write_output
 from creps_gym.runner.history import History
 from creps_gym.runner.rundir import RunDir
@@ -50,15 +51,43 @@ def _stop_text(runs: Sequence[History]) -> str:
     return ", ".join(reason if n == 1 else f"{reason} ×{n}" for reason, n in counts.most_common())
 
 
-def _draw(axis: Any, x: NDArray[np.float64], values: NDArray[np.float64], label: str, band: tuple) -> None:
+def _draw(axis: Any, x: NDArray[np.float64], values: NDArray[np.float64], style: dict, band: tuple) -> Any:
+    """The median line (or None when no value is finite) and the quantile band of a group."""
     keep = np.isfinite(values).any(axis=0)
     if not keep.any():
-        return
+        return None
     x, values = x[keep], values[:, keep]
-    (line,) = axis.plot(x, np.nanmedian(values, axis=0), label=label)
+    (line,) = axis.plot(x, np.nanmedian(values, axis=0), **style)
     if values.shape[0] > 1:
         low, high = np.nanquantile(values, band, axis=0)
         axis.fill_between(x, low, high, color=line.get_color(), alpha=0.25, linewidth=0)
+    return line
+
+
+def _draw_groups(axes: tuple, groups: Mapping[str, Sequence[History]], regret: bool, band: tuple) -> list:
+    """Draw each group (legend text -> runs) on both panels in its own colour; (line, text) legend entries."""
+    metric = "eval_regret" if regret else "eval_return"
+    entries = []
+    for k, (text, runs) in enumerate(groups.items()):
+        style = {"color": f"C{k % 10}", "linestyle": ("-", "--", ":", "-.")[k // 10 % 4], "label": text}
+        lines = [_draw(axes[0], *_stack(runs, "mean_return"), style, band),
+                 _draw(axes[1], *_stack(runs, metric), style, band)]  # fmt: skip
+        drawn = [line for line in lines if line is not None]
+        entries += [(drawn[0], text)] if drawn else []
+    return entries
+
+
+def _figure(texts: Sequence[str]) -> tuple[Any, Any, Any, Any, int]:
+    """The figure, its two panels and the strip below them, sized for a legend of ``texts``; its columns."""
+    longest = max(len(text) for text in texts)
+    columns = 2 if len(texts) > 3 and longest <= 55 else 1
+    width = max(11.0, 0.075 * longest * columns + 1.0)  # about 0.075 inch per character at "small" size
+    strip = 0.22 * -(-len(texts) // columns) + 0.3  # 0.22 inch per legend row
+    figure = import_optional("matplotlib.figure", "plot").Figure(
+        figsize=(width, 4.2 + strip), layout="constrained"
+    )
+    panels, below = figure.subfigures(2, 1, height_ratios=[4.2, strip])
+    return figure, *panels.subplots(1, 2), below, columns
 
 
 def _symlog(axis: Any, values: NDArray[np.float64]) -> None:
@@ -103,29 +132,27 @@ def plot_histories(
     if not 0.0 <= band[0] < band[1] <= 1.0:
         raise ValueError(f"band: expected quantiles 0 <= low < high <= 1, got {band}")
     envs = check_one_env([run for runs in groups.values() for run in runs], mix_envs)
-    figure_module = import_optional("matplotlib.figure", "plot")
-    figure = figure_module.Figure(figsize=(11, 4.2), layout="constrained")
-    left, right = figure.subplots(1, 2)
     regret = all(run.meta.get("metric") == "regret" for runs in groups.values() for run in runs)
-    metric = "eval_regret" if regret else "eval_return"
-    for label, runs in groups.items():
-        text = _plain(f"{label} (n={len(runs)}; stop: {_stop_text(runs)})")
-        _draw(left, *_stack(runs, "mean_return"), text, band)
-        _draw(right, *_stack(runs, metric), text, band)
+    texts = [_plain(f"{label} (n={len(runs)}; stop: {_stop_text(runs)})") for label, runs in groups.items()]
+    target = regret and target_regret is not None
+    figure, left, right, below, columns = _figure(texts + (["target regret"] if target else []))
+    entries = _draw_groups((left, right), dict(zip(texts, groups.values(), strict=True)), regret, band)
     _symlog(left, np.concatenate([run.column("mean_return") for runs in groups.values() for run in runs]))
     left.set(xlabel="episodes", ylabel="mean sample return (symlog)", title="samples")
     right.set(xlabel="episodes", title="recommended (mean) policy on the test contexts")
     if regret:
         right.set_yscale("log")
         right.set_ylabel("mean regret (log)")
-        if target_regret is not None:
-            right.axhline(target_regret, color="black", linestyle="--", linewidth=1,
-                          label=f"target regret {target_regret:g}")  # fmt: skip
+        if target:
+            line = right.axhline(target_regret, color="black", linestyle="--", linewidth=1)
+            entries.append((line, f"target regret {target_regret:g}"))
     else:
         right.set_ylabel("mean evaluation return")
     for axis in (left, right):
         axis.grid(True, alpha=0.3)
-        axis.legend(fontsize="small")
+    if entries:
+        handles, labels = zip(*entries, strict=True)
+        below.legend(handles, labels, loc="center", ncols=columns, fontsize="small", frameon=False)
     figure.suptitle(title if title is not None else _plain(" / ".join(envs)))
     if path is not None:
         save_figure(figure, path)
@@ -164,21 +191,20 @@ def plot_run_dirs(
     out: str | os.PathLike[str] | None = None,
     *,
     mix_envs: bool = False,
+    labels: Sequence[str] | None = None,
     **kwargs: Any,
 ) -> Any:
-    """Plot run directories, one group per optimiser (per optimiser and env with ``mix_envs``).
+    """Plot run directories, one group per setting (see :mod:`creps_gym.runner.groups`).
 
-    The target regret line is drawn when every run has the same ``target_regret``.
+    ``labels``: one per run directory (same label, same group) or one per setting group. The target
+    regret line is drawn when every run has the same ``target_regret``.
     """
-    histories = [load_history(p) for p in paths]
-    several_envs = len(check_one_env(histories, mix_envs)) > 1
-    groups: dict[str, list[History]] = {}
-    for history in histories:
-        label = str(history.meta.get("optimizer", "?"))
-        if several_envs:
-            label += f" on {env_key(history)}"
-        groups.setdefault(label, []).append(history)
-    targets = {RunDir.open(p).config().target_regret for p in paths}
+    from creps_gym.runner.groups import group_runs, load_runs
+
+    runs = load_runs(paths)
+    check_one_env([history for _, history in runs], mix_envs)
+    groups, _ = group_runs(runs, labels)
+    targets = {config.target_regret for config, _ in runs}
     if len(targets) == 1 and "target_regret" not in kwargs:
         kwargs["target_regret"] = targets.pop()
     return plot_histories(groups, out, mix_envs=mix_envs, **kwargs)

@@ -12,7 +12,10 @@ Ray is imported only when a :class:`RayBackend` is built. Which Ray it uses, in 
    (:func:`check_reachable`; Ray itself would retry for minutes, or wait for ever). A new run checks it
    before it creates its run directory.
 3. **Otherwise a local Ray** (``ray.init(address="local")``, so a cluster that ``ray start`` left on
-   this machine is never joined by accident), which :meth:`RayBackend.close` shuts down at the end.
+   this machine is never joined by accident). Its start-up (seconds) is paid once per process: the Ray
+   stays up for the next run of the process with the same ``workers`` (another ``workers`` or a
+   ``ray_address`` restarts or leaves it), and is shut down when the process exits, or by
+   :func:`shutdown_local_ray` (call it before your own ``ray.init``).
 
 Each iteration's episodes are split into one chunk per CPU of the cluster, counted when the iteration
 starts (``ray.cluster_resources()``), so nodes that join or leave mid-run are taken into account; each
@@ -30,11 +33,13 @@ a run that starts its own Ray also starts a small watchdog process (:mod:`creps_
 Linux ``/proc`` only). It records the processes Ray started and their descendants, and when the run's
 process dies without shutting Ray down it terminates them (SIGTERM, then SIGKILL after 2 s) and exits.
 Ray's session files under its temporary directory (``/tmp/ray/session_*``) are left, as after any Ray
-session. A Ray the user initialised, or a cluster the run joined, is never watched or stopped.
+session. A Ray the user initialised, or a cluster the run joined, is never watched or stopped. The
+watchdog of a local Ray kept for later runs watches until the process exits or shuts that Ray down.
 """
 
 from __future__ import annotations
 
+import atexit
 import itertools
 import os
 import socket
@@ -50,9 +55,19 @@ from creps_gym.runner.backends import Array, Backend, EnvSource, EpisodeError, r
 from creps_gym.runner.config import check_ray_address
 from creps_gym.runner.watchdog import Watchdog, child_pids
 
-__all__ = ["RayBackend", "check_reachable", "cluster_cpus", "plan_chunks", "resolve_address"]
+__all__ = [
+    "RayBackend",
+    "check_reachable",
+    "cluster_cpus",
+    "plan_chunks",
+    "resolve_address",
+    "shutdown_local_ray",
+]
 
 _RAY_ENVS: dict[str, gym.Env] = {}
+#: The local Ray a RayBackend started in this process and keeps for later runs: the ``ray`` module, its
+#: ``num_cpus``, ``watchdog`` and GCS ``address`` (empty when there is none).
+_LOCAL_RAY: dict[str, Any] = {}
 CONNECT_TIMEOUT = 5.0  # seconds to wait for a cluster's GCS port to answer before ray.init
 
 
@@ -89,6 +104,43 @@ def plan_chunks(episodes: int, chunks: int) -> list[tuple[int, int]]:
 #: What an HTTP/2 client sends first (RFC 9113, 3.4), then an empty SETTINGS frame; a gRPC server such as
 #: Ray's GCS answers with a SETTINGS frame (type 4), any other listener with something else or nothing.
 _HTTP2_HELLO = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+
+
+def shutdown_local_ray() -> None:
+    """Shut down the local Ray that runs of this process started and kept (nothing if there is none).
+
+    Called at exit; a Ray the user initialised, or a cluster a run joined, is never touched.
+    """
+    if not _LOCAL_RAY:
+        return
+    ray, watchdog = _LOCAL_RAY["ray"], _LOCAL_RAY["watchdog"]
+    if _own_local_ray(ray):
+        ray.shutdown()
+    _LOCAL_RAY.clear()
+    if watchdog is not None:
+        watchdog.release()
+
+
+def _start_local_ray(ray: Any, workers: int | None) -> None:
+    """``ray.init`` a local Ray of ``workers`` CPUs (all if None), watched, and kept for later runs."""
+    shutdown_local_ray()  # a Ray we started and someone else shut down: release its watchdog
+    before = child_pids(os.getpid())
+    ray.init(address="local", num_cpus=workers, include_dashboard=False, logging_level="ERROR")
+    watchdog = Watchdog.start(sorted(child_pids(os.getpid()) - before))
+    address = ray.get_runtime_context().gcs_address
+    _LOCAL_RAY.update(ray=ray, num_cpus=workers, watchdog=watchdog, address=address)
+
+
+def _own_local_ray(ray: Any) -> bool:
+    """Whether the Ray initialised in this process is the local one a run started (not the user's)."""
+    return (
+        bool(_LOCAL_RAY)
+        and ray.is_initialized()
+        and ray.get_runtime_context().gcs_address == _LOCAL_RAY["address"]
+    )
+
+
+atexit.register(shutdown_local_ray)
 
 
 def check_reachable(address: str, name: str, timeout: float = CONNECT_TIMEOUT) -> None:
@@ -166,18 +218,20 @@ class RayBackend(Backend):
         self._ray = ray = import_optional("ray", "ray")
         address, origin = resolve_address(address, os.environ)
         self._shutdown = False  # whether close() calls ray.shutdown() (never stopping a cluster)
-        self._watchdog: Watchdog | None = None
-        if ray.is_initialized():
+        ours = _own_local_ray(ray)
+        if ours and (address is not None or _LOCAL_RAY["num_cpus"] != workers):
+            shutdown_local_ray()  # another cluster, or another size: our local Ray gives way
+            ours = False
+        if ours:
+            kind = "local"  # started by an earlier run of this process, kept for this one
+        elif ray.is_initialized():
             self._check_same_cluster(address, origin)
             kind = "in-process"
         elif address is not None:
             self._join(address, origin)
             kind = "joined"
         else:
-            before = child_pids(os.getpid())
-            ray.init(address="local", num_cpus=workers, include_dashboard=False, logging_level="ERROR")
-            self._shutdown = True
-            self._watchdog = Watchdog.start(sorted(child_pids(os.getpid()) - before))
+            _start_local_ray(ray, workers)
             kind = "local"
         self.workers = workers
         try:
@@ -244,9 +298,7 @@ class RayBackend(Backend):
         return np.concatenate(returns)
 
     def close(self) -> None:
+        """Disconnect from a joined cluster; a local Ray stays up for the next run (see the module)."""
         if self._shutdown and self._ray.is_initialized():
             self._ray.shutdown()
-        if self._watchdog is not None:
-            self._watchdog.release()
-            self._watchdog = None
         self._shutdown = False

@@ -127,7 +127,7 @@ class BoundedFunctionEnv(ContextualFunctionEnv):
         """Returns ``-f(x)`` (n,); info ``regret`` (n,) and ``optimal_params`` theta*(s) (n, p)."""
         contexts, params = self._check_batch(contexts, params)
         optimum, values = self._optimum_and_objective(contexts, params)
-        return -values, {"regret": values - self.f_opt, "optimal_params": optimum}
+        return 0.0 - values, {"regret": values - self.f_opt, "optimal_params": optimum}  # +0.0 at f = 0
 
     def reset_info(self, contexts: Array) -> InfoBatch:
         """Reset info: ``optimal_params`` theta*(s), shape (n, p)."""
@@ -153,7 +153,7 @@ class UnboundedFunctionEnv(ContextualFunctionEnv):
     def evaluate(self, contexts: Array, params: Array) -> tuple[Array, InfoBatch]:
         """Returns ``-f(x)`` (n,); info ``target_gap`` = f(x) + 1e4 (n,), <= 0 once the target is met."""
         values = self._objective(*self._check_batch(contexts, params))
-        return -values, {"target_gap": values - self.target}
+        return 0.0 - values, {"target_gap": values - self.target}  # +0.0, not -0.0, at f = 0
 
 
 class ContextualFunctionVectorEnv(ContextualEpisodicVectorEnv):

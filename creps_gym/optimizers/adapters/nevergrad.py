@@ -15,6 +15,7 @@ Two workarounds for nevergrad 1.0.12 (the latest release) live here:
 from __future__ import annotations
 
 import builtins
+import difflib
 import threading
 from typing import Any, ClassVar
 
@@ -80,7 +81,11 @@ class NevergradAdapter(MinimizerAdapter):
         name = options.get("optimizer", "TwoPointsDE")
         registry = import_optional("nevergrad").optimizers.registry
         if name not in registry:
-            raise ValueError(f"optimizer: expected a name in nevergrad.optimizers.registry, got {name!r}")
+            close = difflib.get_close_matches(str(name), list(registry), n=3, cutoff=0.6)
+            hint = f" (did you mean {' or '.join(map(repr, close))}?)" if close else ""
+            raise ValueError(
+                f"optimizer: expected a name in nevergrad.optimizers.registry, got {name!r}{hint}"
+            )
         if getattr(registry[name], "no_parallelization", False):  # e.g. the recast "Powell", "Cobyla"
             raise ValueError(
                 f"optimizer: expected a nevergrad optimiser that evaluates batches (a tell needs at least 2 "

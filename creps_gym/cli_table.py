@@ -1,0 +1,45 @@
+# ruff: noqa: E501
+"""What `creps-gym list` and `--help` print, without importing numpy, Gymnasium or any env.
+
+Generated from the registries and RunConfig by `python -m creps_gym.listing --write`: do not edit.
+ENVS rows: id, context, parameters, initial distribution, description, optional modules it needs.
+"""
+
+__all__ = ["BACKENDS", "ENVS", "OPTIMIZERS", "RUN_DEFAULTS", "VECTOR_MODES"]
+
+# fmt: off
+ENVS = [['creps_gym/CigTab-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'CigTab: contextual version, x = theta + A s.', []],
+ ['creps_gym/Cigar-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Cigar: contextual version, x = theta + A s.', []],
+ ['creps_gym/DifferentPowers-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Different Powers: contextual version, x = theta + A s.', []],
+ ['creps_gym/KickFlexibility-v0', '[0.15, 0.3]×[-0.15, 0.15]', '[-1, 1]^25', 'N(env-declared mean, 0.02^2)', 'Humanoid kick, flexibility task: kick the ball as far as possible from wherever it lies.', ['mujoco']],
+ ['creps_gym/KickFlexibility-v1', '[0.15, 0.3]×[-0.15, 0.15]', '[-1, 1]^25', 'N(env-declared mean, 0.02^2)', 'Humanoid kick, flexibility task: kick the ball as far as possible from wherever it lies.', ['mujoco']],
+ ['creps_gym/KickFlexibility-v2', '[0.15, 0.3]×[-0.15, 0.15]', '[-1, 1]^25', 'N(env-declared mean, 0.02^2)', 'Humanoid kick, flexibility task: kick the ball as far as possible from wherever it lies.', ['mujoco']],
+ ['creps_gym/KickPrecision-v0', '[3, 12]', '[-1, 1]^25', 'N(env-declared mean, 0.02^2)', 'Humanoid kick, precision task: kick a fixed ball to a target distance.', ['mujoco']],
+ ['creps_gym/KickPrecision-v1', '[3, 12]', '[-1, 1]^25', 'N(env-declared mean, 0.02^2)', 'Humanoid kick, precision task: kick a fixed ball to a target distance.', ['mujoco']],
+ ['creps_gym/ParabolicRidge-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Parabolic Ridge: contextual version, x = theta + A s.', []],
+ ['creps_gym/PlanarReacher-v0', '[0, 2]^2', '[-30, 30]^25', 'N(0, 15^2)', 'A 5-link planar arm, driven by joint-space DMPs, passes a via-point and reaches a fixed goal.', []],
+ ['creps_gym/Plane-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Plane: contextual version, x = theta + A s.', []],
+ ['creps_gym/PointMazeGoal-v0', '[-2.25, 2.25]×[-1.25, 1.25]', '[-2.25, 2.25]×[-1.25, 1.25]×[-1, 1]^6', 'N(box centre, (width/4)^2)', 'A point mass steered to a goal in an open PointMaze arena by a tracked DMP reference.', ['mujoco', 'gymnasium_robotics']],
+ ['creps_gym/Rastrigin-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Rastrigin: contextual version, x = theta + A s.', []],
+ ['creps_gym/ReacherTarget-v0', '[-0.2, 0.2]^2', '[-1, 1]^8', 'N(0, 0.5^2)', "Gymnasium's two-joint Reacher reaching a target with an open-loop DMP torque profile.", ['mujoco']],
+ ['creps_gym/Rosenbrock-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Rosenbrock: contextual version, x = theta + A s.', []],
+ ['creps_gym/SharpRidge-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Sharp Ridge: contextual version, x = theta + A s.', []],
+ ['creps_gym/ShiftedRotatedElliptic-v0', '[0, 3]', '[-5, 5]^12×[-5.99059, 5]×[-5, 5]^2', 'N(box centre, (width/4)^2)', 'Shifted Rotated High-Conditioned Elliptic (condition 1e6): contextual version, x = theta + A s.', []],
+ ['creps_gym/ShiftedRotatedElliptic1e4-v0', '[0, 3]', '[-5, 5]^12×[-5.99059, 5]×[-5, 5]^2', 'N(box centre, (width/4)^2)', 'Shifted Rotated High-Conditioned Elliptic, variant with condition 1e4: contextual version, x = theta + A s.', []],
+ ['creps_gym/ShiftedSchwefel-v0', '[0, 3]', '[-5, 5]^12×[-5.99059, 5]×[-5, 5]^2', 'N(box centre, (width/4)^2)', "Shifted Schwefel's problem 1.2: contextual version, x = theta + A s.", []],
+ ['creps_gym/ShiftedSphere-v0', '[0, 3]', '[-5, 5]^12×[-5.99059, 5]×[-5, 5]^2', 'N(box centre, (width/4)^2)', 'Shifted Sphere: contextual version, x = theta + A s.', []],
+ ['creps_gym/Sphere-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Sphere: contextual version, x = theta + A s.', []],
+ ['creps_gym/Tablet-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Tablet: contextual version, x = theta + A s.', []],
+ ['creps_gym/TwoAxes-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Two Axes: contextual version, x = theta + A s.', []]]
+OPTIMIZERS = [['creps', 'Contextual REPS: KL-bounded weights, weighted ML mean and covariance (premature convergence)'],
+ ['creps-cma-old', 'CREPS-CMA, old-mean variant: rank-mu covariance around the sampling mean (Eq. 16)'],
+ ['creps-cma-current', 'CREPS-CMA, current-mean variant: rank-mu covariance around the new mean (Eq. 13)'],
+ ['creps-cma-csa', 'CREPS-CMA with step-size control: CREPS weights and mean, CMA covariance and CSA'],
+ ['c-cma-es', 'Contextual CMA-ES: rank weights on context-baselined returns, step-size control (CSA)'],
+ ['cma', "pycma CMA-ES (non-contextual: ignores the context; extra 'adapters')"],
+ ['nevergrad', "nevergrad optimiser, TwoPointsDE by default (non-contextual; extra 'adapters')"],
+ ['optuna', "optuna TPE sampler, ask-and-tell (non-contextual; extra 'adapters')"]]
+BACKENDS = ['auto', 'serial', 'vector', 'ray']
+VECTOR_MODES = ['auto', 'native', 'sync', 'async']
+RUN_DEFAULTS = {'eval_every': 1, 'eval_contexts': 16, 'context_draws': 'batch', 'backend': 'auto', 'workers': None, 'vector_mode': 'auto', 'retries': 2, 'max_episodes': None, 'target_regret': None, 'max_time': None, 'checkpoint_every': 10, 'initial_mean': None, 'initial_std': None, 'ray_address': None, 'context_selector': None}
+# fmt: on

@@ -11,6 +11,7 @@ are imported on first use.
 
 from __future__ import annotations
 
+import copy
 import importlib
 import importlib.abc
 import importlib.util
@@ -47,12 +48,26 @@ class _RegisterAfterGymnasium(importlib.abc.MetaPathFinder, importlib.abc.Loader
     def exec_module(self, module: Any) -> None:
         module.__loader__ = module.__spec__.loader = self._loader  # Gymnasium's own loader from now on
         self._loader.exec_module(module)
-        importlib.import_module("creps_gym.envs")  # registers every id (creps_gym.envs.register_envs)
+        _register_ids(module)
+
+
+def _register_ids(gymnasium: Any) -> None:
+    """Register every ``creps_gym/`` id from :data:`creps_gym.cli_table.REGISTRATIONS`.
+
+    The table holds only data (entry points are ``"module:Class"`` strings), so this imports no env
+    module: Gymnasium may be imported for the first time *by* one of them (``import creps_gym.wrappers``),
+    which registering through :mod:`creps_gym.envs` would import again half-initialised.
+    """
+    from creps_gym import cli_table
+
+    for entry in getattr(cli_table, "REGISTRATIONS", ()):  # none while `listing --write` makes the table
+        if entry["id"] not in gymnasium.registry:
+            gymnasium.register(**copy.deepcopy(entry))
 
 
 def _register_when_gymnasium_loads() -> None:
     if "gymnasium" in sys.modules:
-        importlib.import_module("creps_gym.envs")
+        _register_ids(sys.modules["gymnasium"])
     elif not any(isinstance(finder, _RegisterAfterGymnasium) for finder in sys.meta_path):
         sys.meta_path.insert(0, _RegisterAfterGymnasium())
 

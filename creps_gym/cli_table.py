@@ -3,9 +3,11 @@
 
 Generated from the registries and RunConfig by `python -m creps_gym.listing --write`: do not edit.
 ENVS rows: id, context, parameters, initial distribution, description, optional modules it needs.
+REGISTRATIONS: the gymnasium.register keywords of every id (entry points are strings), which
+`import creps_gym` registers as soon as Gymnasium is imported, without importing any env module.
 """
 
-__all__ = ["BACKENDS", "ENVS", "OPTIMIZERS", "RUN_DEFAULTS", "VECTOR_MODES"]
+__all__ = ["BACKENDS", "ENVS", "OPTIMIZERS", "REGISTRATIONS", "RUN_DEFAULTS", "VECTOR_MODES"]
 
 # fmt: off
 ENVS = [['creps_gym/CigTab-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'CigTab: contextual version, x = theta + A s.', []],
@@ -42,4 +44,27 @@ OPTIMIZERS = [['creps', 'Contextual REPS: KL-bounded weights, weighted ML mean a
 BACKENDS = ['auto', 'serial', 'vector', 'ray']
 VECTOR_MODES = ['auto', 'native', 'sync', 'async']
 RUN_DEFAULTS = {'eval_every': 1, 'eval_contexts': 16, 'context_draws': 'batch', 'backend': 'auto', 'workers': None, 'vector_mode': 'auto', 'retries': 2, 'max_episodes': None, 'target_regret': None, 'max_time': None, 'checkpoint_every': 10, 'initial_mean': None, 'initial_std': None, 'ray_address': None, 'context_selector': None}
+REGISTRATIONS = [{'id': 'creps_gym/Rosenbrock-v0', 'entry_point': 'creps_gym.envs.functions.suite:RosenbrockEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:RosenbrockVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/Sphere-v0', 'entry_point': 'creps_gym.envs.functions.suite:SphereEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:SphereVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/ShiftedSphere-v0', 'entry_point': 'creps_gym.envs.functions.suite:ShiftedSphereEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:ShiftedSphereVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/ShiftedSchwefel-v0', 'entry_point': 'creps_gym.envs.functions.suite:ShiftedSchwefelEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:ShiftedSchwefelVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/CigTab-v0', 'entry_point': 'creps_gym.envs.functions.suite:CigTabEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:CigTabVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/Tablet-v0', 'entry_point': 'creps_gym.envs.functions.suite:TabletEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:TabletVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/ShiftedRotatedElliptic-v0', 'entry_point': 'creps_gym.envs.functions.suite:ShiftedRotatedEllipticEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:ShiftedRotatedEllipticVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/ShiftedRotatedElliptic1e4-v0', 'entry_point': 'creps_gym.envs.functions.suite:ShiftedRotatedElliptic1e4Env', 'vector_entry_point': 'creps_gym.envs.functions.suite:ShiftedRotatedElliptic1e4VectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/DifferentPowers-v0', 'entry_point': 'creps_gym.envs.functions.suite:DifferentPowersEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:DifferentPowersVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/Plane-v0', 'entry_point': 'creps_gym.envs.functions.suite:PlaneEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:PlaneVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/TwoAxes-v0', 'entry_point': 'creps_gym.envs.functions.suite:TwoAxesEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:TwoAxesVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/Cigar-v0', 'entry_point': 'creps_gym.envs.functions.suite:CigarEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:CigarVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/Rastrigin-v0', 'entry_point': 'creps_gym.envs.functions.suite:RastriginEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:RastriginVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/ParabolicRidge-v0', 'entry_point': 'creps_gym.envs.functions.suite:ParabolicRidgeEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:ParabolicRidgeVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/SharpRidge-v0', 'entry_point': 'creps_gym.envs.functions.suite:SharpRidgeEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:SharpRidgeVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
+ {'id': 'creps_gym/PlanarReacher-v0', 'entry_point': 'creps_gym.envs.reacher.planar:PlanarReacherEnv', 'vector_entry_point': 'creps_gym.envs.reacher.planar:PlanarReacherVectorEnv', 'kwargs': {'position_weight': 1.0, 'acceleration_weight': 1e-05}},
+ {'id': 'creps_gym/KickPrecision-v0', 'entry_point': 'creps_gym.envs.kick.tasks:KickPrecisionEnv', 'vector_entry_point': 'creps_gym.envs.kick.tasks:KickPrecisionVectorEnv', 'kwargs': {'rolling_friction': 0.003, 'fall_penalty': 1.0}},
+ {'id': 'creps_gym/KickPrecision-v1', 'entry_point': 'creps_gym.envs.kick.tasks:KickPrecisionEnv', 'vector_entry_point': 'creps_gym.envs.kick.tasks:KickPrecisionVectorEnv', 'kwargs': {'rolling_friction': 0.003, 'fall_penalty': 1.0, 'fall_grading': 30.0}},
+ {'id': 'creps_gym/KickFlexibility-v0', 'entry_point': 'creps_gym.envs.kick.tasks:KickFlexibilityEnv', 'vector_entry_point': 'creps_gym.envs.kick.tasks:KickFlexibilityVectorEnv', 'kwargs': {'rolling_friction': 0.003, 'fall_penalty': 1.0}},
+ {'id': 'creps_gym/KickFlexibility-v1', 'entry_point': 'creps_gym.envs.kick.tasks:KickFlexibilityEnv', 'vector_entry_point': 'creps_gym.envs.kick.tasks:KickFlexibilityVectorEnv', 'kwargs': {'rolling_friction': 0.003, 'fall_penalty': 1.0, 'forward_only': True}},
+ {'id': 'creps_gym/KickFlexibility-v2', 'entry_point': 'creps_gym.envs.kick.tasks:KickFlexibilityEnv', 'vector_entry_point': 'creps_gym.envs.kick.tasks:KickFlexibilityVectorEnv', 'kwargs': {'rolling_friction': 0.003, 'fall_penalty': 1.0, 'forward_only': True, 'miss_weight': 1.0}},
+ {'id': 'creps_gym/PointMazeGoal-v0', 'entry_point': 'creps_gym.wrappers.examples:PointMazeGoalEnv', 'vector_entry_point': 'creps_gym.wrappers.examples:PointMazeGoalVectorEnv'},
+ {'id': 'creps_gym/ReacherTarget-v0', 'entry_point': 'creps_gym.wrappers.examples:ReacherTargetEnv', 'vector_entry_point': 'creps_gym.wrappers.examples:ReacherTargetVectorEnv'}]
 # fmt: on

@@ -170,6 +170,7 @@ def live_table() -> dict[str, Any]:
     from dataclasses import MISSING, fields
 
     import creps_gym
+    from creps_gym.envs.registration import all_registrations
     from creps_gym.optimizers.registry import describe_optimizers
     from creps_gym.runner.config import BACKENDS, VECTOR_MODES, RunConfig
 
@@ -182,6 +183,7 @@ def live_table() -> dict[str, Any]:
         "BACKENDS": list(BACKENDS),
         "VECTOR_MODES": list(VECTOR_MODES),
         "RUN_DEFAULTS": {f.name: f.default for f in fields(RunConfig) if f.default is not MISSING},
+        "REGISTRATIONS": all_registrations(),
     }
 
 
@@ -195,6 +197,8 @@ def table_source(data: dict[str, Any]) -> str:
         "",
         "Generated from the registries and RunConfig by `python -m creps_gym.listing --write`: do not edit.",
         "ENVS rows: id, context, parameters, initial distribution, description, optional modules it needs.",
+        "REGISTRATIONS: the gymnasium.register keywords of every id (entry points are strings), which",
+        "`import creps_gym` registers as soon as Gymnasium is imported, without importing any env module.",
         '"""',
         "",
         "__all__ = [" + ", ".join(f'"{name}"' for name in sorted(data)) + "]",

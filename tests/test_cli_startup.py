@@ -72,3 +72,23 @@ def test_list_prints_every_row_of_the_static_table():
 
     listed = subprocess.run(cli_command("list"), capture_output=True, text=True, timeout=60)
     assert listed.returncode == 0 and all(f"  {row[0]}  " in listed.stdout for row in ENVS + OPTIMIZERS)
+
+
+@pytest.mark.parametrize(
+    "module",
+    ["creps_gym.wrappers", "creps_gym.selectors", "creps_gym.envs.functions.suite", "creps_gym.runner"],
+)
+def test_a_subpackage_that_imports_gymnasium_first_registers_every_id(module):
+    """Gymnasium imported for the first time *by* a creps_gym module: the ids are registered from the
+    static table (before: registering imported that module's package again, half-initialised)."""
+    from creps_gym.cli_table import REGISTRATIONS
+
+    result = _python(
+        f"""
+        import {module}
+        import gymnasium
+        print(sorted(i for i in gymnasium.registry if i.startswith("creps_gym/")))
+        """
+    )
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout.replace("'", '"')) == sorted(entry["id"] for entry in REGISTRATIONS)

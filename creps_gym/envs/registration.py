@@ -12,7 +12,7 @@ from typing import Any
 
 import gymnasium as gym
 
-__all__ = ["register_envs", "registered_ids"]
+__all__ = ["all_registrations", "register_envs", "registered_ids"]
 
 NAMESPACE = "creps_gym"
 
@@ -27,7 +27,7 @@ FAMILIES = (
 )
 
 
-def _all_registrations() -> list[dict[str, Any]]:
+def all_registrations() -> list[dict[str, Any]]:
     registrations: list[dict[str, Any]] = []
     for module_name in FAMILIES:
         try:
@@ -42,7 +42,7 @@ def _all_registrations() -> list[dict[str, Any]]:
 
 def register_envs() -> None:
     """Register every creps_gym id (idempotent)."""
-    for entry in _all_registrations():
+    for entry in all_registrations():
         if entry["id"] not in gym.registry:
             gym.register(**entry)
 

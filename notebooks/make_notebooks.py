@@ -167,7 +167,7 @@ from creps_gym.runner import run
 # An optimiser object (rather than a registry name) stays in our hands, trained, after the run.
 optimizer = CREPSCMA(25, 2, variant="old", seed=0, initial_cov=1.0)
 history = run(
-    optimizer, "creps_gym/PlanarReacher-v0", iterations=(15 if QUICK else 300),
+    optimizer, "creps_gym/PlanarReacher-v1", iterations=(15 if QUICK else 300),
     samples_per_iteration=(40 if QUICK else 100), seed=0, eval_every=5,
 )
 returns = history.column("eval_return")
@@ -177,7 +177,7 @@ plt.xlabel("episodes"); plt.ylabel("cost −R on the test via-points (log scale)
     ),
     new_markdown_cell("Render the initial (zero) DMP and the learned motion for one via-point."),
     new_code_cell(
-        """env = gym.make("creps_gym/PlanarReacher-v0", render_mode="rgb_array")
+        """env = gym.make("creps_gym/PlanarReacher-v1", render_mode="rgb_array")
 via = np.array([1.0, 1.0])
 frames = []
 for label, theta in [("zero DMP", np.zeros(25)), ("learned", optimizer.recommend(via[None])[0])]:

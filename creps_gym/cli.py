@@ -31,7 +31,15 @@ from collections.abc import Sequence
 from dataclasses import fields
 from typing import Any
 
-from creps_gym.cli_types import initial_mean, integer, key_value, numbers, optimizer_name, positive_float
+from creps_gym.cli_types import (
+    initial_mean,
+    integer,
+    key_value,
+    numbers,
+    optimizer_name,
+    positive_float,
+    positive_or_none,
+)
 
 __all__ = ["EXIT_CODES", "build_parser", "main"]
 
@@ -128,6 +136,12 @@ def _add_run(commands: Any) -> None:
         ("--max-episodes", integer(2), "episode budget"),
         ("--target-regret", positive_float, "stop once the mean regret is at most this"),
         ("--max-time", positive_float, "stop after this many seconds"),
+        (
+            "--divergence",
+            positive_or_none,
+            "stop once 10 evaluations in a row are worse than the first by "
+            "this factor of its size ('none': never)",
+        ),
         ("--initial-mean", initial_mean, "a number, p comma-separated numbers, or 'uniform' in the box"),
         ("--initial-std", numbers, "initial standard deviation(s); default: the env-declared one"),
     ]

@@ -7,7 +7,15 @@ import json
 import math
 from typing import Any
 
-__all__ = ["initial_mean", "integer", "key_value", "numbers", "optimizer_name", "positive_float"]
+__all__ = [
+    "initial_mean",
+    "integer",
+    "key_value",
+    "numbers",
+    "optimizer_name",
+    "positive_float",
+    "positive_or_none",
+]
 
 
 def integer(minimum: int):
@@ -31,6 +39,17 @@ def positive_float(text: str) -> float:
     if not 0 < value < math.inf:
         raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
     return value
+
+
+def positive_or_none(text: str) -> float | None:
+    if text.lower() == "none":
+        return None
+    try:
+        return positive_float(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive finite number or 'none', got {text!r}"
+        ) from None
 
 
 def numbers(text: str) -> float | list[float]:

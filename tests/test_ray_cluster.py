@@ -278,12 +278,12 @@ def test_unreachable_addresses_fail_at_once_with_their_name(monkeypatch):
     with pytest.raises(
         ValueError, match=rf"^ray_address: expected the address of a running Ray .* got '{dead}'"
     ):
-        run(CREPSCMA(2, 1, seed=0), env, 2, 8, 0, backend="ray", ray_address=dead)
+        run(CREPSCMA(2, 1, seed=0), env, 2, 10, 0, backend="ray", ray_address=dead)
     monkeypatch.setenv("RAY_ADDRESS", dead)
     with pytest.raises(
         ValueError, match=rf"^RAY_ADDRESS: expected the address of a running Ray .* got '{dead}'"
     ):
-        run(CREPSCMA(2, 1, seed=0), env, 2, 8, 0, backend="ray")
+        run(CREPSCMA(2, 1, seed=0), env, 2, 10, 0, backend="ray")
     assert time.monotonic() - started < 60 and not ray.is_initialized()  # (Ray itself retries for minutes)
 
 
@@ -293,12 +293,12 @@ def test_a_2_node_cluster_gives_the_serial_history_and_is_left_running(cluster, 
     import ray
 
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
-    serial = run(CREPSCMA(2, 1, seed=0), Probe(), 5, 8, 0)
+    serial = run(CREPSCMA(2, 1, seed=0), Probe(), 5, 10, 0)
     log = tmp_path / "nodes.log"
     out = tmp_path / "run"
     with pytest.raises(RuntimeError, match="simulated crash"):
         env = Probe(str(log), meet=str(tmp_path / "meet"))
-        run(CREPSCMA(2, 1, seed=0), env, 5, 8, 0, backend="ray", ray_address=cluster["address"],
+        run(CREPSCMA(2, 1, seed=0), env, 5, 10, 0, backend="ray", ray_address=cluster["address"],
             run_dir=out, checkpoint_every=2, callbacks=[_crash_at(3)])  # fmt: skip
     assert not ray.is_initialized()  # the driver disconnected ...
     assert all(node.poll() is None for node in (cluster["head"], cluster["worker"]))  # ... the cluster runs
@@ -321,7 +321,7 @@ def test_killing_the_worker_node_mid_run_loses_no_sample(cluster, tmp_path):
     """The worker node's processes are killed while it evaluates a chunk: Ray re-runs it on the head."""
     import ray
 
-    serial = run(CREPSCMA(2, 1, seed=1), Probe(), 4, 8, 1)
+    serial = run(CREPSCMA(2, 1, seed=1), Probe(), 4, 10, 1)
     hang = str(tmp_path / "hang")
     killed = []
 
@@ -338,7 +338,7 @@ def test_killing_the_worker_node_mid_run_loses_no_sample(cluster, tmp_path):
 
     killer = threading.Thread(target=kill_the_worker_node, daemon=True)
     killer.start()
-    history = run(CREPSCMA(2, 1, seed=1), Probe(hang=hang), 4, 8, 1, backend="ray",
+    history = run(CREPSCMA(2, 1, seed=1), Probe(hang=hang), 4, 10, 1, backend="ray",
                   ray_address=cluster["address"], callbacks=[arm])  # fmt: skip
     killer.join(timeout=10)
     assert killed == [True] and cluster["worker"].wait(timeout=30) is not None

@@ -33,6 +33,7 @@ from creps_gym.optimizers.policies import LinearGaussianPolicy, spd_factor
 from creps_gym.optimizers.registry import (
     describe_optimizers,
     make_optimizer,
+    minimum_samples,
     optimizer_names,
     recommended_samples,
     register_optimizer,
@@ -60,6 +61,7 @@ __all__ = [
     "load_state",
     "make_features",
     "make_optimizer",
+    "minimum_samples",
     "optimizer_names",
     "recommended_batch_size",
     "recommended_samples",

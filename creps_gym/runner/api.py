@@ -41,8 +41,9 @@ def run(
     iterations : int
         Maximum number of iterations.
     samples_per_iteration : int or None
-        Episodes per iteration (>= 2); None takes the optimiser's recommended batch size
-        (:func:`creps_gym.optimizers.recommended_samples`).
+        Episodes per iteration (>= 2, and at least the optimiser's minimum,
+        :func:`creps_gym.optimizers.minimum_samples`, else ``ValueError``); None takes the optimiser's
+        recommended batch size (:func:`creps_gym.optimizers.recommended_samples`).
     seed : int
         Master seed (>= 0).
     run_dir : path-like, optional
@@ -76,7 +77,14 @@ def run(
     kwargs = {"env_kwargs": env_kwargs or {}, "optimizer_options": optimizer_options or {}}
     config = RunConfig(**names, **sizes, **kwargs, **options)
     objects = {"env": None if by_id else env, "optimizer": None if by_name else optimizer}
-    return Runner(config, **objects, callbacks=callbacks, run_dir=run_dir, overwrite=overwrite).run()
+    try:
+        runner = Runner(config, **objects, callbacks=callbacks, run_dir=run_dir, overwrite=overwrite)
+    except ValueError as exc:  # e.g. a batch below the optimiser's minimum: name this function's argument
+        field, sep, rest = str(exc).partition(":")
+        if sep and field == "samples":
+            raise ValueError(f"samples_per_iteration:{rest}") from None
+        raise
+    return runner.run()
 
 
 def resume(

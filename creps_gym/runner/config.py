@@ -128,6 +128,9 @@ class RunConfig:
         variable's cluster if set, else a local Ray started and stopped by the run (see
         :mod:`creps_gym.runner.ray_backend`). Not part of the run's identity: a resumed run never joins
         the address its ``config.json`` records.
+    divergence : float or None
+        Stop with the reason ``"divergence"`` once 10 consecutive evaluations are worse than the first by
+        more than this factor times its magnitude (:mod:`creps_gym.runner.divergence`); None: never.
     """
 
     env: str | None
@@ -151,6 +154,7 @@ class RunConfig:
     initial_mean: Any = None
     initial_std: Any = None
     ray_address: str | None = None
+    divergence: float | None = 1000.0
 
     def __post_init__(self) -> None:
         for name in ("env", "optimizer"):
@@ -186,7 +190,7 @@ class RunConfig:
                 )
         _optional_positive(self.workers, "workers", integer=True)
         _optional_positive(self.max_episodes, "max_episodes", integer=True)
-        for name in ("target_regret", "max_time"):
+        for name in ("target_regret", "max_time", "divergence"):
             object.__setattr__(self, name, _optional_positive(getattr(self, name), name, integer=False))
         if not (isinstance(self.initial_mean, str) and self.initial_mean == "uniform"):
             object.__setattr__(

@@ -88,18 +88,18 @@ def test_bad_addresses_are_refused_with_their_name(address):
     with pytest.raises(ValueError, match=rf"^ray_address: expected 'HOST:PORT' .*, got {address!r}$"):
         check_ray_address(address)
     with pytest.raises(ValueError, match=r"^ray_address: expected 'HOST:PORT'"):
-        RunConfig("creps_gym/Sphere-v0", "creps", 2, 10, 0, backend="ray", ray_address=address)
+        RunConfig("creps_gym/Sphere-v0", "creps", 2, 12, 0, backend="ray", ray_address=address)
     for good in ("10.0.0.1:6379", "head.example.org:6379", "[::1]:6379", "auto"):
         assert check_ray_address(good) == good
     with pytest.raises(TypeError, match=r"^ray_address: expected a str 'HOST:PORT' or 'auto', got int 6379$"):
-        RunConfig("creps_gym/Sphere-v0", "creps", 2, 10, 0, backend="ray", ray_address=6379)
+        RunConfig("creps_gym/Sphere-v0", "creps", 2, 12, 0, backend="ray", ray_address=6379)
 
 
 def test_an_address_needs_the_ray_backend(tmp_path, capsys):
     with pytest.raises(
         ValueError, match=r"^ray_address: expected None unless backend='ray' \(backend is 'auto'"
     ):
-        RunConfig("creps_gym/Sphere-v0", "creps", 2, 10, 0, ray_address="10.0.0.1:6379")
+        RunConfig("creps_gym/Sphere-v0", "creps", 2, 12, 0, ray_address="10.0.0.1:6379")
     base = ["run", "--env", "creps_gym/Sphere-v0", "--optimizer", "creps", "--iterations", "2", "--seed", "0"]
     for flags, expected in (
         (["--ray-address", "10.0.0.1:6379"], "argument --ray-address: expected None unless backend='ray'"),
@@ -111,7 +111,7 @@ def test_an_address_needs_the_ray_backend(tmp_path, capsys):
 
 
 def test_config_json_records_the_address_but_a_resume_never_joins_it(tmp_path):
-    config = RunConfig("creps_gym/Sphere-v0", "creps", 2, 10, 0, backend="ray", ray_address="10.0.0.1:6379")
+    config = RunConfig("creps_gym/Sphere-v0", "creps", 2, 12, 0, backend="ray", ray_address="10.0.0.1:6379")
     RunDir.create(tmp_path / "run", config, {}).lock.release()
     recorded = json.loads((tmp_path / "run" / RunDir.CONFIG).read_text())["config"]
     assert recorded["ray_address"] == "10.0.0.1:6379" and recorded["backend"] == "ray"
@@ -342,7 +342,7 @@ def test_killing_the_worker_node_mid_run_loses_no_sample(cluster, tmp_path):
                   ray_address=cluster["address"], callbacks=[arm])  # fmt: skip
     killer.join(timeout=10)
     assert killed == [True] and cluster["worker"].wait(timeout=30) is not None
-    assert history.equals(serial) and len(history) == 4 and history.records[-1].episodes == 32
+    assert history.equals(serial) and len(history) == 4 and history.records[-1].episodes == 40
     assert not ray.is_initialized() and cluster["head"].poll() is None  # the runner left the head running
     ray.init(address=cluster["address"], logging_level="ERROR", log_to_driver=False)
     try:

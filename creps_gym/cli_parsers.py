@@ -8,7 +8,15 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from creps_gym.cli_types import initial_mean, integer, key_value, numbers, positive_float, selector_name
+from creps_gym.cli_types import (
+    initial_mean,
+    integer,
+    key_value,
+    numbers,
+    positive_float,
+    positive_or_none,
+    selector_name,
+)
 
 __all__ = ["add_import", "add_progress", "add_run"]
 
@@ -78,6 +86,12 @@ def add_run(commands: Any) -> None:
         ("--max-episodes", integer(2), "episode budget"),
         ("--target-regret", positive_float, "stop once the mean regret is at most this"),
         ("--max-time", positive_float, "stop after this many seconds"),
+        (
+            "--divergence",
+            positive_or_none,
+            "stop once 10 evaluations in a row are worse than the first by "
+            "this factor of its size ('none': never)",
+        ),
         ("--initial-mean", initial_mean, "a number, p comma-separated numbers, or 'uniform' in the box"),
         ("--initial-std", numbers, "initial standard deviation(s); default: the env-declared one"),
     ]

@@ -20,6 +20,7 @@ ENVS = [['creps_gym/CigTab-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'CigTab: 
  ['creps_gym/KickPrecision-v1', '[3, 12]', '[-1, 1]^25', 'N(env-declared mean, 0.02^2)', 'Humanoid kick, precision task: kick a fixed ball to a target distance.', ['mujoco']],
  ['creps_gym/ParabolicRidge-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Parabolic Ridge: contextual version, x = theta + A s.', []],
  ['creps_gym/PlanarReacher-v0', '[0, 2]^2', '[-30, 30]^25', 'N(0, 15^2)', 'A 5-link planar arm, driven by joint-space DMPs, passes a via-point and reaches a fixed goal.', []],
+ ['creps_gym/PlanarReacher-v1', '[0, 2]^2', '[-30, 30]^25', 'N(0, 1^2)', 'A 5-link planar arm, driven by joint-space DMPs, passes a via-point and reaches a fixed goal.', []],
  ['creps_gym/Plane-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Plane: contextual version, x = theta + A s.', []],
  ['creps_gym/PointMazeGoal-v0', '[-2.25, 2.25]×[-1.25, 1.25]', '[-2.25, 2.25]×[-1.25, 1.25]×[-1, 1]^6', 'N(box centre, (width/4)^2)', 'A point mass steered to a goal in an open PointMaze arena by a tracked DMP reference.', ['mujoco', 'gymnasium_robotics']],
  ['creps_gym/Rastrigin-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Rastrigin: contextual version, x = theta + A s.', []],
@@ -43,7 +44,7 @@ OPTIMIZERS = [['creps', 'Contextual REPS: KL-bounded weights, weighted ML mean a
  ['optuna', "optuna TPE sampler, ask-and-tell (non-contextual; extra 'adapters')"]]
 BACKENDS = ['auto', 'serial', 'vector', 'ray']
 VECTOR_MODES = ['auto', 'native', 'sync', 'async']
-RUN_DEFAULTS = {'eval_every': 1, 'eval_contexts': 16, 'context_draws': 'batch', 'backend': 'auto', 'workers': None, 'vector_mode': 'auto', 'retries': 2, 'max_episodes': None, 'target_regret': None, 'max_time': None, 'checkpoint_every': 10, 'initial_mean': None, 'initial_std': None, 'ray_address': None, 'context_selector': None}
+RUN_DEFAULTS = {'eval_every': 1, 'eval_contexts': 16, 'context_draws': 'batch', 'backend': 'auto', 'workers': None, 'vector_mode': 'auto', 'retries': 2, 'max_episodes': None, 'target_regret': None, 'max_time': None, 'checkpoint_every': 10, 'initial_mean': None, 'initial_std': None, 'ray_address': None, 'context_selector': None, 'divergence': 1000.0}
 REGISTRATIONS = [{'id': 'creps_gym/Rosenbrock-v0', 'entry_point': 'creps_gym.envs.functions.suite:RosenbrockEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:RosenbrockVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
  {'id': 'creps_gym/Sphere-v0', 'entry_point': 'creps_gym.envs.functions.suite:SphereEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:SphereVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
  {'id': 'creps_gym/ShiftedSphere-v0', 'entry_point': 'creps_gym.envs.functions.suite:ShiftedSphereEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:ShiftedSphereVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
@@ -59,7 +60,8 @@ REGISTRATIONS = [{'id': 'creps_gym/Rosenbrock-v0', 'entry_point': 'creps_gym.env
  {'id': 'creps_gym/Rastrigin-v0', 'entry_point': 'creps_gym.envs.functions.suite:RastriginEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:RastriginVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
  {'id': 'creps_gym/ParabolicRidge-v0', 'entry_point': 'creps_gym.envs.functions.suite:ParabolicRidgeEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:ParabolicRidgeVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
  {'id': 'creps_gym/SharpRidge-v0', 'entry_point': 'creps_gym.envs.functions.suite:SharpRidgeEnv', 'vector_entry_point': 'creps_gym.envs.functions.suite:SharpRidgeVectorEnv', 'kwargs': {'dim': 15, 'context_dim': 1, 'instance': 0}},
- {'id': 'creps_gym/PlanarReacher-v0', 'entry_point': 'creps_gym.envs.reacher.planar:PlanarReacherEnv', 'vector_entry_point': 'creps_gym.envs.reacher.planar:PlanarReacherVectorEnv', 'kwargs': {'position_weight': 1.0, 'acceleration_weight': 1e-05}},
+ {'id': 'creps_gym/PlanarReacher-v0', 'entry_point': 'creps_gym.envs.reacher.planar:PlanarReacherEnv', 'vector_entry_point': 'creps_gym.envs.reacher.planar:PlanarReacherVectorEnv', 'kwargs': {'position_weight': 1.0, 'acceleration_weight': 1e-05, 'initial_std': 15.0}},
+ {'id': 'creps_gym/PlanarReacher-v1', 'entry_point': 'creps_gym.envs.reacher.planar:PlanarReacherEnv', 'vector_entry_point': 'creps_gym.envs.reacher.planar:PlanarReacherVectorEnv', 'kwargs': {'position_weight': 1.0, 'acceleration_weight': 1e-05, 'initial_std': 1.0}},
  {'id': 'creps_gym/KickPrecision-v0', 'entry_point': 'creps_gym.envs.kick.tasks:KickPrecisionEnv', 'vector_entry_point': 'creps_gym.envs.kick.tasks:KickPrecisionVectorEnv', 'kwargs': {'rolling_friction': 0.003, 'fall_penalty': 1.0}},
  {'id': 'creps_gym/KickPrecision-v1', 'entry_point': 'creps_gym.envs.kick.tasks:KickPrecisionEnv', 'vector_entry_point': 'creps_gym.envs.kick.tasks:KickPrecisionVectorEnv', 'kwargs': {'rolling_friction': 0.003, 'fall_penalty': 1.0, 'fall_grading': 30.0}},
  {'id': 'creps_gym/KickFlexibility-v0', 'entry_point': 'creps_gym.envs.kick.tasks:KickFlexibilityEnv', 'vector_entry_point': 'creps_gym.envs.kick.tasks:KickFlexibilityVectorEnv', 'kwargs': {'rolling_friction': 0.003, 'fall_penalty': 1.0}},

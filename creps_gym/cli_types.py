@@ -18,6 +18,7 @@ __all__ = [
     "key_value",
     "numbers",
     "positive_float",
+    "positive_or_none",
     "selector_name",
 ]
 
@@ -47,6 +48,17 @@ def positive_float(text: str) -> float:
     if not 0 < value < math.inf:
         raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
     return value
+
+
+def positive_or_none(text: str) -> float | None:
+    if text.lower() == "none":
+        return None
+    try:
+        return positive_float(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected a positive finite number or 'none', got {text!r}"
+        ) from None
 
 
 def numbers(text: str) -> float | list[float]:

@@ -60,32 +60,32 @@ def test_the_layer_that_chooses_contexts_draws_them():
 
 @pytest.mark.parametrize("draws", ["batch", "reset"])
 def test_both_streams_are_the_same_on_every_backend_and_differ_from_each_other(draws):
-    serial = run("creps-cma-old", SPHERE, 3, 8, 2, backend="serial", context_draws=draws, **SMALL)
-    native = run("creps-cma-old", SPHERE, 3, 8, 2, context_draws=draws, **SMALL)
-    synced = run("creps-cma-old", SPHERE, 3, 8, 2, backend="vector", vector_mode="sync", context_draws=draws,
+    serial = run("creps-cma-old", SPHERE, 3, 10, 2, backend="serial", context_draws=draws, **SMALL)
+    native = run("creps-cma-old", SPHERE, 3, 10, 2, context_draws=draws, **SMALL)
+    synced = run("creps-cma-old", SPHERE, 3, 10, 2, backend="vector", vector_mode="sync", context_draws=draws,
                  workers=3, **SMALL)  # fmt: skip
     assert native.equals(serial) and synced.equals(serial)
     other = "reset" if draws == "batch" else "batch"
-    assert not serial.equals(run("creps-cma-old", SPHERE, 3, 8, 2, context_draws=other, **SMALL))
+    assert not serial.equals(run("creps-cma-old", SPHERE, 3, 10, 2, context_draws=other, **SMALL))
 
 
 def test_a_wrapped_env_object_gives_the_same_history_on_serial_and_vector_backends():
     def env():
         return FixedContexts(gym.make(SPHERE, dim=2), [[0.5], [1.0], [2.0]], order="random")
 
-    serial = run(CREPSCMA(2, 1, seed=0), env(), 3, 8, 0, backend="serial")
-    synced = run(CREPSCMA(2, 1, seed=0), env(), 3, 8, 0, backend="vector", vector_mode="sync", workers=3)
+    serial = run(CREPSCMA(2, 1, seed=0), env(), 3, 10, 0, backend="serial")
+    synced = run(CREPSCMA(2, 1, seed=0), env(), 3, 10, 0, backend="vector", vector_mode="sync", workers=3)
     assert synced.equals(serial)
 
 
 def test_the_default_backend_is_the_native_vector_env_of_a_registered_id():
-    runner = Runner(RunConfig(SPHERE, "creps", 1, 8, 0, **SMALL))
+    runner = Runner(RunConfig(SPHERE, "creps", 1, 10, 0, **SMALL))
     backend = runner.make_backend()
     assert runner.config.backend == "auto" and isinstance(backend, VectorBackend) and backend.mode == "native"
-    objects = Runner(RunConfig(None, "creps", 1, 8, 0), env=gym.make(SPHERE, dim=3))  # the object is used
+    objects = Runner(RunConfig(None, "creps", 1, 10, 0), env=gym.make(SPHERE, dim=3))  # the object is used
     assert isinstance(objects.make_backend(), SerialBackend)
     with pytest.raises(ValueError, match=r"context_draws: expected one of \['batch', 'reset'\], got 'x'"):
-        RunConfig(SPHERE, "creps", 1, 8, 0, context_draws="x")
+        RunConfig(SPHERE, "creps", 1, 10, 0, context_draws="x")
 
 
 def test_a_checkpoint_does_not_grow_with_the_run(tmp_path):
@@ -97,6 +97,6 @@ def test_a_checkpoint_does_not_grow_with_the_run(tmp_path):
         if record.iteration == 151:  # the checkpoint of iteration 150, beyond the stagnation window (~130)
             sizes.append(path.stat().st_size)
 
-    history = run("creps-cma-old", SPHERE, 300, 8, 0, run_dir=tmp_path / "run", checkpoint_every=150,
+    history = run("creps-cma-old", SPHERE, 300, 10, 0, run_dir=tmp_path / "run", checkpoint_every=150,
                   callbacks=[measure], **SMALL)  # fmt: skip
     assert len(history) == 300 and abs(path.stat().st_size - sizes[0]) < 512  # the history alone: > 50 kB

@@ -401,7 +401,7 @@ def test_the_runner_vector_backend_runs_episodes_in_parallel_with_the_serial_ret
     from creps_gym.runner import run
 
     serial, parallel = (
-        run("creps-cma-old", MAZE, 2, 6, 0, backend=backend, workers=2) for backend in ("serial", "vector")
+        run("creps-cma-old", MAZE, 2, 16, 0, backend=backend, workers=2) for backend in ("serial", "vector")
     )
     assert parallel.equals(serial)
     assert np.isfinite(serial.column("mean_return")).all()

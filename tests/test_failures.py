@@ -77,7 +77,7 @@ def test_a_reward_that_is_not_a_real_number_is_refused_not_converted(reward, bac
     options = {"backend": "vector", "vector_mode": "sync", "workers": 2} if backend == "sync" else {}
     pattern = r"episode 0 .* failed 2 time\(s\); last error: TypeError: reward: expected a real number"
     with pytest.raises(EpisodeError, match=pattern):
-        run(CREPSCMA(1, 1, seed=0), env, 2, 4, 0, retries=1, **options)
+        run(CREPSCMA(1, 1, seed=0), env, 2, 10, 0, retries=1, **options)
 
 
 def test_real_rewards_of_any_numeric_type_are_accepted():
@@ -86,7 +86,7 @@ def test_real_rewards_of_any_numeric_type_are_accepted():
     for reward, error in (("2", TypeError), (False, TypeError), (math.inf, ValueError)):
         with pytest.raises(error):
             episode_return(reward)
-    history = run(CREPSCMA(1, 1, seed=0), OddReward(np.float32(0.25)), 2, 4, 0)
+    history = run(CREPSCMA(1, 1, seed=0), OddReward(np.float32(0.25)), 2, 10, 0)
     assert history.records[-1].mean_return == 0.25
 
 

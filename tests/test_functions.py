@@ -96,7 +96,7 @@ def test_env_objective_is_the_textbook_formula(env_class):
 
 
 @pytest.mark.parametrize("env_class", BOUNDED, ids=lambda cls: cls.function.name)
-@pytest.mark.parametrize(("dim", "context_dim"), [(2, 1), (15, 1), (9, 3), (64, 5)])
+@pytest.mark.parametrize(("dim", "context_dim"), [(2, 1), (15, 1), (9, 3), (64, 5), (4, 0)])
 def test_optimum_gives_f_opt_exactly_and_perturbations_do_worse(env_class, dim, context_dim):
     rng = np.random.default_rng(dim * 10 + context_dim)
     env = env_class(dim=dim, context_dim=context_dim, instance=2)
@@ -324,7 +324,7 @@ def test_scalar_env_protocol_errors_leave_the_episode_usable():
     [
         ({"dim": 1}, ValueError, "dim: expected an integer >= 2, got 1"),
         ({"dim": 2.5}, TypeError, "dim"),
-        ({"context_dim": 0}, ValueError, "context_dim: expected an integer >= 1, got 0"),
+        ({"context_dim": -1}, ValueError, "context_dim: expected an integer >= 0, got -1"),
         ({"instance": -1}, ValueError, "instance: expected an integer >= 0, got -1"),
         ({"instance": "0"}, TypeError, "instance"),
         ({"render_mode": "human"}, ValueError, "render_mode"),
@@ -415,3 +415,28 @@ def test_the_return_at_the_optimum_is_plus_zero_as_the_readme_prints_it():
     context, _ = env.reset(seed=0)
     _, reward, _, _, info = env.step(env.unwrapped.optimal_params(context[None])[0])
     assert f"{reward} {info['regret']}" == "0.0 0.0"
+
+
+def test_context_dim_zero_is_the_non_contextual_function():
+    """z = 0: an empty context, one optimum for every episode, a checked env and a native vector env that
+    agrees with it; the runner learns it like any other function."""
+    from gymnasium.utils.env_checker import check_env
+
+    from creps_gym.runner import run
+
+    env = gym.make("creps_gym/Rosenbrock-v0", dim=4, context_dim=0)
+    context, info = env.reset(seed=0)
+    assert context.shape == (0,) and env.observation_space.shape == (0,)
+    check_env(env.unwrapped)
+    optimum = info["optimal_params"]
+    _, _, terminated, _, step_info = env.step(optimum)
+    assert terminated and step_info["regret"] == 0.0
+    vector = gym.make_vec("creps_gym/Rosenbrock-v0", num_envs=3, dim=4, context_dim=0)
+    vector.reset(seed=1)
+    params = np.random.default_rng(0).uniform(-1, 1, (3, 4))
+    _, returns, _, _, _ = vector.step(params)
+    for k in range(3):
+        env.reset(seed=k)
+        assert env.step(params[k])[1] == returns[k]
+    history = run("c-cma-es", "creps_gym/Sphere-v0", 60, None, 0, env_kwargs={"dim": 4, "context_dim": 0})
+    assert history.records[-1].eval_regret < 1e-6 < history.records[0].eval_regret

@@ -37,8 +37,22 @@ def test_functions_declare_the_box_rule():
 
 
 def test_the_reacher_declares_its_own_start():
-    mean, std = initial_distribution(gym.make("creps_gym/PlanarReacher-v0"))
+    mean, std = initial_distribution(gym.make("creps_gym/PlanarReacher-v0"))  # kept as it was
     assert np.array_equal(mean, np.zeros(25)) and np.array_equal(std, np.full(25, 15.0))
+
+
+def test_reacher_v1_declares_the_papers_start_and_behaves_like_v0():
+    """v1 (issue 31): σ = 1, where CREPS-CMA-old ends 300x better than from v0's σ = 15 (docstring)."""
+    v0, v1 = gym.make("creps_gym/PlanarReacher-v0"), gym.make("creps_gym/PlanarReacher-v1")
+    mean, std = initial_distribution(v1)
+    assert np.array_equal(mean, np.zeros(25)) and np.array_equal(std, np.ones(25))
+    contexts = np.random.default_rng(0).uniform(0, 2, (5, 2))
+    params = np.random.default_rng(1).normal(0, 3, (5, 25))
+    assert np.array_equal(
+        v0.unwrapped.evaluate(contexts, params)[0], v1.unwrapped.evaluate(contexts, params)[0]
+    )
+    with pytest.raises(ValueError, match="initial_std: expected a finite value > 0, got 0"):
+        gym.make("creps_gym/PlanarReacher-v1", initial_std=0)
 
 
 def test_the_kick_declares_the_reference_kick():

@@ -60,17 +60,17 @@ def test_ray_matches_serial_bit_for_bit_and_keeps_the_users_ray(local_ray):
 
 def test_a_dead_worker_is_retried_and_no_sample_is_lost(local_ray, tmp_path):
     marker = tmp_path / "deaths"
-    reference = run(CREPSCMA(2, 1, seed=0), Target(), 2, 8, 0)
-    survived = run(CREPSCMA(2, 1, seed=0), Target(str(marker), deaths=1), 2, 8, 0, backend="ray")
+    reference = run(CREPSCMA(2, 1, seed=0), Target(), 2, 10, 0)
+    survived = run(CREPSCMA(2, 1, seed=0), Target(str(marker), deaths=1), 2, 10, 0, backend="ray")
     assert marker.read_text() == "x" and survived.equals(reference)
 
 
 def test_failures_after_the_retries_stop_the_run_with_a_clear_error(local_ray, tmp_path):
     with pytest.raises(EpisodeError, match=r"iteration 1, episode \d+ .*failed 2 time\(s\).*simulated crash"):
-        run(CREPSCMA(2, 1, seed=0, initial_cov=0.5), Target(fail=True), 2, 8, 0, backend="ray", retries=1)
+        run(CREPSCMA(2, 1, seed=0, initial_cov=0.5), Target(fail=True), 2, 10, 0, backend="ray", retries=1)
     marker = tmp_path / "deaths"
     with pytest.raises(EpisodeError, match=r"iteration 1, episodes \d+\.\.\d+: the Ray task failed 1 time"):
-        run(CREPSCMA(2, 1, seed=0), Target(str(marker), deaths=5), 2, 8, 0, backend="ray", retries=0)
+        run(CREPSCMA(2, 1, seed=0), Target(str(marker), deaths=5), 2, 10, 0, backend="ray", retries=0)
 
 
 def test_flaky_episodes_and_resets_are_retried_as_on_serial(local_ray):

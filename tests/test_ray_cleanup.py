@@ -95,7 +95,7 @@ def test_a_killed_driver_leaves_no_ray_process_behind(tmp_path):
             print("iteration", record.iteration, flush=True)
             time.sleep(0.2)
 
-        run("creps-cma-old", "creps_gym/Sphere-v0", 100000, 8, 0, env_kwargs={"dim": 3}, backend="ray",
+        run("creps-cma-old", "creps_gym/Sphere-v0", 100000, 10, 0, env_kwargs={"dim": 3}, backend="ray",
             workers=2, callbacks=[pause])
         """,
     )

@@ -88,18 +88,18 @@ def test_bad_addresses_are_refused_with_their_name(address):
     with pytest.raises(ValueError, match=rf"^ray_address: expected 'HOST:PORT' .*, got {address!r}$"):
         check_ray_address(address)
     with pytest.raises(ValueError, match=r"^ray_address: expected 'HOST:PORT'"):
-        RunConfig("creps_gym/Sphere-v0", "creps", 2, 10, 0, backend="ray", ray_address=address)
+        RunConfig("creps_gym/Sphere-v0", "creps", 2, 12, 0, backend="ray", ray_address=address)
     for good in ("10.0.0.1:6379", "head.example.org:6379", "[::1]:6379", "auto"):
         assert check_ray_address(good) == good
     with pytest.raises(TypeError, match=r"^ray_address: expected a str 'HOST:PORT' or 'auto', got int 6379$"):
-        RunConfig("creps_gym/Sphere-v0", "creps", 2, 10, 0, backend="ray", ray_address=6379)
+        RunConfig("creps_gym/Sphere-v0", "creps", 2, 12, 0, backend="ray", ray_address=6379)
 
 
 def test_an_address_needs_the_ray_backend(tmp_path, capsys):
     with pytest.raises(
         ValueError, match=r"^ray_address: expected None unless backend='ray' \(backend is 'auto'"
     ):
-        RunConfig("creps_gym/Sphere-v0", "creps", 2, 10, 0, ray_address="10.0.0.1:6379")
+        RunConfig("creps_gym/Sphere-v0", "creps", 2, 12, 0, ray_address="10.0.0.1:6379")
     base = ["run", "--env", "creps_gym/Sphere-v0", "--optimizer", "creps", "--iterations", "2", "--seed", "0"]
     for flags, expected in (
         (["--ray-address", "10.0.0.1:6379"], "argument --ray-address: expected None unless backend='ray'"),
@@ -111,7 +111,7 @@ def test_an_address_needs_the_ray_backend(tmp_path, capsys):
 
 
 def test_config_json_records_the_address_but_a_resume_never_joins_it(tmp_path):
-    config = RunConfig("creps_gym/Sphere-v0", "creps", 2, 10, 0, backend="ray", ray_address="10.0.0.1:6379")
+    config = RunConfig("creps_gym/Sphere-v0", "creps", 2, 12, 0, backend="ray", ray_address="10.0.0.1:6379")
     RunDir.create(tmp_path / "run", config, {}).lock.release()
     recorded = json.loads((tmp_path / "run" / RunDir.CONFIG).read_text())["config"]
     assert recorded["ray_address"] == "10.0.0.1:6379" and recorded["backend"] == "ray"
@@ -278,12 +278,12 @@ def test_unreachable_addresses_fail_at_once_with_their_name(monkeypatch):
     with pytest.raises(
         ValueError, match=rf"^ray_address: expected the address of a running Ray .* got '{dead}'"
     ):
-        run(CREPSCMA(2, 1, seed=0), env, 2, 8, 0, backend="ray", ray_address=dead)
+        run(CREPSCMA(2, 1, seed=0), env, 2, 10, 0, backend="ray", ray_address=dead)
     monkeypatch.setenv("RAY_ADDRESS", dead)
     with pytest.raises(
         ValueError, match=rf"^RAY_ADDRESS: expected the address of a running Ray .* got '{dead}'"
     ):
-        run(CREPSCMA(2, 1, seed=0), env, 2, 8, 0, backend="ray")
+        run(CREPSCMA(2, 1, seed=0), env, 2, 10, 0, backend="ray")
     assert time.monotonic() - started < 60 and not ray.is_initialized()  # (Ray itself retries for minutes)
 
 
@@ -293,12 +293,12 @@ def test_a_2_node_cluster_gives_the_serial_history_and_is_left_running(cluster, 
     import ray
 
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
-    serial = run(CREPSCMA(2, 1, seed=0), Probe(), 5, 8, 0)
+    serial = run(CREPSCMA(2, 1, seed=0), Probe(), 5, 10, 0)
     log = tmp_path / "nodes.log"
     out = tmp_path / "run"
     with pytest.raises(RuntimeError, match="simulated crash"):
         env = Probe(str(log), meet=str(tmp_path / "meet"))
-        run(CREPSCMA(2, 1, seed=0), env, 5, 8, 0, backend="ray", ray_address=cluster["address"],
+        run(CREPSCMA(2, 1, seed=0), env, 5, 10, 0, backend="ray", ray_address=cluster["address"],
             run_dir=out, checkpoint_every=2, callbacks=[_crash_at(3)])  # fmt: skip
     assert not ray.is_initialized()  # the driver disconnected ...
     assert all(node.poll() is None for node in (cluster["head"], cluster["worker"]))  # ... the cluster runs
@@ -321,7 +321,7 @@ def test_killing_the_worker_node_mid_run_loses_no_sample(cluster, tmp_path):
     """The worker node's processes are killed while it evaluates a chunk: Ray re-runs it on the head."""
     import ray
 
-    serial = run(CREPSCMA(2, 1, seed=1), Probe(), 4, 8, 1)
+    serial = run(CREPSCMA(2, 1, seed=1), Probe(), 4, 10, 1)
     hang = str(tmp_path / "hang")
     killed = []
 
@@ -338,11 +338,11 @@ def test_killing_the_worker_node_mid_run_loses_no_sample(cluster, tmp_path):
 
     killer = threading.Thread(target=kill_the_worker_node, daemon=True)
     killer.start()
-    history = run(CREPSCMA(2, 1, seed=1), Probe(hang=hang), 4, 8, 1, backend="ray",
+    history = run(CREPSCMA(2, 1, seed=1), Probe(hang=hang), 4, 10, 1, backend="ray",
                   ray_address=cluster["address"], callbacks=[arm])  # fmt: skip
     killer.join(timeout=10)
     assert killed == [True] and cluster["worker"].wait(timeout=30) is not None
-    assert history.equals(serial) and len(history) == 4 and history.records[-1].episodes == 32
+    assert history.equals(serial) and len(history) == 4 and history.records[-1].episodes == 40
     assert not ray.is_initialized() and cluster["head"].poll() is None  # the runner left the head running
     ray.init(address=cluster["address"], logging_level="ERROR", log_to_driver=False)
     try:

@@ -24,7 +24,7 @@ from hypothesis import strategies as st  # noqa: E402
 from creps_gym.optimizers.base import load_state, save_state  # noqa: E402
 from creps_gym.runner import History, RunDir, RunDirError, RunDirWarning, load_history, resume, run  # noqa: E402
 
-SETTINGS = {"iterations": 4, "samples_per_iteration": 6, "env_kwargs": {"dim": 2}, "eval_every": 2,
+SETTINGS = {"iterations": 4, "samples_per_iteration": 10, "env_kwargs": {"dim": 2}, "eval_every": 2,
             "checkpoint_every": 2}  # fmt: skip
 FUZZ = settings(max_examples=30, deadline=None)
 

@@ -21,7 +21,7 @@ NO_STAGNATION = 10**9  # iterations: the optimiser's stagnation stop never fires
 
 SETTINGS = {
     "iterations": 6,
-    "samples_per_iteration": 6,
+    "samples_per_iteration": 10,
     "env_kwargs": {"dim": 3},
     "eval_every": 2,
     "checkpoint_every": 2,
@@ -201,7 +201,7 @@ def test_a_module_named_with_import_on_the_command_line_is_trusted(tmp_path):
     )
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(package), os.environ.get("PYTHONPATH", "")])}
     out = tmp_path / "run"
-    args = ["--optimizer", "creps", "--iterations", 3, "--samples", 6, "--seed", 0, "--no-plot"]
+    args = ["--optimizer", "creps", "--iterations", 3, "--samples", 12, "--seed", 0, "--no-plot"]
     start = cli_command("run", "--env", "MyEnvs/Sphere-v0", "--out", out, *args, "--import", "my_envs")
     assert subprocess.run(start, capture_output=True, env=env, timeout=120).returncode == 0
     (out / RunDir.HISTORY_JSON).unlink()
@@ -237,11 +237,11 @@ def test_a_folder_with_a_checkpoint_and_no_config_is_not_a_run(tmp_path):
     (old / RunDir.CONFIG).unlink()
     checkpoint = (old / RunDir.CHECKPOINT).read_bytes()
     assert main(["resume", str(old), "--no-plot"]) == 3
-    args = ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", "4", "--samples", "6"]
+    args = ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", "4", "--samples", "12"]
     args += ["--seed", "0", "--env-kwarg", "dim=3", "--out", str(old), "--no-plot"]
     assert main(args) == 3 and (old / RunDir.CHECKPOINT).read_bytes() == checkpoint
     with pytest.raises(FileExistsError, match=r"but no config\.json"):
-        run("creps-cma-old", SPHERE, 4, 6, 0, env_kwargs={"dim": 3}, run_dir=old)
+        run("creps-cma-old", SPHERE, 4, 10, 0, env_kwargs={"dim": 3}, run_dir=old)
     assert main([*args, "--overwrite"]) == 0  # the user says so: the old files go
     assert len(History.from_json(old / RunDir.HISTORY_JSON)) == 4
 
@@ -352,8 +352,8 @@ def test_export_of_a_damaged_history_json_rebuilds_it_and_warns(tmp_path, capsys
 def test_a_second_writer_is_refused_while_the_first_lives(tmp_path):
     out = tmp_path / "run"
     # no stagnation stop: with it the run may end within seconds, while the live run must outlast the test
-    args = ["--env", SPHERE, "--optimizer", "creps", "--iterations", 100000, "--samples", 6, "--seed", 0,
-            "--opt", f"tolstagnation={NO_STAGNATION}"]  # fmt: skip
+    args = ["--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 100000, "--samples", 12,
+            "--seed", 0, "--opt", f"tolstagnation={NO_STAGNATION}"]  # fmt: skip
     live = subprocess.Popen(
         cli_command("run", *args, "--out", out, "--checkpoint-every", 1, "--no-plot"),
         stdout=subprocess.DEVNULL,
@@ -392,7 +392,7 @@ def test_only_the_runs_own_temporary_files_are_removed(tmp_path):
     assert sorted(p.name for p in out.iterdir() if p.name.endswith(".tmp")) == sorted(mine)
     for name in theirs:
         (out / name).write_text("x")
-    assert main(["run", "--env", SPHERE, "--optimizer", "creps", "--iterations", "2", "--samples", "6",
+    assert main(["run", "--env", SPHERE, "--optimizer", "creps", "--iterations", "2", "--samples", "12",
                  "--seed", "0", "--out", str(out), "--overwrite", "--no-plot"]) == 0  # fmt: skip
     assert sorted(p.name for p in out.iterdir() if p.name.endswith(".tmp")) == sorted(mine)
 
@@ -402,19 +402,19 @@ def test_out_refuses_a_folder_that_is_neither_empty_nor_a_run(tmp_path, capsys):
     folder = tmp_path / "photos"
     folder.mkdir()
     (folder / "holiday.jpg").write_text("x")
-    args = ["run", "--env", SPHERE, "--optimizer", "creps", "--iterations", "2", "--samples", "6"]
+    args = ["run", "--env", SPHERE, "--optimizer", "creps", "--iterations", "2", "--samples", "12"]
     for extra in ([], ["--overwrite"]):
         assert main([*args, "--seed", "0", "--out", str(folder), "--no-plot", *extra]) == 3
         assert "which holds other files (holiday.jpg); choose another directory" in capsys.readouterr().err
     assert sorted(os.listdir(folder)) == ["holiday.jpg"]
     with pytest.raises(FileExistsError, match="holds other files"):
-        run("creps", SPHERE, 2, 6, 0, run_dir=folder)
+        run("creps", SPHERE, 2, 12, 0, run_dir=folder)
     empty = tmp_path / "empty"
     empty.mkdir()
-    assert len(run("creps", SPHERE, 2, 6, 0, run_dir=empty)) == 2
+    assert len(run("creps", SPHERE, 2, 12, 0, run_dir=empty)) == 2
     with pytest.raises(FileExistsError, match="holds a run"):
-        run("creps", SPHERE, 3, 6, 0, run_dir=empty)
-    assert len(run("creps", SPHERE, 3, 6, 0, run_dir=empty, overwrite=True)) == 3
+        run("creps", SPHERE, 3, 12, 0, run_dir=empty)
+    assert len(run("creps", SPHERE, 3, 12, 0, run_dir=empty, overwrite=True)) == 3
 
 
 # -- issue 16.6: Ctrl-C leaves a checkpoint ---------------------------------------------------------------
@@ -423,7 +423,7 @@ def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
     out = tmp_path / "run"
     # Long enough that the run is still going when the signal comes (an iteration takes about 2 ms): the
     # stagnation stop is off, since with it the run would end on its own after 186 iterations.
-    args = ["--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 3000, "--samples", 6,
+    args = ["--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 3000, "--samples", 10,
             "--seed", 3, "--env-kwarg", "dim=3", "--checkpoint-every", 100000, "--eval-every", 2,
             "--opt", f"tolstagnation={NO_STAGNATION}"]  # fmt: skip
     process = subprocess.Popen(
@@ -444,7 +444,7 @@ def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
     assert 5 <= state["iteration"] == records[-1].iteration < 3000  # nothing done after the checkpoint
     assert main(["resume", str(out), "--no-plot"]) == 0
     expected = run(
-        "creps-cma-old", SPHERE, 3000, 6, 3, env_kwargs={"dim": 3}, eval_every=2,
+        "creps-cma-old", SPHERE, 3000, 10, 3, env_kwargs={"dim": 3}, eval_every=2,
         optimizer_options={"tolstagnation": NO_STAGNATION},
     )  # fmt: skip
     assert History.from_json(out / RunDir.HISTORY_JSON).equals(expected)
@@ -482,7 +482,7 @@ def limited_memory(gigabytes: float):
     ids=["function-arrays", "covariance", "batch", "evaluation", "context-arrays"],
 )
 def test_sizes_that_would_exhaust_memory_are_refused_before_allocating(tmp_path, flags, expected):
-    args = ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 2, "--samples", 6]
+    args = ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 2, "--samples", 12]
     args += ["--seed", 0, "--out", tmp_path / "run", "--no-plot"]
     for flag, value in zip(flags[::2], flags[1::2], strict=True):
         args = args[: args.index(flag)] + args[args.index(flag) + 2 :] if flag in args else args

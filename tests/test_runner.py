@@ -17,7 +17,7 @@ from helpers import EXTRAS, SPHERE, marked, python_blocks
 from creps_gym import registered_ids
 from creps_gym.envs.base import ContextualEpisodicEnv, SupportsRegret
 from creps_gym.envs.evaluation import contextual_model
-from creps_gym.optimizers import CREPSCMA
+from creps_gym.optimizers import CREPSCMA, minimum_samples
 from creps_gym.runner import (
     Callback,
     EpisodeError,
@@ -82,16 +82,18 @@ def test_same_seed_gives_a_bit_identical_history_and_another_seed_does_not():
     ids=["native", "sync", "async"],
 )  # fmt: skip
 def test_every_vector_backend_matches_serial_bit_for_bit(backend):
-    serial = run("creps-cma-old", SPHERE, 4, 7, 1, backend="serial", **SMALL)
-    other = run("creps-cma-old", SPHERE, 4, 7, 1, **SMALL, **backend)
+    serial = run("creps-cma-old", SPHERE, 4, 10, 1, backend="serial", **SMALL)
+    other = run("creps-cma-old", SPHERE, 4, 10, 1, **SMALL, **backend)
     assert other.equals(serial)
 
 
 @pytest.mark.parametrize("env_id", marked(registered_ids()))
 def test_every_registered_env_runs_and_a_chunked_vector_backend_matches_serial(env_id):
-    serial = run("creps-cma-old", env_id, 2, 8, 0, eval_contexts=2, backend="serial")
-    vector = {"backend": "vector", "workers": 3}  # chunks of 3 + 3 + 2 (padded)
-    chunked = run("creps-cma-old", env_id, 2, 8, 0, eval_contexts=2, **vector)
+    space = gym.make(env_id)
+    n = minimum_samples("creps-cma-old", space.action_space.shape[0], space.observation_space.shape[0])
+    serial = run("creps-cma-old", env_id, 2, n, 0, eval_contexts=2, backend="serial")
+    vector = {"backend": "vector", "workers": 3}  # chunks of 3 + ... + a padded last one
+    chunked = run("creps-cma-old", env_id, 2, n, 0, eval_contexts=2, **vector)
     assert chunked.equals(serial) and len(serial) == 2
     assert np.isfinite(serial.column("eval_return")).all()
     knows_optimum = isinstance(contextual_model(gym.make(env_id)), SupportsRegret)
@@ -114,7 +116,7 @@ def test_default_initial_distribution_is_the_box_centre_and_a_quarter_width():
 
 def test_uniform_initial_mean_is_drawn_in_the_box_from_the_seed_without_touching_other_streams():
     def runner(seed, **options):
-        return Runner(RunConfig(SPHERE, "creps", 1, 8, seed, env_kwargs={"dim": 4}, **options))
+        return Runner(RunConfig(SPHERE, "creps", 1, 10, seed, env_kwargs={"dim": 4}, **options))
 
     a, b, c = (runner(seed, initial_mean="uniform") for seed in (3, 3, 4))
     means = [r.optimizer.recommend(np.zeros((1, 1)))[0] for r in (a, b, c)]
@@ -251,11 +253,11 @@ def test_a_reset_that_ignores_its_seed_is_reported():
             return obs, info
 
     with pytest.raises(EpisodeError, match="must be deterministic under reset"):
-        run(CREPSCMA(1, 1, seed=0), Drifting(), 2, 4, 0)
+        run(CREPSCMA(1, 1, seed=0), Drifting(), 2, 10, 0)
 
 
 def test_history_round_trips_through_json_and_csv_bit_for_bit(tmp_path):
-    history = run("creps-cma-current", SPHERE, 5, 8, 2, eval_every=2, **SMALL)
+    history = run("creps-cma-current", SPHERE, 5, 10, 2, eval_every=2, **SMALL)
     history.records[0].diagnostics["odd"] = -math.inf
     loaded = History.from_json(history.to_json(tmp_path / "h.json"))
     assert loaded.equals(history, include_time=True) and loaded.meta == history.meta
@@ -270,9 +272,9 @@ def test_history_round_trips_through_json_and_csv_bit_for_bit(tmp_path):
 
 def test_run_directory_contents(tmp_path):
     out = tmp_path / "run"
-    history = run("creps-cma-old", SPHERE, 7, 8, 4, run_dir=out, checkpoint_every=3, **SMALL)
+    history = run("creps-cma-old", SPHERE, 7, 10, 4, run_dir=out, checkpoint_every=3, **SMALL)
     directory = RunDir.open(out)
-    expected = RunConfig(SPHERE, "creps-cma-old", 7, 8, 4, checkpoint_every=3, env_kwargs={"dim": 4})
+    expected = RunConfig(SPHERE, "creps-cma-old", 7, 10, 4, checkpoint_every=3, env_kwargs={"dim": 4})
     assert directory.config() == expected
     versions = json.loads(directory.file(RunDir.VERSIONS).read_text())
     assert {"gymnasium", "numpy", "mujoco", "creps-gym", "python"} <= set(versions)
@@ -285,7 +287,7 @@ def test_run_directory_contents(tmp_path):
     assert optimizer_state["kind"] == "creps-cma"
     assert History.from_json(directory.file(RunDir.HISTORY_JSON)).equals(history, include_time=True)
     with pytest.raises(FileExistsError, match="holds a run"):
-        run("creps-cma-old", SPHERE, 7, 8, 4, run_dir=out, **SMALL)
+        run("creps-cma-old", SPHERE, 7, 10, 4, run_dir=out, **SMALL)
 
 
 def test_resume_continues_exactly_with_objects(tmp_path):
@@ -326,11 +328,11 @@ def test_resume_continues_exactly_with_objects(tmp_path):
 @EXTRAS
 def test_progress_bar_shows_the_regret_only_when_asked():
     stream = io.StringIO()
-    run("creps-cma-old", SPHERE, 3, 8, 0, callbacks=[ProgressBar(True, stream)], **SMALL)
+    run("creps-cma-old", SPHERE, 3, 10, 0, callbacks=[ProgressBar(True, stream)], **SMALL)
     text = stream.getvalue()
     assert "3/3" in text and "regret=" in text
     quiet = io.StringIO()
-    run("creps-cma-old", SPHERE, 3, 8, 0, callbacks=[ProgressBar(None, quiet)], **SMALL)  # not a terminal
+    run("creps-cma-old", SPHERE, 3, 10, 0, callbacks=[ProgressBar(None, quiet)], **SMALL)  # not a terminal
     assert quiet.getvalue() == ""
 
 
@@ -346,21 +348,21 @@ def test_progress_bar_of_an_early_stop_ends_at_100_percent_with_its_reason():
 
 
 def test_iohanalyzer_export(tmp_path):
-    histories = [run("creps-cma-old", SPHERE, 4, 8, seed, eval_every=2, **SMALL) for seed in (0, 1)]
+    histories = [run("creps-cma-old", SPHERE, 4, 10, seed, eval_every=2, **SMALL) for seed in (0, 1)]
     path = write_iohanalyzer(histories, tmp_path / "ioh.csv")
     rows = list(csv.DictReader(path.open()))
     assert list(rows[0]) == ["evaluations", "value", "function_id", "algorithm_id", "dimension", "run_id"]
     assert [(r["evaluations"], r["run_id"]) for r in rows] == [
-        ("16", "0"),
-        ("32", "0"),
-        ("16", "1"),
-        ("32", "1"),
+        ("20", "0"),
+        ("40", "0"),
+        ("20", "1"),
+        ("40", "1"),
     ]
     assert float(rows[1]["value"]) == histories[0].records[3].eval_regret
     assert {(r["function_id"], r["algorithm_id"], r["dimension"]) for r in rows} == {
         (SPHERE, "creps-cma-old", "4")
     }
-    plane = run("creps", "creps_gym/Plane-v0", 2, 8, 0, **SMALL)  # no regret: the (maximised) return
+    plane = run("creps", "creps_gym/Plane-v0", 2, 10, 0, **SMALL)  # no regret: the (maximised) return
     rows = list(csv.DictReader(write_iohanalyzer([plane], tmp_path / "plane.csv").open()))
     assert [float(r["value"]) for r in rows] == plane.column("eval_return").tolist()
 
@@ -368,7 +370,7 @@ def test_iohanalyzer_export(tmp_path):
 def test_plot_median_and_band_over_seeds_with_a_log_regret_axis(tmp_path):
     pytest.importorskip("matplotlib")
     runs = {
-        name: [run(name, SPHERE, 4, 8, s, **SMALL) for s in (0, 1, 2)] for name in ("creps", "creps-cma-old")
+        name: [run(name, SPHERE, 4, 10, s, **SMALL) for s in (0, 1, 2)] for name in ("creps", "creps-cma-old")
     }
     figure = plot_histories(runs, tmp_path / "curves.png", title="test")
     assert (tmp_path / "curves.png").stat().st_size > 0
@@ -491,10 +493,10 @@ def test_a_start_no_batch_size_can_learn_from_names_the_initial_distribution():
 
 
 def test_more_workers_than_samples_are_capped_at_the_samples():
-    runner = Runner(RunConfig(SPHERE, "creps", 2, 8, 0, backend="vector", workers=10**11))
+    runner = Runner(RunConfig(SPHERE, "creps", 2, 12, 0, backend="vector", workers=10**11))
     backend = runner.make_backend()
     try:
-        assert backend.num_envs == 8
+        assert backend.num_envs == 12
     finally:
         backend.close()
 

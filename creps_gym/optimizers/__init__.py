@@ -34,6 +34,7 @@ from creps_gym.optimizers.policy_file import Policy
 from creps_gym.optimizers.registry import (
     describe_optimizers,
     make_optimizer,
+    minimum_samples,
     optimizer_names,
     recommended_samples,
     register_optimizer,
@@ -62,6 +63,7 @@ __all__ = [
     "load_state",
     "make_features",
     "make_optimizer",
+    "minimum_samples",
     "optimizer_names",
     "recommended_batch_size",
     "recommended_samples",

@@ -305,6 +305,21 @@ class PolicyAccess:
         quadratic = 1 + n_context_dims + n_context_dims * (n_context_dims + 1) // 2
         return max(population * (1 + n_context_dims), 2 * quadratic + 2)
 
+    @staticmethod
+    def minimum_batch_size(n_params: int, n_context_dims: int) -> int:
+        """The smallest batch N the runner accepts: max(4 + ⌊3 ln p⌋, 5 (1 + z), k + 1).
+
+        CMA-ES's population 4 + ⌊3 ln p⌋, at least 2.5 selected samples (N/2) per coefficient of the
+        affine mean features [1, s], and more samples than the k = 1 + z + z(z + 1)/2 features of a full
+        quadratic in s (the baselines are regressions). Measured in ``docs/optimizers.md`` (*Batch size*):
+        below it c-cma-es and CREPS-CMA diverged on the Sphere on every seed tried. ``tell`` itself accepts
+        any batch of at least two.
+        """
+        n_params = check_positive_int(n_params, "n_params")
+        n_context_dims = check_positive_int(n_context_dims, "n_context_dims", minimum=0)
+        quadratic = 1 + n_context_dims + n_context_dims * (n_context_dims + 1) // 2
+        return max(4 + int(3 * math.log(n_params)), 5 * (1 + n_context_dims), quadratic + 1)
+
     @property
     def coefficients(self) -> Array:
         """The mean coefficients A, shape (k, p), as a read-only view."""

@@ -30,6 +30,7 @@ __all__ = [
     "OptimizerEntry",
     "describe_optimizers",
     "make_optimizer",
+    "minimum_samples",
     "optimizer_class",
     "optimizer_names",
     "recommended_samples",
@@ -172,6 +173,18 @@ def recommended_samples(optimizer: str | Any, n_params: int, n_context_dims: int
     if rule is None:
         from creps_gym.optimizers.ccmaes import recommended_batch_size as rule
     return int(rule(n_params, n_context_dims))
+
+
+def minimum_samples(optimizer: str | Any, n_params: int, n_context_dims: int) -> int | None:
+    """The smallest batch size the runner accepts for a registry name or an optimiser object, or None.
+
+    The optimiser's class decides through a ``minimum_batch_size(n_params, n_context_dims)`` method (every
+    native optimiser has one: :meth:`creps_gym.optimizers.policies.PolicyAccess.minimum_batch_size`);
+    classes without one (the adapters, users' own optimisers) get None: no minimum beyond two.
+    """
+    cls = optimizer_class(optimizer) if isinstance(optimizer, str) else type(optimizer)
+    rule = getattr(cls, "minimum_batch_size", None)
+    return None if rule is None else int(rule(n_params, n_context_dims))
 
 
 def restore_optimizer(name: str, state: Mapping[str, Any]) -> Any:

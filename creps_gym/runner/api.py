@@ -42,8 +42,9 @@ def run(
     iterations : int
         Maximum number of iterations.
     samples_per_iteration : int or None
-        Episodes per iteration (>= 2); None takes the optimiser's recommended batch size
-        (:func:`creps_gym.optimizers.recommended_samples`).
+        Episodes per iteration (>= 2, and at least the optimiser's minimum,
+        :func:`creps_gym.optimizers.minimum_samples`, else ``ValueError``); None takes the optimiser's
+        recommended batch size (:func:`creps_gym.optimizers.recommended_samples`).
     seed : int
         Master seed (>= 0).
     run_dir : path-like, optional
@@ -83,14 +84,20 @@ def run(
     config = RunConfig(**names, **sizes, **kwargs, context_selector=selector_name, **options)
     objects = {"env": None if by_id else env, "optimizer": None if by_name else optimizer}
     selector = None if selector_name is not None else context_selector
-    runner = Runner(
-        config,
-        **objects,
-        callbacks=callbacks,
-        run_dir=run_dir,
-        overwrite=overwrite,
-        context_selector=selector,
-    )
+    try:
+        runner = Runner(
+            config,
+            **objects,
+            callbacks=callbacks,
+            run_dir=run_dir,
+            overwrite=overwrite,
+            context_selector=selector,
+        )
+    except ValueError as exc:  # e.g. a batch below the optimiser's minimum: name this function's argument
+        field, sep, rest = str(exc).partition(":")
+        if sep and field == "samples":
+            raise ValueError(f"samples_per_iteration:{rest}") from None
+        raise
     return runner.run()
 
 

@@ -3,6 +3,8 @@
 * :func:`check_optimizer`: an optimiser object follows the ask/tell protocol of
   :class:`creps_gym.optimizers.AskTellOptimizer`; raw pycma, nevergrad and optuna objects are refused
   with the adapter to use.
+* :func:`check_minimum_batch`: the batch is at least the optimiser's minimum workable size
+  (:func:`creps_gym.optimizers.registry.minimum_samples`; measured in ``docs/optimizers.md``).
 * :func:`check_batch_size`: one ask/tell of a fresh copy of a named optimiser on a synthetic batch of
   the run's size, so options that only fail at the first ``tell`` (``epsilon >= log N``, a batch too
   small for the features) fail before anything is written.
@@ -23,6 +25,7 @@ from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array
 from creps_gym.envs.evaluation import contextual_model
+from creps_gym.optimizers.registry import minimum_samples
 from creps_gym.wrappers import FixedContexts, SampleContexts
 
 __all__ = [
@@ -30,7 +33,9 @@ __all__ = [
     "MODEL_PRESERVING_WRAPPERS",
     "check_batch_size",
     "check_box_spaces",
+    "check_minimum_batch",
     "check_optimizer",
+    "check_optimizer_sizes",
     "check_ray_cluster",
     "real_params",
     "stop_criteria",
@@ -84,6 +89,34 @@ def check_optimizer(optimizer: Any) -> None:
             "a diagnostics property, see creps_gym.optimizers.AskTellOptimizer) or a registry name, got "
             f"{name} without {', '.join(missing)}"
         )
+
+
+def check_minimum_batch(optimizer: Any, runner: Any) -> None:
+    """ValueError naming ``samples`` when the runner's batch is below the optimiser's minimum batch size.
+
+    ``runner`` has the ``config``, ``n_params`` and ``n_context_dims`` of the run. The minimum is the
+    class's ``minimum_batch_size(n_params, n_context_dims)`` (every native optimiser has one); optimisers
+    without one (adapters, users' classes) are not checked.
+    """
+    config, p, z = runner.config, runner.n_params, runner.n_context_dims
+    smallest = minimum_samples(optimizer, p, z)
+    if smallest is not None and config.samples < smallest:
+        label = repr(config.optimizer) if config.optimizer else type(optimizer).__name__
+        raise ValueError(
+            f"samples: expected at least {smallest} episodes per iteration for {label} with {p} "
+            f"parameters and {z} context dimension(s) (smaller batches diverge; see docs/optimizers.md, "
+            f"'Batch size'), got {config.samples}"
+        )
+
+
+def check_optimizer_sizes(optimizer: Any, name: str, runner: Any) -> None:
+    """ValueError naming ``name`` unless the optimiser's ``n_params`` and ``n_context_dims`` are the
+    runner's (``runner.env_name`` names the env)."""
+    for attribute in ("n_params", "n_context_dims"):
+        expected = getattr(runner, attribute)
+        got = getattr(optimizer, attribute, expected)
+        if got != expected:
+            raise ValueError(f"{name}: expected {attribute} = {expected} for {runner.env_name}, got {got}")
 
 
 def check_batch_size(

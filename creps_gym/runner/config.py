@@ -134,6 +134,9 @@ class RunConfig:
         ``docs/contexts.md``). None: the env's own draws (or a selector object given to the runner).
     context_selector_options : dict
         The selector's keyword arguments, as JSON data.
+    divergence : float or None
+        Stop with the reason ``"divergence"`` once 10 consecutive evaluations are worse than the first by
+        more than this factor times its magnitude (:mod:`creps_gym.runner.divergence`); None: never.
     """
 
     env: str | None
@@ -159,6 +162,7 @@ class RunConfig:
     ray_address: str | None = None
     context_selector: str | None = None
     context_selector_options: dict[str, Any] = field(default_factory=dict)
+    divergence: float | None = 1000.0
 
     def __post_init__(self) -> None:
         for name in ("env", "optimizer"):
@@ -195,7 +199,7 @@ class RunConfig:
         self._check_selector()
         _optional_positive(self.workers, "workers", integer=True)
         _optional_positive(self.max_episodes, "max_episodes", integer=True)
-        for name in ("target_regret", "max_time"):
+        for name in ("target_regret", "max_time", "divergence"):
             object.__setattr__(self, name, _optional_positive(getattr(self, name), name, integer=False))
         if not (isinstance(self.initial_mean, str) and self.initial_mean == "uniform"):
             object.__setattr__(

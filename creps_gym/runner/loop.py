@@ -18,8 +18,8 @@ every backend and after any resume. **Checkpoints** hold the optimiser's and the
 counts, wall time, stop reason, a checksum of the records, the best evaluated policy:
 :mod:`~creps_gym.runner.policy_store`): O(1). A resume rebuilds the history from the log.
 **Stop reasons** (``History.stop_reason``): ``"iterations"``, ``"max_episodes"`` (the next iteration would
-exceed the budget), ``"target_regret"``, ``"max_time"``, ``"optimizer: <criteria>"`` (the optimiser's own
-``stop()``), ``"callback"``.
+exceed the budget), ``"target_regret"``, ``"max_time"``, ``"divergence"`` (see
+:mod:`~creps_gym.runner.divergence`), ``"optimizer: <criteria>"`` (its own ``stop()``), ``"callback"``.
 """
 
 from __future__ import annotations
@@ -42,9 +42,9 @@ from creps_gym.runner import checks
 from creps_gym.runner.backends import Backend, EnvSource, EpisodeError, retry
 from creps_gym.runner.build import build_backend, build_optimizer, default_initial_distribution, split_seed
 from creps_gym.runner.callbacks import as_callback
-from creps_gym.runner.checks import check_batch_size, check_optimizer, unwrapped_model
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
+from creps_gym.runner.divergence import DivergenceWatch, evaluation_loss
 from creps_gym.runner.history import History, IterationRecord
 from creps_gym.runner.policy_store import RunPolicies, evaluate_contexts
 from creps_gym.runner.recovery import REBUILD, chain_crc, checkpoint_history, history_crc
@@ -60,8 +60,7 @@ Array = NDArray[np.float64]
 class Runner:
     """Runs one configuration; :func:`creps_gym.runner.run` and :func:`creps_gym.runner.resume` use it.
 
-    Everything is built once: a new run builds its optimiser from the config (or takes the object), a
-    continued run restores it from the checkpoint, read once.
+    Built once: a new run builds its optimiser (or takes the object), a continued one restores it.
 
     Parameters
     ----------
@@ -82,6 +81,8 @@ class Runner:
     context_selector : ContextSelector, optional
         A selector object, instead of ``config.context_selector``.
     """
+
+    _watch: DivergenceWatch | None = None  # the divergence stop's, built at the first step from the history
 
     def __init__(
         self,
@@ -114,7 +115,7 @@ class Runner:
         self.draws = ContextDraws.for_run(self.env, config, context_selector)
         obj = None if config.env else self.env
         self.source = EnvSource(config.env, dict(config.env_kwargs), obj, set_context=self.draws.batched)
-        self._model = unwrapped_model(self.env)
+        self._model = checks.unwrapped_model(self.env)
         self.test_contexts = self._test_contexts(eval_seed)
         if config.target_regret is not None and not self.has_regret:
             raise ValueError(
@@ -151,24 +152,20 @@ class Runner:
     def _new_optimizer(self, optimizer: Any, seed: int, check: bool) -> Any:
         """The optimiser object as given, or the registered one built (batch size checked if ``check``)."""
         if optimizer is not None:
-            check_optimizer(optimizer)
+            checks.check_optimizer(optimizer)
         else:
             make = functools.partial(build_optimizer, self.config, self.env, self.n_context_dims, seed)
             optimizer = make()
-            if check:  # a new run: its batch size must suit the optimiser
-                n, contexts = self.config.samples, self.test_contexts
-                if self._model is not None:
-                    contexts = self._model.sample_contexts(np.random.default_rng(seed), n)
-                contexts = contexts[np.arange(n) % len(contexts)]
-                check_batch_size(make, contexts, self.config.optimizer_options, repr(self.config.optimizer))
-        self._check_optimizer_sizes(optimizer, "optimizer")
+        checks.check_optimizer_sizes(optimizer, "optimizer", self)
+        if check:  # a new run: below the optimiser's minimum batch, the search diverges
+            checks.check_minimum_batch(optimizer, self)
+        if check and self.config.optimizer is not None:  # and a named optimiser must accept the batch
+            n, contexts, options = self.config.samples, self.test_contexts, self.config.optimizer_options
+            if self._model is not None:
+                contexts = self._model.sample_contexts(np.random.default_rng(seed), n)
+            contexts = contexts[np.arange(n) % len(contexts)]
+            checks.check_batch_size(make, contexts, options, repr(self.config.optimizer))
         return optimizer
-
-    def _check_optimizer_sizes(self, optimizer: Any, name: str) -> None:
-        for attribute, expected in (("n_params", self.n_params), ("n_context_dims", self.n_context_dims)):
-            got = getattr(optimizer, attribute, expected)
-            if got != expected:
-                raise ValueError(f"{name}: expected {attribute} = {expected} for {self.env_name}, got {got}")
 
     @property
     def has_regret(self) -> bool:
@@ -213,7 +210,7 @@ class Runner:
                 self.optimizer = restore_optimizer(self.config.optimizer, optimizer_state)
             else:
                 self.optimizer = (optimizer_class or type(optimizer)).from_state_dict(optimizer_state)
-            self._check_optimizer_sizes(self.optimizer, "optimizer state")
+            checks.check_optimizer_sizes(self.optimizer, "optimizer state", self)
             self.env_rng.bit_generator.state = state["env_rng"]
             self.draws.selection.load(state)
             self.history = self._checkpoint_history(run_dir, state)
@@ -295,6 +292,7 @@ class Runner:
 
     def step(self, backend: Backend) -> tuple[IterationRecord, str | None]:
         """Run one iteration on ``backend``; returns its record and the stop reason (None: go on)."""
+        self._watch = self._watch or DivergenceWatch.of_history(self.config.divergence, self.history.records)
         n, label = self.config.samples, f"iteration {self.iteration + 1}"
         seeds, contexts = self.draws.draw(self.env_rng, n, label)
         params = checks.real_params(self.optimizer.ask(contexts), "ask")
@@ -311,6 +309,8 @@ class Runner:
             target = self.config.target_regret
             if reason is None and target is not None and eval_regret <= target:
                 reason = "target_regret"
+            diverged = self._watch.observe(evaluation_loss(eval_return, eval_regret))
+            reason = reason or ("divergence" if diverged else None)
         diagnostics = {str(k): float(v) for k, v in dict(self.optimizer.diagnostics).items()}
         counts = (self.iteration, self.episodes, finite_mean(returns))
         record = IterationRecord(*counts, eval_return, eval_regret, self.elapsed, diagnostics)

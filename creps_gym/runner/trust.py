@@ -62,6 +62,8 @@ FINGERPRINT_FIELDS = ("env", "env_kwargs", "optimizer", "optimizer_options", "se
 #: Fields fingerprinted only when set (``context_selector`` not None): runs without a selector keep the
 #: fingerprint they had before the fields existed, so their checkpoints still load.
 FINGERPRINT_FIELDS_IF_SET = ("context_selector", "context_selector_options")
+#: ``divergence`` is fingerprinted only when it is not the default, for the same reason.
+DEFAULT_DIVERGENCE = RunConfig.divergence
 #: The fields format ``creps_gym.run/2`` fingerprinted (it had no ``context_draws``: always ``"reset"``).
 FINGERPRINT_FIELDS_2 = tuple(name for name in FINGERPRINT_FIELDS if name != "context_draws")
 
@@ -182,6 +184,8 @@ def config_fingerprint(config: RunConfig, checkpoint_format: str = CHECKPOINT_FO
     document = {"format": checkpoint_format, **{name: data[name] for name in names}}
     if data.get("context_selector") is not None:
         document.update({name: data[name] for name in FINGERPRINT_FIELDS_IF_SET})
+    if data.get("divergence", DEFAULT_DIVERGENCE) != DEFAULT_DIVERGENCE:  # the default: as before it existed
+        document["divergence"] = data["divergence"]
     return hashlib.sha256(json.dumps(document, sort_keys=True, allow_nan=False).encode()).hexdigest()
 
 
@@ -201,7 +205,8 @@ def possible_stop_reason(stop: Any, config: RunConfig, iteration: int) -> bool:
     ``stop`` None means not stopped. The loop (:mod:`creps_gym.runner.loop`) checks its reasons in order:
     at ``config.iterations`` the reason is ``"iterations"``, and only there; where the next iteration would
     exceed ``max_episodes`` it is ``"max_episodes"``; the others need their option (``target_regret``,
-    ``max_time``) or are ``"callback"`` or ``"optimizer: "`` with plain sorted criterion names.
+    ``max_time``, ``divergence``) or are ``"callback"`` or ``"optimizer: "`` with plain sorted criterion
+    names.
     """
     if stop is not None and not isinstance(stop, str):
         return False
@@ -211,7 +216,12 @@ def possible_stop_reason(stop: Any, config: RunConfig, iteration: int) -> bool:
         return stop == ("iterations" if iteration >= config.iterations else "max_episodes")
     if stop is None:
         return True
-    needs = {"target_regret": config.target_regret, "max_time": config.max_time, "callback": True}
+    needs = {
+        "target_regret": config.target_regret,
+        "max_time": config.max_time,
+        "divergence": config.divergence,
+        "callback": True,
+    }
     if stop in needs:
         return iteration > 0 and needs[stop] is not None
     criteria = stop.removeprefix("optimizer: ").split(", ")

@@ -10,8 +10,10 @@ Ids (collected by :mod:`creps_gym.envs.registration`)
     :class:`ReacherTargetVectorEnv`.
 
 Each class docstring is the env's manual. Both render ``rgb_array`` frames through the inner MuJoCo env
-(headless: ``MUJOCO_GL=egl`` or ``osmesa``). The native vector envs run the episodes one after another in
-one process; ``gymnasium.make_vec(id, n, vectorization_mode="async")`` runs them in parallel processes.
+(headless: EGL or OSMesa, chosen by :func:`creps_gym.envs.opengl.choose_gl_backend` when ``MUJOCO_GL`` is
+unset; where none works, every render raises the same ``RuntimeError``). The native vector envs run the
+episodes one after another in one process; ``gymnasium.make_vec(id, n, vectorization_mode="async")`` runs
+them in parallel processes.
 
 Seeding across vectorisation modes. ``reset(seed=s)`` of the native vector env draws all n contexts from
 one generator seeded with ``s``; Gymnasium's sync and async vector envs seed sub-env ``i`` with ``s + i``.
@@ -39,6 +41,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym.envs.opengl import check_rendering, choose_gl_backend, is_gl_error, record_failure
 from creps_gym.wrappers.episodic import EpisodicEnv, EpisodicVectorEnv
 
 __all__ = [
@@ -78,6 +81,7 @@ _REACHER: dict[str, Any] = {
 def _import_robotics_quietly() -> None:
     """Import Gymnasium-Robotics (registers its ids) without the Adroit notice it prints to stderr."""
     if "gymnasium_robotics" not in sys.modules:
+        choose_gl_backend()  # it imports mujoco, which reads MUJOCO_GL once
         with contextlib.redirect_stderr(io.StringIO()):
             importlib.import_module("gymnasium_robotics")
 
@@ -93,6 +97,7 @@ class _RenderedEpisodicEnv(EpisodicEnv):
             raise ValueError(
                 f"render_mode: expected one of {self.metadata['render_modes']} or None, got {render_mode!r}"
             )
+        choose_gl_backend()  # before the inner env imports mujoco, which reads MUJOCO_GL once
         kwargs = {**copy.deepcopy(self._defaults), **overrides}
         if render_mode is not None:  # the inner env renders the frames
             kwargs["env_kwargs"] = {**kwargs.get("env_kwargs", {}), "render_mode": render_mode}
@@ -105,10 +110,29 @@ class _RenderedEpisodicEnv(EpisodicEnv):
             return None
         if self._context is None:
             raise RuntimeError("render() called before reset(): there is no context to show")
+        check_rendering()  # one clear error, every time, where a GL context would fail or abort
         if self._last_params is None:  # show the episode's start with its context
             observation, _ = self.inner.reset(seed=self.start_seed, options=self.reset_options)
             self.access.write(self.inner, self._context, observation)
-        return self.inner.render()
+            _update_positions(self.inner)  # the goal marker moved to the context: place it before drawing
+        try:
+            return self.inner.render()
+        except Exception as exc:  # the GL backends raise assorted error types
+            if is_gl_error(exc):
+                raise record_failure(exc) from exc
+            raise
+
+
+def _update_positions(env: Any) -> None:
+    """``mj_forward`` on the MuJoCo model behind ``env`` (a maze's ``point_env`` or the env itself), so
+    that sites moved by writing the context (the maze's goal marker) are drawn where they now are."""
+    inner = env.unwrapped
+    simulation = getattr(inner, "point_env", inner)
+    model, data = getattr(simulation, "model", None), getattr(simulation, "data", None)
+    if model is not None and data is not None:
+        import mujoco
+
+        mujoco.mj_forward(model, data)
 
 
 class PointMazeGoalEnv(_RenderedEpisodicEnv):

@@ -49,7 +49,7 @@ class ContextualFunctionEnv(ContextualEpisodicEnv):
         self, dim: int = 15, context_dim: int = 1, instance: int = 0, render_mode: str | None = None
     ) -> None:
         self.dim = check_positive_int(dim, "dim", minimum=2)
-        context_dim = check_positive_int(context_dim, "context_dim", minimum=1)
+        context_dim = check_positive_int(context_dim, "context_dim", minimum=0)
         self.instance = check_positive_int(instance, "instance", minimum=0)
         spec = self.function
         rotation = 2 * self.dim**2 if spec.rotated else 0  # the Gaussian and the orthonormalised matrix

@@ -95,6 +95,8 @@ class FunctionInstance:
         rounding is symmetric, so negating A first gives exactly ``-(A s)`` with one pass fewer.
         """
         columns = self._negated_columns
+        if not columns:  # z = 0: a non-contextual function, theta* is the same for every (empty) context
+            return np.zeros((contexts.shape[0], self.dim))
         out = contexts[:, 0:1] * columns[0]
         for j in range(1, len(columns)):
             out += contexts[:, j : j + 1] * columns[j]

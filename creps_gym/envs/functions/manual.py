@@ -52,8 +52,10 @@ theta = 1e200): no step returns ±inf or NaN. The paper's stopping target is {ta
 ``gymnasium.make("creps_gym/{name}-v0", dim=15, context_dim=1, instance=0)``
 
 * ``dim`` (int >= 2): p, the number of parameters. The paper uses 15 (and 2 to 64 in Fig. 3).
-* ``context_dim`` (int >= 1): z. The default is 1; the paper's text says both 1 and 3 (and 1 to 5 in
-  Fig. 3).
+* ``context_dim`` (int >= 0): z. The default is 1; the paper's text says both 1 and 3 (and 1 to 5 in
+  Fig. 3). ``context_dim=0`` gives the non-contextual function: the context space is ``Box`` of shape
+  (0,), every episode's optimum is the same theta*, and the optimisers run as plain (non-contextual)
+  searches on it.
 * ``instance`` (int >= 0): seed of A{seed_text}.
 
 ``gymnasium.make_vec("creps_gym/{name}-v0", num_envs=n)`` gives the native vector env, which evaluates

@@ -15,9 +15,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-import mujoco
-import numpy as np
-from numpy.typing import NDArray
+from creps_gym.envs.opengl import choose_gl_backend
+
+choose_gl_backend()  # MuJoCo reads MUJOCO_GL once, when it is imported
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+from numpy.typing import NDArray  # noqa: E402
 
 __all__ = [
     "ASSET_PATH",

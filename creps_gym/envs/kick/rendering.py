@@ -1,7 +1,9 @@
 """Offscreen rendering of kick episodes and a GIF/MP4 writer.
 
-Headless machines need an OpenGL backend chosen *before* mujoco is imported: ``MUJOCO_GL=egl`` (Debian
-packages ``libegl1 libegl-mesa0 libgbm1 libgl1-mesa-dri``) or ``MUJOCO_GL=osmesa`` (``libosmesa6``).
+Headless machines need an OpenGL backend chosen *before* mujoco is imported: with ``MUJOCO_GL`` unset,
+:func:`creps_gym.envs.opengl.choose_gl_backend` picks EGL (Debian packages ``libegl1 libegl-mesa0 libgbm1
+libgl1-mesa-dri``), else OSMesa (``libosmesa6``), whichever works; where none does, every render raises the
+same ``RuntimeError`` (the interpreter never aborts).
 Software rendering costs roughly 0.05-0.15 s per 480x360 frame.
 """
 
@@ -11,19 +13,16 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import mujoco
-import numpy as np
-from numpy.typing import NDArray
+from creps_gym.envs.opengl import check_rendering, choose_gl_backend, record_failure
 
-from creps_gym._validation import check_real
+choose_gl_backend()  # MuJoCo reads MUJOCO_GL once, when it is imported
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+from numpy.typing import NDArray  # noqa: E402
+
+from creps_gym._validation import check_real  # noqa: E402
 
 __all__ = ["KickRenderer", "save_video"]
-
-_GL_HELP = (
-    "no OpenGL context could be created for rendering. On a headless machine set MUJOCO_GL=egl (Debian "
-    "packages libegl1 libegl-mesa0 libgbm1 libgl1-mesa-dri) or MUJOCO_GL=osmesa (libosmesa6) before "
-    "mujoco is imported"
-)
 
 
 class KickRenderer:
@@ -43,10 +42,11 @@ class KickRenderer:
             raise ValueError(f"width, height: expected at most {max_w}x{max_h}, got {width}x{height}")
         self.model = model
         self.data = mujoco.MjData(model)
+        check_rendering()  # one clear error, every time, where a GL context would fail or abort
         try:
             self._renderer = mujoco.Renderer(model, height=height, width=width)
         except Exception as exc:  # the GL backends raise assorted error types
-            raise RuntimeError(f"{_GL_HELP} ({type(exc).__name__}: {exc})") from exc
+            raise record_failure(exc) from exc
         self.camera = mujoco.MjvCamera()
         self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
         self.camera.azimuth, self.camera.elevation = 60.0, -25.0  # behind the robot, on its right

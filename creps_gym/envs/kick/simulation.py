@@ -21,12 +21,15 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 
-import mujoco
-import mujoco.batch
-import numpy as np
-from numpy.typing import NDArray
+from creps_gym.envs.opengl import choose_gl_backend
 
-from creps_gym.envs.kick.model import STAND_POSE, KickModels
+choose_gl_backend()  # MuJoCo reads MUJOCO_GL once, when it is imported
+import mujoco  # noqa: E402
+import mujoco.batch  # noqa: E402
+import numpy as np  # noqa: E402
+from numpy.typing import NDArray  # noqa: E402
+
+from creps_gym.envs.kick.model import STAND_POSE, KickModels  # noqa: E402
 
 __all__ = [
     "CHUNK",

@@ -1,0 +1,47 @@
+"""Contextual CMA-ES's public face: the options in ``help()`` and the diagnostics' meanings."""
+
+from __future__ import annotations
+
+import inspect
+import math
+import pydoc
+from dataclasses import fields
+
+import numpy as np
+
+from creps_gym.optimizers import CCMAES, CCMAESConfig
+
+
+def test_help_and_the_signature_show_every_option_with_its_default():
+    signature = inspect.signature(CCMAES)
+    options = [f for f in fields(CCMAESConfig) if f.init]
+    assert list(signature.parameters) == [f.name for f in options]
+    for option in options[2:]:  # after n_params and n_context_dims: keyword-only, with the config's default
+        parameter = signature.parameters[option.name]
+        assert parameter.kind is inspect.Parameter.KEYWORD_ONLY and parameter.default == option.default
+    text = pydoc.render_doc(CCMAES, renderer=pydoc.plaintext)
+    for option in options:
+        assert f"{option.name}=" in text or f"{option.name} :" in text or f"{option.name}," in text
+    assert "baseline_bandwidth : float" in text and "restarts : int" in text
+
+
+def _run_sphere(iterations: int) -> CCMAES:
+    optimizer = CCMAES(6, 1, initial_cov=4.0, seed=1)
+    rng = np.random.default_rng(2)
+    for _ in range(iterations):
+        contexts = rng.uniform(1.0, 2.0, (16, 1))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -((params - contexts) ** 2).sum(axis=1))
+    return optimizer
+
+
+def test_search_scale_is_the_root_mean_variance_of_the_search_not_sigma():
+    """σ alone is not the search's spread (C carries a scale too, det C drifts from 1): ``search_scale`` is
+    σ·√(mean eigenvalue of C) = √(trace(σ²C)/p)."""
+    optimizer = _run_sphere(60)
+    diagnostics = optimizer.diagnostics
+    assert diagnostics["step_size"] == optimizer.step_size
+    expected = math.sqrt(float(np.trace(optimizer.cov)) / optimizer.n_params)
+    assert math.isclose(diagnostics["search_scale"], expected, rel_tol=1e-9)
+    assert not math.isclose(diagnostics["search_scale"], diagnostics["step_size"], rel_tol=1e-3)
+    assert diagnostics["search_scale"] <= diagnostics["max_std"] * (1 + 1e-12)

@@ -8,6 +8,7 @@ import pydoc
 from dataclasses import fields
 
 import numpy as np
+import pytest
 
 from creps_gym.optimizers import CCMAES, CCMAESConfig
 
@@ -45,3 +46,44 @@ def test_search_scale_is_the_root_mean_variance_of_the_search_not_sigma():
     assert math.isclose(diagnostics["search_scale"], expected, rel_tol=1e-9)
     assert not math.isclose(diagnostics["search_scale"], diagnostics["step_size"], rel_tol=1e-3)
     assert diagnostics["search_scale"] <= diagnostics["max_std"] * (1 + 1e-12)
+
+
+def _converge_then_restart(**options) -> tuple[CCMAES, np.ndarray]:
+    """A contextual sphere (θ*(s) = s·1) until tolx = 1e-2 restarts the search once."""
+    optimizer = CCMAES(4, 1, initial_mean=3.0, initial_cov=1.0, tolx=1e-2, restarts=1, seed=5, **options)
+    rng = np.random.default_rng(6)
+    while optimizer.restarts_done == 0:
+        contexts = rng.uniform(0.0, 1.0, (16, 1))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -((params - contexts) ** 2).sum(axis=1))
+        assert optimizer.iteration < 400
+    return optimizer, np.linspace(0.0, 1.0, 5)[:, None]
+
+
+def test_a_restart_keeps_the_best_mean_policy_as_the_recommendation():
+    """C10: the restart resets the search to its initial mean, but ``recommend`` keeps the converged policy
+    until the new search scores better; with ``keep_best=False`` the recommendation restarts too."""
+    optimizer, tests = _converge_then_restart()
+    assert np.array_equal(optimizer.coefficients, optimizer.config.initial_mean)  # the search restarted
+    regret = ((optimizer.recommend(tests) - tests) ** 2).sum(axis=1)
+    assert regret.max() < 1e-2 and np.isfinite(optimizer.best_score)
+    plain, _ = _converge_then_restart(keep_best=False)
+    assert np.allclose(plain.recommend(tests), 3.0) and plain.best_coefficients is None
+
+
+def test_the_kept_policy_survives_a_checkpoint_bit_identically(tmp_path):
+    optimizer, tests = _converge_then_restart()
+    restored = CCMAES.load(optimizer.save(tmp_path / "c.npz"))
+    assert np.array_equal(restored.recommend(tests), optimizer.recommend(tests))
+    assert restored.best_score == optimizer.best_score
+    contexts = np.full((16, 1), 0.5)
+    assert np.array_equal(restored.ask(contexts), optimizer.ask(contexts))
+    state = optimizer.state_dict()
+    state["best_score"] = np.array([np.nan])
+    with pytest.raises(ValueError, match="best_score"):
+        CCMAES.from_state_dict(state)
+
+
+def test_keep_best_must_be_a_bool():
+    with pytest.raises(TypeError, match="keep_best"):
+        CCMAES(3, 1, keep_best="yes")

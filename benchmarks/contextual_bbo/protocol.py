@@ -6,7 +6,9 @@ the returns −f_s(θ), and records after every generation:
 - the protocol's measure: the generation's average return, the mean of −f_s over its N episodes (the
   published tables give this at the last generation, averaged over the runs);
 - ours: the mean over 100 fixed test contexts of the regret f_s(m(s)) of the optimiser's mean policy m(s)
-  (its ``recommend``), and the episodes until that regret is ≤ 1e-5.
+  (its ``recommend``), and the episodes until that regret is ≤ 1e-5; beside it the same regret of the
+  running search's mean (``policy.mean``), which differs from ``recommend`` only where a restart kept a
+  better policy (``c-cma-es``'s ``keep_best``): it is what ``keep_best=False`` recommends on the same run.
 
 Every episode counted is a true evaluation of f_s. A run that ends before its budget (the optimiser's stop
 criteria fire with no restart left, or its update fails) keeps its last generation's values for the rest of
@@ -107,7 +109,7 @@ def run_protocol(spec: ProtocolSpec, checkpoint_dir: Path | None = None) -> dict
         spec.method, N_PARAMS, problem.context_dim, seed=draw.optimizer_seed,
         initial_mean=draw.initial_mean, initial_cov=problem.sigma0**2, **dict(spec.options),
     )  # fmt: skip
-    averages, regrets, hit, stop_reason = [], [], None, "budget"
+    averages, regrets, running, hit, stop_reason = [], [], [], None, "budget"
     for generation in range(problem.generations):
         contexts = draw.contexts(GENERATION)
         params = optimizer.ask(contexts)
@@ -119,6 +121,9 @@ def run_protocol(spec: ProtocolSpec, checkpoint_dir: Path | None = None) -> dict
         averages.append(-float(values.mean()))
         recommended = optimizer.recommend(draw.test_contexts)
         regrets.append(float(draw.regret(draw.test_contexts, recommended).mean()))
+        policy = getattr(optimizer, "policy", None)
+        means = recommended if policy is None else policy.mean(draw.test_contexts)
+        running.append(float(draw.regret(draw.test_contexts, means).mean()))
         if hit is None and regrets[-1] <= TARGET:
             hit = (generation + 1) * GENERATION
         met = optimizer.stop() if stop_reason == "budget" else {}
@@ -129,12 +134,14 @@ def run_protocol(spec: ProtocolSpec, checkpoint_dir: Path | None = None) -> dict
     ran = len(averages)
     averages += [averages[-1]] * (problem.generations - ran)  # an early end keeps its last values
     regrets += [regrets[-1]] * (problem.generations - ran)
+    running += [running[-1]] * (problem.generations - ran)
     indices = _curve_indices(problem.generations)
     return {
         "spec": {**asdict(spec), "options": dict(spec.options), "budget": problem.episodes},
         "key": spec.key,
         "hit": hit,
         "final": regrets[-1],
+        "final_running": running[-1],
         "protocol_last": averages[-1],
         "generations_run": ran,
         "total_episodes": ran * GENERATION,
@@ -144,6 +151,7 @@ def run_protocol(spec: ProtocolSpec, checkpoint_dir: Path | None = None) -> dict
             "generation": [i + 1 for i in indices],
             "average_return": [averages[i] for i in indices],
             "regret": [regrets[i] if math.isfinite(regrets[i]) else 1e300 for i in indices],
+            "regret_running": [running[i] if math.isfinite(running[i]) else 1e300 for i in indices],
         },
         "seconds": round(time.perf_counter() - start, 3),
         "environment": environment_record(),

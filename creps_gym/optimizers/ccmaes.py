@@ -19,6 +19,10 @@ One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N
    samples' weighted mean context. Under random selection y_w ~ N(0, C/μ_eff) exactly, as in CMA-ES.
 5. Paths, covariance and step size (C5)–(C9): CMA-ES's cumulative step-size adaptation, rank-one and rank-μ
    updates with y_k = (θ_k − m_old(s_k))/σ.
+6. Restarts that keep the best (C10, ``keep_best``): a search that ends in a restart leaves its final mean
+   policy as the best one if its score (the mean return of its last ``BEST_WINDOW`` batches, from the told
+   returns only) beats the best so far; ``recommend`` gives the best policy until the running search's score
+   beats it.
 """
 
 from __future__ import annotations
@@ -65,6 +69,8 @@ __all__ = [
 Array = NDArray[np.float64]
 
 recommended_batch_size = PolicyAccess.recommended_batch_size
+#: Batches whose mean returns score a search's mean policy (C10): a few, to average the context draw's noise.
+BEST_WINDOW = 3
 
 
 class _Step(NamedTuple):
@@ -95,6 +101,8 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         self.n_params, self.n_context_dims = config.n_params, config.n_context_dims
         self.rng = np.random.default_rng(config.seed)
         self.restarts_done = 0
+        self.best_coefficients: Array | None = None  # the kept mean policy (C10) and its score
+        self.best_score = -math.inf
         self._eigen_of: Array | None = None
         self._eigen_cache: tuple[Array, Array] = (np.ones(0), np.ones((0, 0)))
         self._reset_search()
@@ -141,6 +149,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             )
         self._diagnostics = dict(step.diagnostics, baseline_r2=explained, mean_return=self.mean_returns[-1])
         if self.restarts_done < config.restarts and self.stop():
+            self._keep_if_best()
             self._reset_search()
             self.restarts_done += 1
             for stale in ("cond_cov", "max_std", "search_scale"):  # they described the abandoned distribution
@@ -180,6 +189,31 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         diagnostics = {"step_size": policy.step_size, "mu_eff": constants.mu_eff, "path_sigma_ratio": ratio,
                        "hsig": float(hsig), "cov_repaired": float(repaired)}  # fmt: skip
         return _Step(policy, path_sigma, path_cov, diagnostics)
+
+    def _search_score(self) -> float:
+        """The running search's score (C10): the mean of its last ``BEST_WINDOW`` batch mean returns (−inf
+        before it has told that many)."""
+        recent = self.mean_returns[-BEST_WINDOW:]
+        return float(np.mean(recent)) if len(recent) == BEST_WINDOW else -math.inf
+
+    def _keep_if_best(self) -> None:
+        """Eq. (C10): before a restart, keep the ending search's mean policy if it scores best so far."""
+        score = self._search_score()
+        if self.config.keep_best and score > self.best_score:
+            self.best_coefficients, self.best_score = self.policy.coefficients.copy(), score
+
+    def recommend(self, contexts: Any) -> Array:
+        """The mean policy Aᵀϕ(s) for contexts (n, z), shape (n, p): the running search's, or with
+        ``keep_best`` the best one a restart left (C10) while the running search scores below it."""
+        if self.best_coefficients is None or self._search_score() >= self.best_score:
+            return super().recommend(contexts)
+        kept = self.policy.copy()
+        kept.coefficients = self.best_coefficients.copy()
+        running, self.policy = self.policy, kept
+        try:
+            return super().recommend(contexts)
+        finally:
+            self.policy = running
 
     def _eigen(self) -> tuple[Array, Array]:
         """``eigh`` of C, computed once per update: the diagnostics, the stop criteria and the next update's
@@ -225,7 +259,10 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             past_contexts=self.past_contexts.copy(),
             past_returns=self.past_returns.copy(),
             restarts_done=self.restarts_done,
-        )
+            best_coefficients=np.zeros((0, self.n_params)) if self.best_coefficients is None
+            else self.best_coefficients.copy(),
+            best_score=np.asarray([self.best_score] if self.best_coefficients is not None else []),
+        )  # fmt: skip
         return state
 
     @classmethod
@@ -253,6 +290,10 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         optimizer.past_returns = read("past_returns", (optimizer.past_contexts.shape[0],))
         optimizer.flat_iterations = int(state["flat_iterations"])
         optimizer.restarts_done = int(state["restarts_done"])
+        if "best_coefficients" in state and np.asarray(state["best_coefficients"]).size:  # absent before C10
+            k = config.mean_map.n_features
+            optimizer.best_coefficients = read("best_coefficients", (k, p))
+            optimizer.best_score = float(read("best_score", (1,))[0])
         return optimizer
 
 

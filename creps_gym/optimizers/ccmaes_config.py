@@ -54,6 +54,9 @@ class CCMAESConfig:
     seed : int or None              seed of the sampling Generator.
     restarts : int                  restarts from the initial distribution when a stop criterion is met
         (``stop()`` reports criteria only once they are used up).
+    keep_best : bool                at each restart, keep the ending search's mean policy if it scored best so
+        far (score: the mean return of its last ``BEST_WINDOW`` batches); ``recommend`` gives it until the
+        new search scores better, so a restart cannot make the recommendation worse (C10).
     tolx, tolupsigma, max_condition, tolstagnation, tolflatfitness : stop criteria like pycma's
         (``tolstagnation=None`` means 100 + 100·p^1.5/N iterations).
     """
@@ -70,6 +73,7 @@ class CCMAESConfig:
     baseline_loss: str = "squared"
     baseline_bandwidth: float = 0.0
     restarts: int = 3
+    keep_best: bool = True
     step_size_signal: str = "mean"
     ridge: float = 1e-8
     baseline_ridge: float = 1e-10
@@ -103,6 +107,7 @@ class CCMAESConfig:
         if self.tolstagnation is not None:
             object.__setattr__(self, "tolstagnation", check_positive_int(self.tolstagnation, "tolstagnation"))
         object.__setattr__(self, "active", check_bool(self.active, "active"))
+        object.__setattr__(self, "keep_best", check_bool(self.keep_best, "keep_best"))
         standardise = check_bool(self.standardise_advantages, "standardise_advantages")
         object.__setattr__(self, "standardise_advantages", standardise)
         if self.baseline_loss not in LOSSES:

@@ -63,16 +63,16 @@ def _converge_then_restart(**options) -> tuple[CCMAES, np.ndarray]:
 def test_a_restart_keeps_the_best_mean_policy_as_the_recommendation():
     """C10: the restart resets the search to its initial mean, but ``recommend`` keeps the converged policy
     until the new search scores better; with ``keep_best=False`` the recommendation restarts too."""
-    optimizer, tests = _converge_then_restart()
+    optimizer, tests = _converge_then_restart(keep_best=True)
     assert np.array_equal(optimizer.coefficients, optimizer.config.initial_mean)  # the search restarted
     regret = ((optimizer.recommend(tests) - tests) ** 2).sum(axis=1)
     assert regret.max() < 1e-2 and np.isfinite(optimizer.best_score)
-    plain, _ = _converge_then_restart(keep_best=False)
+    plain, _ = _converge_then_restart()  # keep_best=False, the default
     assert np.allclose(plain.recommend(tests), 3.0) and plain.best_coefficients is None
 
 
 def test_the_kept_policy_survives_a_checkpoint_bit_identically(tmp_path):
-    optimizer, tests = _converge_then_restart()
+    optimizer, tests = _converge_then_restart(keep_best=True)
     restored = CCMAES.load(optimizer.save(tmp_path / "c.npz"))
     assert np.array_equal(restored.recommend(tests), optimizer.recommend(tests))
     assert restored.best_score == optimizer.best_score

@@ -43,6 +43,7 @@ SEEDS = {"quick": 3, "full": 20}
 #: The columns: (label, registry name, options). An empty label is the method with its defaults.
 COLUMNS: tuple[tuple[str, str, tuple[tuple[str, object], ...]], ...] = (
     ("", "c-cma-es", ()),
+    ("c-cma-es-keep-best", "c-cma-es", (("keep_best", True),)),
     ("c-cma-es-no-restarts", "c-cma-es", (("restarts", 0),)),
 )
 

@@ -56,7 +56,8 @@ class CCMAESConfig:
         (``stop()`` reports criteria only once they are used up).
     keep_best : bool                at each restart, keep the ending search's mean policy if it scored best so
         far (score: the mean return of its last ``BEST_WINDOW`` batches); ``recommend`` gives it until the
-        new search scores better, so a restart cannot make the recommendation worse (C10).
+        new search scores better, so a restart cannot make the recommendation worse (C10). Off by default
+        until the committed studies' restarted ``c-cma-es`` runs are recomputed with it.
     tolx, tolupsigma, max_condition, tolstagnation, tolflatfitness : stop criteria like pycma's
         (``tolstagnation=None`` means 100 + 100·p^1.5/N iterations).
     """
@@ -73,7 +74,7 @@ class CCMAESConfig:
     baseline_loss: str = "squared"
     baseline_bandwidth: float = 0.0
     restarts: int = 3
-    keep_best: bool = True
+    keep_best: bool = False
     step_size_signal: str = "mean"
     ridge: float = 1e-8
     baseline_ridge: float = 1e-10

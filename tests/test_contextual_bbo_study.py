@@ -77,6 +77,7 @@ def test_the_committed_results_are_rendered_from_the_committed_runs(tmp_path, mo
     shutil.copy(committed / "timing.json", tmp_path / "timing.json")
     assert run.main([f"--{mode}", "--render-only", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "results.md").read_text() == (committed / "results.md").read_text()
+    assert (tmp_path / "curves.png").stat().st_size > 10_000
     for spec in run.specs_for(mode, list(PROBLEMS)):
         document = load_document(STUDY / "runs" / f"{spec.key}.json")
         assert document is not None, spec.key  # every run of the mode is committed

@@ -17,7 +17,7 @@ import numpy as np
 from benchmarks.contextual_bbo.problems import GENERATION, N_PARAMS, PROBLEMS
 from benchmarks.contextual_bbo.protocol import TARGET
 
-__all__ = ["PUBLISHED", "load_published", "protocol_table", "regret_table", "render"]
+__all__ = ["PUBLISHED", "load_published", "plot_curves", "protocol_table", "regret_table", "render"]
 
 PUBLISHED = Path(__file__).resolve().parent / "published.json"
 
@@ -134,3 +134,27 @@ running search's mean instead, which is what `c-cma-es` recommends with `keep_be
 
 {_environments(documents)}
 """
+
+
+def plot_curves(documents: Sequence[dict[str, Any]], path: Path) -> Path:
+    """One panel per function: the median over the runs of the mean policy's test regret against the
+    episodes, one line per column (log scale); saved to ``path`` (PNG)."""
+    import matplotlib.pyplot as plt
+
+    cells = _by_cell(documents)
+    figure, axes = plt.subplots(2, 3, figsize=(13, 7), constrained_layout=True)
+    for axis, (name, problem) in zip(axes.flat, PROBLEMS.items(), strict=True):
+        for column in _columns(documents):
+            runs = cells.get((name, column))
+            if runs:
+                episodes = np.asarray(runs[0]["curve"]["generation"]) * GENERATION
+                median = np.median([d["curve"]["regret"] for d in runs], axis=0)
+                axis.plot(episodes, np.maximum(median, 1e-16), label=column)
+        axis.axhline(TARGET, color="grey", linestyle=":", linewidth=1)
+        axis.set(title=f"{name} (n_s = {problem.context_dim})", xlabel="episodes", yscale="log")
+        axis.set_ylabel("median test regret")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    figure.legend(handles, labels, loc="outside lower center", ncols=max(1, len(labels)))
+    figure.savefig(path, dpi=90)
+    plt.close(figure)
+    return path

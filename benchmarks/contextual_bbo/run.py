@@ -23,9 +23,13 @@ from pathlib import Path
 if not __package__:
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
+import matplotlib
+
+matplotlib.use("Agg")
+
 from benchmarks.contextual_bbo.problems import PROBLEMS
 from benchmarks.contextual_bbo.protocol import ProtocolSpec, run_protocol
-from benchmarks.contextual_bbo.report import load_published, render
+from benchmarks.contextual_bbo.report import load_published, plot_curves, render
 from benchmarks.study_runner import (
     add_mode_options,
     add_output_options,
@@ -83,6 +87,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = f"python benchmarks/contextual_bbo/run.py {command_flags(argv, args.mode)}"
     text = render(documents, load_published(), command, timing_text(timing, documents))
     write_text(out / "results.md", text)
+    plot_curves(documents, out / "curves.png")
     if args.out is None:
         update_block(STUDY / "README.md", f"results-{args.mode}", text.split("\n", 1)[1])
     print(f"wrote {out / 'results.md'}")

@@ -19,57 +19,43 @@ One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N
    samples' weighted mean context. Under random selection y_w ~ N(0, C/μ_eff) exactly, as in CMA-ES.
 5. Paths, covariance and step size (C5)–(C9): CMA-ES's cumulative step-size adaptation, rank-one and rank-μ
    updates with y_k = (θ_k − m_old(s_k))/σ.
+6. Restarts that keep the best (C10, ``keep_best``): a search that ends in a restart leaves its final mean
+   policy as the best one if its score (the mean return of its last ``BEST_WINDOW`` batches, from the told
+   returns only) beats the best so far; ``recommend`` gives the best policy until the running search's score
+   beats it.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from creps_gym._validation import (
-    as_float_array,
-    check_bool,
-    check_positive_int,
-    check_real_in_range,
-    check_seed,
-)
+from creps_gym._validation import as_float_array, check_positive_int
 from creps_gym.optimizers.base import ContextualOptimizer
+from creps_gym.optimizers.ccmaes_config import CCMAESConfig, options_doc, options_signature
 from creps_gym.optimizers.cma_rules import (
     CMAConstants,
-    cma_constants,
     csa_step,
     distribution_stops,
     expected_norm,
     inverse_sqrt,
-    rank_weights,
     stagnation_window,
     update_paths_and_cov,
 )
 from creps_gym.optimizers.contextual import (
-    LOSSES,
     baseline_features,
-    check_local_baseline,
     coefficient_shift,
     context_advantages,
     contextual_mean,
     local_advantages,
     recent_samples,
 )
-from creps_gym.optimizers.features import FeatureMap, make_features
-from creps_gym.optimizers.policies import (
-    LinearGaussianPolicy,
-    PolicyAccess,
-    check_option_names,
-    initial_coefficients,
-    initial_covariance,
-    split_step_size,
-)
+from creps_gym.optimizers.policies import LinearGaussianPolicy, PolicyAccess, check_option_names
 
 __all__ = [
     "CCMAES",
@@ -81,11 +67,10 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-#: The options of C1's polynomial fit, which the local baseline (C1'') ignores: they must keep their defaults.
-UNUSED_BY_LOCAL_BASELINE = ("standardise_advantages", "baseline_loss", "baseline_degree", "baseline_ridge")
-SIGNALS = ("coefficients", "mean")
 
 recommended_batch_size = PolicyAccess.recommended_batch_size
+#: Batches whose mean returns score a search's mean policy (C10): a few, to average the context draw's noise.
+BEST_WINDOW = 3
 
 
 class _Step(NamedTuple):
@@ -95,146 +80,13 @@ class _Step(NamedTuple):
     diagnostics: dict[str, float]
 
 
-@dataclass(frozen=True, eq=False)
-class CCMAESConfig:
-    """Configuration of :class:`CCMAES`; validates itself on construction.
-
-    Parameters
-    ----------
-    n_params : int                  p, the dimension of θ.
-    n_context_dims : int            z, the dimension of s (0 for a plain CMA-ES).
-    initial_mean : scalar, (p,) or (k, p)   initial mean (constant over contexts) or coefficients A.
-    initial_cov : scalar, (p,) or (p, p)    initial Σ0 = σ0²C0, split with det C0 = 1.
-    mean_features : str, dict or FeatureMap ϕ(s) of the mean; ``"affine"`` = [1, s].
-    active : bool                   negative weights for the worst half (active CMA).
-    baseline_degree : int           degree of the context baseline's polynomial (2: a full quadratic).
-    baseline_batches : int          batches the baseline is fitted on: the current one and the last
-        (``baseline_batches`` − 1)·N samples before it (sample reuse; 1: the current batch only).
-    standardise_advantages : bool   divide a_k by a context-dependent scale fitted like V (C1).
-    baseline_loss : str             ``"squared"`` (least squares) or ``"huber"`` (Huber's M-estimate, robust
-        to a few outlying returns such as falls) for the fit of V (C1).
-    baseline_bandwidth : float      0: the polynomial V above; h > 0: a local V, the kernel-weighted median of
-        the recent returns with a Gaussian bandwidth of h context standard deviations (C1'').
-    ridge, baseline_ridge : float   relative ridges of the mean fit (C3) and of the baseline (C1).
-    c_sigma, d_sigma, c_c, c_1, c_mu : float or None   learning rates; None = the tutorial's defaults.
-    c_m : float                     the mean's learning rate in (0, 1] (C3'): A ← A + c_m (A_fit − A);
-        below 1 it averages the regression's noise over about (2 − c_m)/c_m batches.
-    mean_repulsion : float          α in [0, 1] (C3''): A_fit also moves away from the negatively weighted
-        samples by α times their fitted shift (needs ``active``; 0: CMA-ES's positive-weight mean).
-    seed : int or None              seed of the sampling Generator.
-    restarts : int                  restarts from the initial distribution when a stop criterion is met
-        (``stop()`` reports criteria only once they are used up).
-    tolx, tolupsigma, max_condition, tolstagnation, tolflatfitness : stop criteria like pycma's
-        (``tolstagnation=None`` means 100 + 100·p^1.5/N iterations).
-    """
-
-    n_params: int
-    n_context_dims: int
-    initial_mean: Any = 0.0
-    initial_cov: Any = 1.0
-    mean_features: Any = "affine"
-    active: bool = True
-    baseline_degree: int = 2
-    baseline_batches: int = 3
-    standardise_advantages: bool = False
-    baseline_loss: str = "squared"
-    baseline_bandwidth: float = 0.0
-    restarts: int = 3
-    step_size_signal: str = "mean"
-    ridge: float = 1e-8
-    baseline_ridge: float = 1e-10
-    c_sigma: float | None = None
-    d_sigma: float | None = None
-    c_c: float | None = None
-    c_1: float | None = None
-    c_mu: float | None = None
-    c_m: float = 1.0
-    mean_repulsion: float = 0.0
-    seed: int | None = None
-    tolx: float = 1e-11
-    tolupsigma: float = 1e20
-    max_condition: float = 1e14
-    tolstagnation: int | None = None
-    tolflatfitness: int = 10
-    mean_map: FeatureMap = field(init=False, repr=False)
-    initial_step_size: float = field(init=False, repr=False)
-    initial_shape: Array = field(init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        for name, minimum in (
-            ("n_params", 1),
-            ("n_context_dims", 0),
-            ("tolflatfitness", 1),
-            ("baseline_degree", 0),
-            ("baseline_batches", 1),
-            ("restarts", 0),
-        ):
-            object.__setattr__(self, name, check_positive_int(getattr(self, name), name, minimum))
-        if self.tolstagnation is not None:
-            object.__setattr__(self, "tolstagnation", check_positive_int(self.tolstagnation, "tolstagnation"))
-        object.__setattr__(self, "active", check_bool(self.active, "active"))
-        standardise = check_bool(self.standardise_advantages, "standardise_advantages")
-        object.__setattr__(self, "standardise_advantages", standardise)
-        if self.baseline_loss not in LOSSES:
-            raise ValueError(f"baseline_loss: expected one of {LOSSES}, got {self.baseline_loss!r}")
-        if self.step_size_signal not in SIGNALS:
-            raise ValueError(f"step_size_signal: expected one of {SIGNALS}, got {self.step_size_signal!r}")
-        for name, low, high in (
-            ("ridge", 0.0, 1.0),
-            ("baseline_ridge", 0.0, 1.0),
-            ("tolx", 0.0, 1e300),
-            ("tolupsigma", 1.0, 1e300),
-            ("max_condition", 1.0, 1e300),
-            ("mean_repulsion", 0.0, 1.0),
-            ("baseline_bandwidth", 0.0, 1e3),
-        ):
-            value = check_real_in_range(getattr(self, name), name, low, high, low_inclusive=low == 0.0)
-            object.__setattr__(self, name, value)
-        for name, high in (("c_sigma", 1.0), ("d_sigma", 1e6), ("c_c", 1.0), ("c_1", 1.0), ("c_mu", 1.0)):
-            if getattr(self, name) is not None:  # None: the tutorial's default; else in (0, high]
-                object.__setattr__(self, name, check_real_in_range(getattr(self, name), name, 0.0, high))
-        object.__setattr__(self, "c_m", check_real_in_range(self.c_m, "c_m", 0.0, 1.0))
-        if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
-            raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
-        defaults = {option.name: option.default for option in fields(self)}
-        unused = {name: (getattr(self, name), defaults[name]) for name in UNUSED_BY_LOCAL_BASELINE}
-        check_local_baseline(self.baseline_bandwidth, unused)
-        if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
-            raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
-        object.__setattr__(self, "seed", check_seed(self.seed))
-        mean_map = make_features(self.mean_features, self.n_context_dims, "mean_features")
-        object.__setattr__(self, "mean_map", mean_map)
-        object.__setattr__(
-            self, "initial_mean", initial_coefficients(self.initial_mean, mean_map, self.n_params)
-        )
-        object.__setattr__(self, "initial_cov", initial_covariance(self.initial_cov, self.n_params))
-        sigma, shape = split_step_size(self.initial_cov)
-        object.__setattr__(self, "initial_step_size", sigma)
-        object.__setattr__(self, "initial_shape", shape)
-
-    def constants(self, n_samples: int) -> CMAConstants:
-        """The strategy constants for a batch of ``n_samples``, with this config's overrides."""
-        return cma_constants(
-            self.n_params,
-            rank_weights(n_samples),
-            active=self.active,
-            overrides={n: getattr(self, n) for n in ("c_sigma", "d_sigma", "c_c", "c_1", "c_mu")},
-        )
-
-    def to_json(self) -> dict[str, Any]:
-        """JSON-serialisable scalars and the feature spec (the initial arrays are saved separately)."""
-        skip = {"initial_mean", "initial_cov", "mean_features"}
-        data = {f.name: getattr(self, f.name) for f in fields(self) if f.init and f.name not in skip}
-        data["mean_features"] = self.mean_map.spec()
-        return data
-
-
 class CCMAES(PolicyAccess, ContextualOptimizer):
     """Contextual CMA-ES with cumulative step-size adaptation and active covariance updates.
 
-    ``CCMAES(n_params, n_context_dims, **options)``; see :class:`CCMAESConfig` for the options and
-    :mod:`creps_gym.optimizers.base` for the protocol. Any batch size of at least two works; the weights and
-    learning rates follow it, and :func:`recommended_batch_size` is the default the runner uses.
+    ``CCMAES(n_params, n_context_dims, **options)``, the options (listed below, keyword-only) validated by
+    :class:`CCMAESConfig`; :mod:`creps_gym.optimizers.base` has the protocol. Any batch size of at least two
+    works; the weights and learning rates follow it, and :func:`recommended_batch_size` is the default the
+    runner uses.
     """
 
     kind: ClassVar[str] = "c-cma-es"
@@ -249,6 +101,8 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         self.n_params, self.n_context_dims = config.n_params, config.n_context_dims
         self.rng = np.random.default_rng(config.seed)
         self.restarts_done = 0
+        self.best_coefficients: Array | None = None  # the kept mean policy (C10) and its score
+        self.best_score = -math.inf
         self._eigen_of: Array | None = None
         self._eigen_cache: tuple[Array, Array] = (np.ones(0), np.ones((0, 0)))
         self._reset_search()
@@ -295,9 +149,10 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             )
         self._diagnostics = dict(step.diagnostics, baseline_r2=explained, mean_return=self.mean_returns[-1])
         if self.restarts_done < config.restarts and self.stop():
+            self._keep_if_best()
             self._reset_search()
             self.restarts_done += 1
-            for stale in ("cond_cov", "max_std"):  # they described the abandoned distribution
+            for stale in ("cond_cov", "max_std", "search_scale"):  # they described the abandoned distribution
                 self._diagnostics.pop(stale, None)
         self._diagnostics["restarts"] = float(self.restarts_done)
 
@@ -335,6 +190,31 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
                        "hsig": float(hsig), "cov_repaired": float(repaired)}  # fmt: skip
         return _Step(policy, path_sigma, path_cov, diagnostics)
 
+    def _search_score(self) -> float:
+        """The running search's score (C10): the mean of its last ``BEST_WINDOW`` batch mean returns (−inf
+        before it has told that many)."""
+        recent = self.mean_returns[-BEST_WINDOW:]
+        return float(np.mean(recent)) if len(recent) == BEST_WINDOW else -math.inf
+
+    def _keep_if_best(self) -> None:
+        """Eq. (C10): before a restart, keep the ending search's mean policy if it scores best so far."""
+        score = self._search_score()
+        if self.config.keep_best and score > self.best_score:
+            self.best_coefficients, self.best_score = self.policy.coefficients.copy(), score
+
+    def recommend(self, contexts: Any) -> Array:
+        """The mean policy Aᵀϕ(s) for contexts (n, z), shape (n, p): the running search's, or with
+        ``keep_best`` the best one a restart left (C10) while the running search scores below it."""
+        if self.best_coefficients is None or self._search_score() >= self.best_score:
+            return super().recommend(contexts)
+        kept = self.policy.copy()
+        kept.coefficients = self.best_coefficients.copy()
+        running, self.policy = self.policy, kept
+        try:
+            return super().recommend(contexts)
+        finally:
+            self.policy = running
+
     def _eigen(self) -> tuple[Array, Array]:
         """``eigh`` of C, computed once per update: the diagnostics, the stop criteria and the next update's
         C^(−1/2) share it."""
@@ -345,11 +225,14 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
 
     @property
     def diagnostics(self) -> dict[str, float]:
-        """σ, μ_eff, ‖p_σ‖/E‖N(0,I)‖, h_σ, R² of the baseline, mean return, max std and cond of σ²C."""
+        """σ (``step_size``), σ·√(mean eigenvalue of C) (``search_scale``, the search's typical spread per
+        coordinate), μ_eff, ‖p_σ‖/E‖N(0,I)‖, h_σ, R² of the baseline (negative when the fit predicts the
+        batch worse than its mean), mean return, max std and cond of σ²C."""
         if "step_size" in self._diagnostics and "cond_cov" not in self._diagnostics:
             eigenvalues = self._eigen()[0]
             self._diagnostics["cond_cov"] = float(eigenvalues[-1] / max(eigenvalues[0], 1e-300))
             self._diagnostics["max_std"] = self.step_size * float(np.sqrt(eigenvalues[-1]))
+            self._diagnostics["search_scale"] = self.step_size * math.sqrt(float(np.mean(eigenvalues)))
         return dict(self._diagnostics)
 
     def stop(self) -> dict[str, Any]:
@@ -376,7 +259,10 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             past_contexts=self.past_contexts.copy(),
             past_returns=self.past_returns.copy(),
             restarts_done=self.restarts_done,
-        )
+            best_coefficients=np.zeros((0, self.n_params)) if self.best_coefficients is None
+            else self.best_coefficients.copy(),
+            best_score=np.asarray([self.best_score] if self.best_coefficients is not None else []),
+        )  # fmt: skip
         return state
 
     @classmethod
@@ -404,4 +290,13 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         optimizer.past_returns = read("past_returns", (optimizer.past_contexts.shape[0],))
         optimizer.flat_iterations = int(state["flat_iterations"])
         optimizer.restarts_done = int(state["restarts_done"])
+        if "best_coefficients" in state and np.asarray(state["best_coefficients"]).size:  # absent before C10
+            k = config.mean_map.n_features
+            optimizer.best_coefficients = read("best_coefficients", (k, p))
+            optimizer.best_score = float(read("best_score", (1,))[0])
         return optimizer
+
+
+# help(CCMAES) and inspect.signature show every option with its default, from the config (one source).
+CCMAES.__doc__ = (CCMAES.__doc__ or "") + options_doc(CCMAESConfig)
+CCMAES.__init__.__signature__ = options_signature(CCMAESConfig)  # type: ignore[attr-defined]

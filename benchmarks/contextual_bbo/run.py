@@ -1,0 +1,98 @@
+"""The field's contextual benchmark (IJCAI 2017 / GECCO 2019 protocol) with our optimisers, beside the
+published values.
+
+    python benchmarks/contextual_bbo/run.py --quick    # 3 runs per cell
+    python benchmarks/contextual_bbo/run.py --full     # 20 runs per cell, as published
+    python benchmarks/contextual_bbo/run.py --full --render-only   # redraw from the committed runs
+
+(or ``python -m benchmarks.contextual_bbo.run ...`` from the repository root). Each run's result is one JSON
+document in ``runs/`` (committed; an interrupted study resumes run by run, since the quick mode's seeds are
+the full mode's first ones, it reuses them). ``results.md`` is rendered from those documents and
+``published.json`` only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+# Run by path: the repository root first on sys.path, as `python -m` puts it (see benchmarks/__init__.py).
+if not __package__:
+    sys.path[0] = str(Path(__file__).resolve().parents[2])
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+from benchmarks.contextual_bbo.problems import PROBLEMS
+from benchmarks.contextual_bbo.protocol import ProtocolSpec, run_protocol
+from benchmarks.contextual_bbo.report import load_published, plot_curves, render
+from benchmarks.study_runner import (
+    add_mode_options,
+    add_output_options,
+    command_flags,
+    invocation_timing,
+    run_all,
+    timing_text,
+    update_block,
+)
+from benchmarks.study_tools import write_text
+from creps_gym.optimizers import optimizer_names
+
+STUDY = Path(__file__).resolve().parent
+SEEDS = {"quick": 3, "full": 20}
+#: The columns: (label, registry name, options). An empty label is the method with its defaults.
+COLUMNS: tuple[tuple[str, str, tuple[tuple[str, object], ...]], ...] = (
+    ("", "c-cma-es", ()),
+    ("c-cma-es-keep-best", "c-cma-es", (("keep_best", True),)),
+    ("c-cma-es-no-restarts", "c-cma-es", (("restarts", 0),)),
+)
+
+
+def specs_for(mode: str, functions: Sequence[str], seeds: int | None = None) -> list[ProtocolSpec]:
+    """Every run of the study: the columns × functions × seeds (registered methods only)."""
+    known = set(optimizer_names())
+    return [
+        ProtocolSpec(function, method, seed, options, label)
+        for label, method, options in COLUMNS
+        if method in known
+        for function in functions
+        for seed in range(seeds or SEEDS[mode])
+    ]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    add_mode_options(parser, quick="3 runs per cell", full="20 runs per cell (the protocol)")
+    add_output_options(parser, STUDY, "results folder (default benchmarks/contextual_bbo/results/<mode>)")
+    parser.add_argument("--functions", nargs="+", default=list(PROBLEMS), choices=list(PROBLEMS))
+    parser.add_argument("--seeds", type=int, help="runs per cell (default: 3 quick, 20 full)")
+    args = parser.parse_args(argv)
+    args.mode = args.mode or "quick"
+    out = args.out or STUDY / "results" / args.mode
+    out.mkdir(parents=True, exist_ok=True)
+    specs = specs_for(args.mode, args.functions, args.seeds)
+    start = time.perf_counter()
+    cached = sum((args.cache / f"{spec.key}.json").exists() for spec in specs)
+    documents = run_all(specs, args.cache, workers=args.workers, worker=run_protocol,
+                        compute=not args.render_only)  # fmt: skip
+    if not documents:
+        print(f"no cached runs in {args.cache}: nothing to render")
+        return 1
+    computed = 0 if args.render_only else len(documents) - cached
+    timing = invocation_timing(out, time.perf_counter() - start, computed, len(specs))
+    command = f"python benchmarks/contextual_bbo/run.py {command_flags(argv, args.mode)}"
+    text = render(documents, load_published(), command, timing_text(timing, documents))
+    write_text(out / "results.md", text)
+    plot_curves(documents, out / "curves.png")
+    if args.out is None:
+        update_block(STUDY / "README.md", f"results-{args.mode}", text.split("\n", 1)[1])
+    print(f"wrote {out / 'results.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

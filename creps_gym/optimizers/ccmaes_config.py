@@ -1,0 +1,189 @@
+"""The configuration of contextual CMA-ES (:class:`~creps_gym.optimizers.ccmaes.CCMAES`): a frozen dataclass
+that validates every option on construction. The algorithm and its references are in
+:mod:`creps_gym.optimizers.ccmaes`."""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym._validation import check_bool, check_positive_int, check_real_in_range, check_seed
+from creps_gym.optimizers.cma_rules import CMAConstants, cma_constants, rank_weights
+from creps_gym.optimizers.contextual import LOSSES, check_local_baseline
+from creps_gym.optimizers.features import FeatureMap, make_features
+from creps_gym.optimizers.policies import initial_coefficients, initial_covariance, split_step_size
+
+__all__ = ["SIGNALS", "UNUSED_BY_LOCAL_BASELINE", "CCMAESConfig", "options_doc", "options_signature"]
+
+Array = NDArray[np.float64]
+#: The options of C1's polynomial fit, which the local baseline (C1'') ignores: they must keep their defaults.
+UNUSED_BY_LOCAL_BASELINE = ("standardise_advantages", "baseline_loss", "baseline_degree", "baseline_ridge")
+SIGNALS = ("coefficients", "mean")
+
+
+@dataclass(frozen=True, eq=False)
+class CCMAESConfig:
+    """Configuration of :class:`CCMAES`; validates itself on construction.
+
+    Parameters
+    ----------
+    n_params : int                  p, the dimension of θ.
+    n_context_dims : int            z, the dimension of s (0 for a plain CMA-ES).
+    initial_mean : scalar, (p,) or (k, p)   initial mean (constant over contexts) or coefficients A.
+    initial_cov : scalar, (p,) or (p, p)    initial Σ0 = σ0²C0, split with det C0 = 1.
+    mean_features : str, dict or FeatureMap ϕ(s) of the mean; ``"affine"`` = [1, s].
+    active : bool                   negative weights for the worst half (active CMA).
+    baseline_degree : int           degree of the context baseline's polynomial (2: a full quadratic).
+    baseline_batches : int          batches the baseline is fitted on: the current one and the last
+        (``baseline_batches`` − 1)·N samples before it (sample reuse; 1: the current batch only).
+    standardise_advantages : bool   divide a_k by a context-dependent scale fitted like V (C1).
+    baseline_loss : str             ``"squared"`` (least squares) or ``"huber"`` (Huber's M-estimate, robust
+        to a few outlying returns such as falls) for the fit of V (C1).
+    baseline_bandwidth : float      0: the polynomial V above; h > 0: a local V, the kernel-weighted median of
+        the recent returns with a Gaussian bandwidth of h context standard deviations (C1'').
+    ridge, baseline_ridge : float   relative ridges of the mean fit (C3) and of the baseline (C1).
+    c_sigma, d_sigma, c_c, c_1, c_mu : float or None   learning rates; None = the tutorial's defaults.
+    c_m : float                     the mean's learning rate in (0, 1] (C3'): A ← A + c_m (A_fit − A);
+        below 1 it averages the regression's noise over about (2 − c_m)/c_m batches.
+    mean_repulsion : float          α in [0, 1] (C3''): A_fit also moves away from the negatively weighted
+        samples by α times their fitted shift (needs ``active``; 0: CMA-ES's positive-weight mean).
+    seed : int or None              seed of the sampling Generator.
+    restarts : int                  restarts from the initial distribution when a stop criterion is met
+        (``stop()`` reports criteria only once they are used up).
+    keep_best : bool                at each restart, keep the ending search's mean policy if it scored best so
+        far (score: the mean return of its last ``BEST_WINDOW`` batches); ``recommend`` gives it until the
+        new search scores better, so a restart cannot make the recommendation worse (C10). Off by default
+        until the committed studies' restarted ``c-cma-es`` runs are recomputed with it.
+    tolx, tolupsigma, max_condition, tolstagnation, tolflatfitness : stop criteria like pycma's
+        (``tolstagnation=None`` means 100 + 100·p^1.5/N iterations).
+    """
+
+    n_params: int
+    n_context_dims: int
+    initial_mean: Any = 0.0
+    initial_cov: Any = 1.0
+    mean_features: Any = "affine"
+    active: bool = True
+    baseline_degree: int = 2
+    baseline_batches: int = 3
+    standardise_advantages: bool = False
+    baseline_loss: str = "squared"
+    baseline_bandwidth: float = 0.0
+    restarts: int = 3
+    keep_best: bool = False
+    step_size_signal: str = "mean"
+    ridge: float = 1e-8
+    baseline_ridge: float = 1e-10
+    c_sigma: float | None = None
+    d_sigma: float | None = None
+    c_c: float | None = None
+    c_1: float | None = None
+    c_mu: float | None = None
+    c_m: float = 1.0
+    mean_repulsion: float = 0.0
+    seed: int | None = None
+    tolx: float = 1e-11
+    tolupsigma: float = 1e20
+    max_condition: float = 1e14
+    tolstagnation: int | None = None
+    tolflatfitness: int = 10
+    mean_map: FeatureMap = field(init=False, repr=False)
+    initial_step_size: float = field(init=False, repr=False)
+    initial_shape: Array = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        for name, minimum in (
+            ("n_params", 1),
+            ("n_context_dims", 0),
+            ("tolflatfitness", 1),
+            ("baseline_degree", 0),
+            ("baseline_batches", 1),
+            ("restarts", 0),
+        ):
+            object.__setattr__(self, name, check_positive_int(getattr(self, name), name, minimum))
+        if self.tolstagnation is not None:
+            object.__setattr__(self, "tolstagnation", check_positive_int(self.tolstagnation, "tolstagnation"))
+        object.__setattr__(self, "active", check_bool(self.active, "active"))
+        object.__setattr__(self, "keep_best", check_bool(self.keep_best, "keep_best"))
+        standardise = check_bool(self.standardise_advantages, "standardise_advantages")
+        object.__setattr__(self, "standardise_advantages", standardise)
+        if self.baseline_loss not in LOSSES:
+            raise ValueError(f"baseline_loss: expected one of {LOSSES}, got {self.baseline_loss!r}")
+        if self.step_size_signal not in SIGNALS:
+            raise ValueError(f"step_size_signal: expected one of {SIGNALS}, got {self.step_size_signal!r}")
+        for name, low, high in (
+            ("ridge", 0.0, 1.0),
+            ("baseline_ridge", 0.0, 1.0),
+            ("tolx", 0.0, 1e300),
+            ("tolupsigma", 1.0, 1e300),
+            ("max_condition", 1.0, 1e300),
+            ("mean_repulsion", 0.0, 1.0),
+            ("baseline_bandwidth", 0.0, 1e3),
+        ):
+            value = check_real_in_range(getattr(self, name), name, low, high, low_inclusive=low == 0.0)
+            object.__setattr__(self, name, value)
+        for name, high in (("c_sigma", 1.0), ("d_sigma", 1e6), ("c_c", 1.0), ("c_1", 1.0), ("c_mu", 1.0)):
+            if getattr(self, name) is not None:  # None: the tutorial's default; else in (0, high]
+                object.__setattr__(self, name, check_real_in_range(getattr(self, name), name, 0.0, high))
+        object.__setattr__(self, "c_m", check_real_in_range(self.c_m, "c_m", 0.0, 1.0))
+        if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
+            raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
+        defaults = {option.name: option.default for option in fields(self)}
+        unused = {name: (getattr(self, name), defaults[name]) for name in UNUSED_BY_LOCAL_BASELINE}
+        check_local_baseline(self.baseline_bandwidth, unused)
+        if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
+            raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
+        object.__setattr__(self, "seed", check_seed(self.seed))
+        mean_map = make_features(self.mean_features, self.n_context_dims, "mean_features")
+        object.__setattr__(self, "mean_map", mean_map)
+        object.__setattr__(
+            self, "initial_mean", initial_coefficients(self.initial_mean, mean_map, self.n_params)
+        )
+        object.__setattr__(self, "initial_cov", initial_covariance(self.initial_cov, self.n_params))
+        sigma, shape = split_step_size(self.initial_cov)
+        object.__setattr__(self, "initial_step_size", sigma)
+        object.__setattr__(self, "initial_shape", shape)
+
+    def constants(self, n_samples: int) -> CMAConstants:
+        """The strategy constants for a batch of ``n_samples``, with this config's overrides."""
+        return cma_constants(
+            self.n_params,
+            rank_weights(n_samples),
+            active=self.active,
+            overrides={n: getattr(self, n) for n in ("c_sigma", "d_sigma", "c_c", "c_1", "c_mu")},
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-serialisable scalars and the feature spec (the initial arrays are saved separately)."""
+        skip = {"initial_mean", "initial_cov", "mean_features"}
+        data = {f.name: getattr(self, f.name) for f in fields(self) if f.init and f.name not in skip}
+        data["mean_features"] = self.mean_map.spec()
+        return data
+
+
+def options_signature(config_class: type = CCMAESConfig) -> inspect.Signature:
+    """``(self, n_params, n_context_dims, *, option=default, ...)`` for every init field of ``config_class``:
+    the signature ``help()`` and ``inspect.signature`` show for an optimiser that takes ``**options``."""
+    self_ = inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    parameters = [self_]
+    for option in fields(config_class):
+        if not option.init:
+            continue
+        positional = option.name in ("n_params", "n_context_dims")
+        kind = inspect.Parameter.POSITIONAL_OR_KEYWORD if positional else inspect.Parameter.KEYWORD_ONLY
+        default = inspect.Parameter.empty if option.default is MISSING else option.default
+        parameters.append(inspect.Parameter(option.name, kind, default=default))
+    return inspect.Signature(parameters, return_annotation=None)
+
+
+def options_doc(config_class: type = CCMAESConfig) -> str:
+    """The "Parameters" section of ``config_class``'s docstring, headed "Options", for the optimiser's own
+    docstring (one source for the options' documentation)."""
+    doc = inspect.cleandoc(config_class.__doc__ or "")
+    _, _, parameters = doc.partition("Parameters\n----------\n")
+    body = "\n".join(f"    {line}" if line else "" for line in parameters.splitlines())
+    return f"\n    Options\n    -------\n{body}\n"

@@ -1,0 +1,84 @@
+"""The contextual BBO study (benchmarks/contextual_bbo/): its functions against their formulas, a run's
+document, and the committed renderings against the committed run documents."""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.contextual_bbo import problems, protocol, run
+from benchmarks.contextual_bbo.problems import PROBLEMS, draw_run
+from benchmarks.study_tools import load_document
+
+STUDY = Path(run.__file__).resolve().parent
+
+
+def _scalar(name: str, x: list[float]) -> float:
+    """Each function's textbook formula, one point at a time (an independent check of the kernels)."""
+    p = len(x)
+    if name == "Sphere":
+        return sum(v * v for v in x)
+    if name == "Rosenbrock":
+        return sum(100 * (x[i + 1] - x[i] ** 2) ** 2 + (1 - x[i]) ** 2 for i in range(p - 1))
+    if name == "Ellipsoidal":
+        return sum(10 ** (6 * i / (p - 1)) * x[i] ** 2 for i in range(p))
+    if name == "Discus":
+        return 1e6 * x[0] ** 2 + sum(v * v for v in x[1:])
+    if name == "DifferentPowers":
+        return math.sqrt(sum(abs(x[i]) ** (2 + 4 * i / (p - 1)) for i in range(p)))
+    mean_square = sum(v * v for v in x) / p
+    waves = sum(math.cos(2 * math.pi * v) for v in x) / p
+    return -20 * math.exp(-0.2 * math.sqrt(mean_square)) - math.exp(waves) + 20 + math.e
+
+
+@pytest.mark.parametrize("name", sorted(PROBLEMS))
+def test_each_function_matches_its_formula_and_is_zero_at_the_contextual_optimum(name):
+    problem = PROBLEMS[name]
+    rng = np.random.default_rng(0)
+    points = rng.normal(0.0, 1.5, (4, problems.N_PARAMS))
+    for row, value in zip(points, problem.kernel(points), strict=True):
+        assert value == pytest.approx(_scalar(name, row.tolist()), rel=1e-12)
+    draw = draw_run(problem, seed=3)
+    contexts = draw.contexts(5)
+    optimum = problem.optimum - contexts @ draw.shift.T  # θ*(s) = x* − G s
+    assert np.all(np.abs(draw.regret(contexts, optimum)) < 1e-12)
+    assert np.all(draw.regret(contexts, optimum + 0.1) > 1e-4)
+
+
+def test_the_draw_follows_the_protocol():
+    draw = draw_run(PROBLEMS["Sphere"], seed=0)
+    assert draw.shift.shape == (20, 2) and draw.initial_mean.shape == (20,)
+    contexts = draw.contexts(1000)
+    assert contexts.min() >= 1.0 and contexts.max() < 2.0
+    assert draw_run(PROBLEMS["Sphere"], seed=0).shift.tolist() == draw.shift.tolist()
+    assert PROBLEMS["Ackley"].sigma0 == 14.5 and PROBLEMS["Ackley"].bound == 32.5
+    with pytest.raises(ValueError, match="function: expected one of"):
+        protocol.ProtocolSpec("Rastrigin", "c-cma-es", 0)
+
+
+def test_a_run_counts_true_episodes_and_records_its_stack(monkeypatch):
+    monkeypatch.setitem(PROBLEMS, "Sphere", problems.Problem("Sphere", 2, 12))
+    document = protocol.run_protocol(protocol.ProtocolSpec("Sphere", "c-cma-es", 0))
+    assert document["total_episodes"] == 12 * 50 and document["generations_run"] == 12
+    assert document["curve"]["generation"][-1] == 12 and document["stop_reason"] == "budget"
+    assert document["protocol_last"] == document["curve"]["average_return"][-1] < 0
+    assert {"numpy", "scipy", "python", "cpu", "creps_gym"} <= set(document["environment"])
+
+
+@pytest.mark.parametrize("mode", ["quick", "full"])
+def test_the_committed_results_are_rendered_from_the_committed_runs(tmp_path, mode):
+    committed = STUDY / "results" / mode
+    if not (committed / "results.md").exists():
+        pytest.skip(f"no committed {mode} results")
+    shutil.copy(committed / "timing.json", tmp_path / "timing.json")
+    assert run.main([f"--{mode}", "--render-only", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "results.md").read_text() == (committed / "results.md").read_text()
+    assert (tmp_path / "curves.png").stat().st_size > 10_000
+    for spec in run.specs_for(mode, list(PROBLEMS)):
+        document = load_document(STUDY / "runs" / f"{spec.key}.json")
+        assert document is not None, spec.key  # every run of the mode is committed
+        assert {"numpy", "scipy", "python", "cpu"} <= set(document["environment"])

@@ -199,6 +199,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _cmd_resume(args: argparse.Namespace) -> int:
     from creps_gym.runner.api import resumed_runner
     from creps_gym.runner.callbacks import ProgressBar
+    from creps_gym.runner.checks import check_ray_cluster
     from creps_gym.runner.rundir import RunDir
 
     _import_modules(args)
@@ -208,6 +209,10 @@ def _cmd_resume(args: argparse.Namespace) -> int:
         raise UsageError(
             f"DIR: expected a run started by `creps-gym run`, got {directory.path} (use the Python API)"
         )
+    try:  # a wrong cluster address (RAY_ADDRESS) fails at once, as it does for `run`
+        check_ray_cluster(config)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     runner = resumed_runner(directory, config, callbacks=[ProgressBar(args.progress)])
     return _finish(runner, args)
 

@@ -444,3 +444,25 @@ def test_run_with_a_ray_address_that_is_not_ray_exits_2_and_leaves_no_run_folder
         "argument --ray-address: expected the address of a running Ray cluster" in err and http_server in err
     )
     assert not (tmp_path / "run").exists()
+
+
+def test_resume_with_a_ray_address_that_is_not_ray_exits_2_at_once(
+    http_server, tmp_path, capsys, monkeypatch
+):
+    """Before: a resume on the Ray backend with RAY_ADDRESS at a non-Ray listener failed with exit 1."""
+    import json
+
+    from creps_gym.runner import run
+
+    out = tmp_path / "run"
+    run("creps", "creps_gym/Sphere-v0", 3, 10, 0, env_kwargs={"dim": 2}, run_dir=out, checkpoint_every=1)
+    (out / "history.json").unlink()
+    document = json.loads((out / "config.json").read_text())
+    document["config"]["backend"] = "ray"  # where it runs is not part of the run (not fingerprinted)
+    (out / "config.json").write_text(json.dumps(document))
+    monkeypatch.setenv("RAY_ADDRESS", http_server)
+    start = time.monotonic()
+    assert main(["resume", str(out), "--no-progress", "--no-plot"]) == 2
+    assert time.monotonic() - start < 30
+    err = capsys.readouterr().err
+    assert "RAY_ADDRESS: expected the address of a running Ray cluster" in err and http_server in err

@@ -43,6 +43,7 @@ from typing import Any
 from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History, IterationRecord, atomic_write_text
+from creps_gym.runner.recovery import RESTART, read_history
 from creps_gym.runner.session import RunDirError, RunDirWarning, RunLock
 from creps_gym.runner.trust import (
     CHECKPOINT_FORMAT,
@@ -53,8 +54,6 @@ from creps_gym.runner.trust import (
 )
 
 __all__ = ["RESTART", "RunDir", "RunDirError", "RunDirWarning", "package_versions"]
-
-RESTART = "delete it to restart the run from its first iteration, or restore it from a backup"
 
 
 def package_versions() -> dict[str, str]:
@@ -343,6 +342,4 @@ class RunDir:
 
     def read_history(self) -> History:
         """The run's history: see :func:`creps_gym.runner.recovery.read_history`."""
-        from creps_gym.runner.recovery import read_history
-
         return read_history(self)

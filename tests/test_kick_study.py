@@ -15,6 +15,7 @@ import pytest
 pytest.importorskip("mujoco")
 pytest.importorskip("cma")
 
+from benchmarks import provenance
 from benchmarks.kick import oracle, report, run, study
 from creps_gym.wrappers import BetaContexts
 
@@ -217,7 +218,9 @@ def test_a_finished_run_being_recomputed_under_another_setting_is_in_progress_no
     assert document["in_progress"] == {"precision/c-cma-es-trial1": 3}
 
 
-def test_the_script_runs_by_path_writes_results_summary_and_figures_and_resumes(tmp_path: Path) -> None:
+def test_the_script_runs_by_path_writes_results_summary_and_figures_and_quick_computes_again(
+    tmp_path: Path,
+) -> None:
     pytest.importorskip("matplotlib")
     script = Path(run.__file__)
     args = [sys.executable, str(script), "--quick", "--only", "precision", "--methods", "creps"]
@@ -228,11 +231,23 @@ def test_the_script_runs_by_path_writes_results_summary_and_figures_and_resumes(
     assert len(document["precision"]["creps"]["trial_errors"]) == 1
     assert (tmp_path / "summary.md").read_text() == report.summary_text(document)
     assert (tmp_path / "precision.png").stat().st_size > 10_000
-    written = (tmp_path / "runs" / "precision" / "creps-trial0.json").read_text()
-    second = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
-    assert second.returncode == 0, second.stderr[-2000:]
-    assert (tmp_path / "runs" / "precision" / "creps-trial0.json").read_text() == written  # read back
-    assert (tmp_path / "summary.md").read_text() == report.summary_text(document)
+    (group,) = document["provenance"]
+    assert group["runs"] == ["precision/creps-trial0"] and provenance.is_recorded(group["record"])
+    assert group["record"]["packages"]["mujoco"] != "not installed"
+    path = tmp_path / "runs" / "precision" / "creps-trial0.json"
+    written = json.loads(path.read_text())
+    path.write_text(json.dumps({**written, "values": [9.0] * 10, "provenance": None}))
+    rendered = subprocess.run(
+        [*args, "--render-only"], capture_output=True, text=True, timeout=300, check=False
+    )
+    assert rendered.returncode == 0, rendered.stderr[-2000:]
+    assert "9.00 ± 0.00 m" in (tmp_path / "summary.md").read_text()  # read back as it is
+    assert "1 run: computed before provenance" in (tmp_path / "summary.md").read_text()
+    again = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
+    assert again.returncode == 0, again.stderr[-2000:]
+    recomputed = json.loads(path.read_text())  # --quick trains the run again, bit for bit
+    assert recomputed["values"] == written["values"] and recomputed["history"] == written["history"]
+    assert json.loads((tmp_path / "results.json").read_text())["precision"] == document["precision"]
 
 
 @pytest.mark.parametrize("mode", ["quick", "full"])
@@ -243,6 +258,12 @@ def test_the_committed_summary_is_rendered_from_the_committed_results(mode: str,
     shutil.copy(folder / "results.json", tmp_path / "results.json")
     document = json.loads((tmp_path / "results.json").read_text())
     assert (folder / "summary.md").read_text() == report.summary_text(document)
+    # ... it says where every run and oracle was computed, or that it was before provenance was recorded.
+    records = [group["record"] for group in document["provenance"] for _ in group["runs"]]
+    entries = [entry for x in ("precision", "flexibility") for entry in document[x].values()]
+    assert len(records) == sum(len(entry.get("trials", entry.get("contexts", []))) for entry in entries)
+    if not all(provenance.is_recorded(record) for record in records):
+        assert "recorded before provenance" in (FULL.parents[1] / "README.md").read_text(encoding="utf-8")
     # ... and results.json is what the committed code gathers from the committed run files: a run file
     # that the current code would compute again (another env or setting) cannot stay in it.
     gathered = report.collect(folder, mode, run.MODES[mode])

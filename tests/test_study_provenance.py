@@ -124,3 +124,20 @@ def test_every_committed_study_records_the_versions_and_cpu_of_its_runs(
         readme = (BENCHMARKS / study / "README.md").read_text(encoding="utf-8")
         assert "recorded before provenance" in readme
     assert provenance.provenance_text(records) in (args.out / "results.md").read_text(encoding="utf-8")
+
+
+def test_compare_runs_tells_identical_runs_from_those_that_part(tmp_path: Path, capsys) -> None:
+    from benchmarks import compare_runs
+
+    document = {"values": [3.0, 2.0, 1.0], "episodes": [50, 100, 150], "hit": None, "final": 1.0}
+    for cache, last in (("a", 1.0), ("b", 1.5)):
+        (tmp_path / cache).mkdir()
+        (tmp_path / cache / "same.json").write_text(json.dumps(document))
+        parted = {**document, "values": [3.0, 2.0, last], "final": last}
+        (tmp_path / cache / "parted.json").write_text(json.dumps(parted))
+    assert compare_runs.main([str(tmp_path / "a"), str(tmp_path / "b")]) == 1
+    out = capsys.readouterr().out
+    assert "same: same" in out and "1 of 2 runs bit-identical" in out
+    assert "parted: differ from curve point 2 of 3 (relative difference 5.0e-01); hit None / None" in out
+    assert "- 2 runs: computed before provenance was recorded" in out
+    assert compare_runs.main([str(tmp_path / "a"), str(tmp_path / "a")]) == 0

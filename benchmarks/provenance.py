@@ -54,7 +54,8 @@ def provenance(packages: Sequence[str] = ()) -> dict[str, Any]:
     -------
     dict
         ``recorded`` (True), ``packages`` (name -> version, with ``python``), ``creps_gym_commit`` (the
-        repository's HEAD, ``-dirty`` if ``creps_gym/`` or ``benchmarks/`` differ from it; None outside a git
+        repository's HEAD when this module was imported, i.e. the code this process runs, ``-dirty`` if a
+        tracked ``.py`` file of ``creps_gym/`` or ``benchmarks/`` differed from it; None outside a git
         checkout), ``cpu`` (model name), ``cpu_count``, ``platform``, ``blas`` (the BLAS numpy calls:
         library, version and the kernel architecture chosen for this CPU where threadpoolctl can tell) and
         ``date`` (UTC, ISO 8601).
@@ -68,7 +69,7 @@ def provenance(packages: Sequence[str] = ()) -> dict[str, Any]:
     return {
         "recorded": True,
         "packages": found,
-        "creps_gym_commit": _git_commit(),
+        "creps_gym_commit": _COMMIT,
         "cpu": _cpu_model(),
         "cpu_count": os.cpu_count(),
         "platform": platform.platform(),
@@ -145,7 +146,7 @@ def _git_commit() -> str | None:
             ["git", "rev-parse", "HEAD"], cwd=_REPO, capture_output=True, text=True, timeout=10, check=True
         ).stdout.strip()
         changes = subprocess.run(
-            ["git", "status", "--porcelain", "--", "creps_gym", "benchmarks"],
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", "creps_gym", "benchmarks"],
             cwd=_REPO,
             capture_output=True,
             text=True,
@@ -157,6 +158,10 @@ def _git_commit() -> str | None:
     # The study's own outputs (run documents, renderings) are not code.
     code = [line for line in changes.splitlines() if line[3:].endswith(".py")]
     return head + ("-dirty" if code else "") if head else None
+
+
+#: The code this process runs: the commit when the study imported this module (a long run's HEAD may move).
+_COMMIT = _git_commit()
 
 
 def _cpu_model() -> str:
@@ -178,11 +183,12 @@ def _blas() -> dict[str, Any]:
     try:
         from threadpoolctl import threadpool_info
 
-        for pool in threadpool_info():
-            if pool.get("user_api") == "blas":
-                keys = {"internal_api": "library", "version": "version", "architecture": "architecture"}
-                found = {new: pool.get(old) for old, new in keys.items()}
-                return {**found, "threads": pool.get("num_threads")}
+        pools = [pool for pool in threadpool_info() if pool.get("user_api") == "blas"]
+        pools.sort(key=lambda pool: "numpy" not in str(pool.get("filepath")))  # numpy's own first (scipy
+        if pools:  # may load another OpenBLAS)
+            keys = {"internal_api": "library", "version": "version", "architecture": "architecture"}
+            found = {new: pools[0].get(old) for old, new in keys.items()}
+            return {**found, "threads": pools[0].get("num_threads")}
     except ImportError:
         pass
     try:

@@ -141,3 +141,20 @@ def test_compare_runs_tells_identical_runs_from_those_that_part(tmp_path: Path, 
     assert "parted: differ from curve point 2 of 3 (relative difference 5.0e-01); hit None / None" in out
     assert "- 2 runs: computed before provenance was recorded" in out
     assert compare_runs.main([str(tmp_path / "a"), str(tmp_path / "a")]) == 0
+
+
+@pytest.mark.parametrize("suffix", ["_quick", ""])
+def test_the_reacher_study_renders_its_table_from_its_results_json(suffix: str) -> None:
+    from benchmarks.reacher import run as reacher
+
+    path = BENCHMARKS / "reacher" / f"results{suffix}.json"
+    if not path.exists():  # full results computed before results.json existed: the README says so
+        assert suffix == "", "the quick results must be recorded (python benchmarks/reacher/run.py --quick)"
+        readme = (BENCHMARKS / "reacher" / "README.md").read_text(encoding="utf-8")
+        assert "recorded before provenance" in readme
+        return
+    document = json.loads(path.read_text(encoding="utf-8"))
+    assert provenance.is_recorded(document["provenance"])
+    committed = (BENCHMARKS / "reacher" / f"results{suffix}.md").read_text(encoding="utf-8")
+    assert reacher.report_text(document) == committed
+    assert len(document["fig4b"]["params"]) == 25

@@ -48,7 +48,7 @@ import creps_gym.movement.dmp as dmp_module
 import creps_gym.optimizers.creps as creps_module
 import creps_gym.optimizers.creps_cma as creps_cma_module
 import creps_gym.optimizers.features as features_module
-from benchmarks.provenance import provenance
+from benchmarks.provenance import provenance, provenance_text
 from creps_gym.envs.reacher import PlanarReacherEnv
 from creps_gym.optimizers import CREPS, CREPSCMA, ContextualOptimizer, load_state, save_state
 
@@ -255,28 +255,28 @@ def stored_curves(document: dict) -> dict[str, np.ndarray]:
     return curves
 
 
+def report_text(document: dict) -> str:
+    """The table of ``results[_quick].md`` and its provenance, from a results document."""
+    curves = stored_curves(document)
+    seeds, iterations = next(iter(curves.values())).shape[:2]
+    header = (
+        f"Planar reacher, {document['mode']} mode: {seeds} seeds x {iterations - 1} iterations x {SAMPLES} "
+        f"samples; mean-policy return R on {N_TEST} fixed test via-points, median [25 %, 75 %] over seeds."
+    )
+    runs = seeds * len(curves)  # one record for all of them
+    return table(curves, iterations - 1, header) + "\n" + provenance_text([document["provenance"]] * runs)
+
+
 def render(document: dict, suffix: str) -> str:
     """Write ``results[suffix].md`` (and README's block), ``fig4a``, ``fig4b``; returns the table."""
     curves = stored_curves(document)
-    seeds, iterations = next(iter(curves.values())).shape[:2]
-    mode = document["mode"]
-    header = (
-        f"Planar reacher, {mode} mode: {seeds} seeds x {iterations - 1} iterations x {SAMPLES} samples; "
-        f"mean-policy return R on {N_TEST} fixed test via-points, median [25 %, 75 %] over seeds."
-    )
-    text = table(curves, iterations - 1, header) + "\n" + provenance_line(document["provenance"])
+    text = report_text(document)
     (HERE / f"results{suffix}.md").write_text(text, encoding="utf-8")
-    update_readme(mode, text)
+    update_readme(document["mode"], text)
+    seeds = next(iter(curves.values())).shape[0]
     plot_curves(curves, HERE / f"fig4a{suffix}.png", f"Planar reacher (Fig. 4a), {seeds} seeds")
     draw_fig4b(document["fig4b"], HERE / f"fig4b{suffix}.png")
     return text
-
-
-def provenance_line(record: dict) -> str:
-    """One Markdown line on where the results were computed."""
-    from benchmarks.provenance import provenance_text
-
-    return provenance_text([record]) + "\n"
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -299,7 +299,11 @@ def main(argv: list[str] | None = None) -> None:
     iterations = args.iterations or MODES[mode]["iterations"]
     suffix = "_quick" if args.quick else ""
     if args.render_only:
-        print(render(json.loads((HERE / f"results{suffix}.json").read_text(encoding="utf-8")), suffix))
+        path = HERE / f"results{suffix}.json"
+        if not path.exists():  # the full results were computed before results.json existed
+            parser.error(f"--render-only: {path.name} not found; compute it: python benchmarks/reacher/run.py"
+                         + (" --quick" if args.quick else ""))  # fmt: skip
+        print(render(json.loads(path.read_text(encoding="utf-8")), suffix))
         return
     folder = HERE / f"runs{suffix}"
     if (args.fresh or args.quick) and folder.exists():  # --quick is a reproduction: it computes again

@@ -264,7 +264,8 @@ def report_text(document: dict) -> str:
         f"samples; mean-policy return R on {N_TEST} fixed test via-points, median [25 %, 75 %] over seeds."
     )
     runs = seeds * len(curves)  # one record for all of them
-    return table(curves, iterations - 1, header) + "\n" + provenance_text([document["provenance"]] * runs)
+    where = provenance_text([document["provenance"]] * runs)
+    return f"{table(curves, iterations - 1, header)}\n{where}\n"
 
 
 def render(document: dict, suffix: str) -> str:

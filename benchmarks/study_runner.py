@@ -226,6 +226,7 @@ def timing_text(timing: dict[str, Any], documents: Sequence[dict[str, Any]]) -> 
 def add_mode_options(parser: argparse.ArgumentParser, quick: str, full: str) -> None:
     """``--quick``/``--full`` (into ``mode``), with their help texts."""
     mode = parser.add_mutually_exclusive_group()
+    quick += ", computing every run again (a reproduction; --render-only redraws the committed runs)"
     mode.add_argument("--quick", action="store_const", dest="mode", const="quick", help=quick)
     mode.add_argument("--full", action="store_const", dest="mode", const="full", help=full)
 

@@ -304,13 +304,18 @@ def run_study(
     above it), and ``readme`` is the study README with a generated ``results-<mode>`` block.
     """
     start = time.perf_counter()
-    cached_before = sum(cached_result(args.cache, spec) is not None for spec in specs)
     worker = functools.partial(execute, baselines=baselines)
     chosen = getattr(args, "compute_methods", None)  # compute only these methods' missing runs
     compute = (
         (lambda spec: spec.method in chosen) if chosen and not args.render_only else not args.render_only
     )
     recompute = args.mode == "quick"  # a quick study is a reproduction: it computes every run again
+
+    def read_back(spec: RunSpec) -> bool:  # a cached run this invocation reads rather than computes
+        fresh = recompute and bool(compute) and (compute is True or compute(spec))
+        return not fresh and cached_result(args.cache, spec) is not None
+
+    cached_before = sum(map(read_back, specs))
     documents = run_all(
         specs, args.cache, workers=args.workers, worker=worker, compute=compute, recompute=recompute
     )

@@ -67,8 +67,10 @@ def test_quick_computes_every_run_again_and_render_only_redraws_the_cached_ones(
     paths[0].write_text(json.dumps(tampered))
     _study(*args, "--render-only")  # reads the cache as it is
     assert "1 run: computed before provenance was recorded" in (out / "results.md").read_text()
+    (out / "timing.json").unlink()
     log = _study(*args)  # --quick: computes both runs again, reading no cached document
     assert "0 runs cached" in log and "2 to compute" in log
+    assert json.loads((out / "timing.json").read_text())["computed"] == 2  # not "read from the cache"
     again = json.loads(paths[0].read_text())
     assert again["final"] != 1234.5 and provenance.is_recorded(again["provenance"])
     assert "computed before provenance" not in (out / "results.md").read_text()

@@ -198,7 +198,8 @@ def invocation_timing(out: str | os.PathLike[str], wall: float, computed: int, t
     if stored is not None:
         return {**stored, "expected": total}  # this invocation's run count, for the completeness check
     timing = {"wall_seconds": round(wall, 1), "computed": computed, "total": total, "cores": os.cpu_count()}
-    timing["provenance"] = provenance(("cma",))
+    if computed:
+        timing["provenance"] = provenance(("cma",))
     path.parent.mkdir(parents=True, exist_ok=True)
     write_text(path, json.dumps(timing) + "\n")
     return timing

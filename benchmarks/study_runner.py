@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.provenance import provenance, provenance_text
 from benchmarks.study_tools import (
     Baselines,
     RunSpec,
@@ -58,8 +59,12 @@ def run_all(
     worker: Callable[[RunSpec, Path], dict[str, Any]] = execute,
     log: Callable[[str], None] = print,
     compute: bool | Callable[[RunSpec], bool] = True,
+    recompute: bool = False,
 ) -> list[dict[str, Any]]:
     """Results of the specs, in order: cached ones are read, the others computed in a process pool.
+
+    Every computed document gets this process's ``provenance`` (:func:`benchmarks.provenance.provenance`:
+    package versions, CPU, BLAS, creps_gym's commit) before it is stored.
 
     Parameters
     ----------
@@ -77,6 +82,9 @@ def run_all(
     compute : bool or callable
         False: compute nothing and return only the cached results (to render a partial study); a predicate
         ``compute(spec)``: compute only the missing runs it accepts (the results leave the others out).
+    recompute : bool
+        Compute every run, reading no cached document (a ``--quick`` invocation reproduces its results);
+        the new documents replace the cached ones.
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
@@ -86,7 +94,8 @@ def run_all(
     results: dict[str, dict[str, Any]] = {}
     todo = []
     for spec in specs:
-        cached = cached_result(cache, spec)
+        fresh = recompute and (compute is True or (callable(compute) and compute(spec)))
+        cached = None if fresh else cached_result(cache, spec)
         if cached is not None:
             results[spec.key] = cached
         elif spec.key not in {s.key for s in todo}:
@@ -104,8 +113,10 @@ def run_all(
     )
 
     partial = cache / "partial"
+    record = provenance(("cma",)) if todo else None  # the studies' baselines use pycma
 
     def done(spec: RunSpec, document: dict[str, Any], count: int) -> None:
+        document = {**document, "provenance": record}
         store_document(cache / f"{spec.key}.json", document)
         for stale in partial.glob(f"{spec.prefix}-b*-n{spec.samples}"):  # this run, under any budget
             shutil.rmtree(stale, ignore_errors=True)
@@ -180,20 +191,23 @@ def invocation_timing(out: str | os.PathLike[str], wall: float, computed: int, t
     """Wall time of the last invocation that computed runs, kept in ``out/timing.json``.
 
     An invocation that only reads the cache (to re-render) keeps the stored timing, so the reports always
-    state how long the computation took.
+    state how long the computation took. A computing invocation records its ``provenance`` there too.
     """
     path = Path(out) / "timing.json"
     stored = load_document(path) if computed == 0 else None
     if stored is not None:
         return {**stored, "expected": total}  # this invocation's run count, for the completeness check
     timing = {"wall_seconds": round(wall, 1), "computed": computed, "total": total, "cores": os.cpu_count()}
+    if computed:
+        timing["provenance"] = provenance(("cma",))
     path.parent.mkdir(parents=True, exist_ok=True)
     write_text(path, json.dumps(timing) + "\n")
     return timing
 
 
 def timing_text(timing: dict[str, Any], documents: Sequence[dict[str, Any]]) -> str:
-    """Markdown on the time taken and on how complete the study is (see :func:`invocation_timing`)."""
+    """Markdown on the time taken, on how complete the study is (see :func:`invocation_timing`) and where
+    the runs shown were computed (their provenance records)."""
     cpu = sum(d["seconds"] for d in documents)
     if timing["computed"]:
         text = (
@@ -207,24 +221,30 @@ def timing_text(timing: dict[str, Any], documents: Sequence[dict[str, Any]]) -> 
     expected = timing.get("expected", timing["total"])
     if len(documents) < expected:
         text += f" **Partial: {len(documents)} of {expected} runs have finished.**"
-    return text
+    return text + "\n\n" + provenance_text(d.get("provenance") for d in documents)
 
 
 def add_mode_options(parser: argparse.ArgumentParser, quick: str, full: str) -> None:
     """``--quick``/``--full`` (into ``mode``), with their help texts."""
     mode = parser.add_mutually_exclusive_group()
+    quick += ", computing every run again (a reproduction; --render-only redraws the committed runs)"
     mode.add_argument("--quick", action="store_const", dest="mode", const="quick", help=quick)
     mode.add_argument("--full", action="store_const", dest="mode", const="full", help=full)
 
 
 def add_output_options(parser: argparse.ArgumentParser, study_dir: Path, out: str) -> None:
-    """Add ``--workers``, ``--render-only``, ``--cache`` (default ``study_dir/runs``) and ``--out`` (help
-    text ``out``)."""
+    """Add ``--workers``, ``--render-only``, ``--cache`` (default: see :func:`resolve_outputs`) and ``--out``
+    (help text ``out``)."""
     parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     parser.add_argument(
         "--render-only", action="store_true", help="compute nothing: render the runs already cached"
     )
-    parser.add_argument("--cache", type=Path, default=study_dir / "runs", help="per-run JSON (committed)")
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        help="per-run JSON (committed; default runs/quick/ with --quick, which computes every run again, "
+        "else runs/, where runs already cached are reused)",
+    )
     parser.add_argument("--out", type=Path, help=out)
 
 
@@ -232,8 +252,12 @@ def resolve_outputs(
     args: argparse.Namespace, argv: Sequence[str] | None, study_dir: Path, label: str
 ) -> None:
     """Set ``args.flags`` (see :func:`command_flags`), ``args.index`` (the results index, or None with
-    ``--out``) and ``args.out`` (default ``docs/results/<study>/<label>``)."""
+    ``--out``), ``args.out`` (default ``docs/results/<study>/<label>``) and ``args.cache`` (default
+    ``<study>/runs/quick`` for ``--quick``, whose runs are computed again by every invocation, so that they
+    never replace the documents a ``--full`` rendering reads, and ``<study>/runs`` otherwise)."""
     results = study_dir.parents[1] / "docs" / "results"
+    if args.cache is None:
+        args.cache = study_dir / "runs" / "quick" if args.mode == "quick" else study_dir / "runs"
     args.flags = command_flags(argv, args.mode)
     args.index = results / "README.md" if args.out is None else None
     args.out = args.out or results / study_dir.name / label
@@ -281,13 +305,21 @@ def run_study(
     above it), and ``readme`` is the study README with a generated ``results-<mode>`` block.
     """
     start = time.perf_counter()
-    cached_before = sum(cached_result(args.cache, spec) is not None for spec in specs)
     worker = functools.partial(execute, baselines=baselines)
     chosen = getattr(args, "compute_methods", None)  # compute only these methods' missing runs
     compute = (
         (lambda spec: spec.method in chosen) if chosen and not args.render_only else not args.render_only
     )
-    documents = run_all(specs, args.cache, workers=args.workers, worker=worker, compute=compute)
+    recompute = args.mode == "quick"  # a quick study is a reproduction: it computes every run again
+
+    def read_back(spec: RunSpec) -> bool:  # a cached run this invocation reads rather than computes
+        fresh = recompute and bool(compute) and (compute is True or compute(spec))
+        return not fresh and cached_result(args.cache, spec) is not None
+
+    cached_before = sum(map(read_back, specs))
+    documents = run_all(
+        specs, args.cache, workers=args.workers, worker=worker, compute=compute, recompute=recompute
+    )
     if not documents:
         print(f"no cached runs in {args.cache}: nothing to render")
         return 1

@@ -15,6 +15,7 @@ import pytest
 pytest.importorskip("mujoco")
 pytest.importorskip("cma")
 
+from benchmarks import provenance
 from benchmarks.kick import oracle, report, run, study
 from creps_gym.wrappers import BetaContexts
 
@@ -88,71 +89,6 @@ def test_the_oracle_learns_one_context_and_caches_it(precision_env, tmp_path: Pa
     assert result["context"] == [6.0] and result["episodes"] == 26 and result["population"] == 13
     assert np.isfinite(result["value"]) and result["value"] >= 0.0
     assert oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path) == result
-
-
-def test_the_reach_probe_scores_distance_falls_and_forward_kicks() -> None:
-    from benchmarks.kick import reach_probe
-
-    info = {
-        "fell": np.array([False, True, False]),
-        "ball_displacement": np.array([[0.0, 0.0], [5.0, 0.0], [3.0, 1.0]]),
-        "min_foot_ball_distance": np.array([0.2, 0.0, -0.01]),
-    }
-    np.testing.assert_allclose(reach_probe.shaped_loss(info), [0.2, 1.0, -0.31])
-    summary = reach_probe.probe(23, episodes=32, seed=0, population=16)
-    assert summary["episodes"] == 32 and summary["context"] == [0.3, -0.05]
-
-
-def test_the_far_end_probe_searches_on_from_a_finished_run(precision_env, tmp_path: Path) -> None:
-    from benchmarks.kick import far_end_probe
-
-    info = {"fell": np.array([False, True]), "ball_displacement": np.array([[9.0, 4.0], [0.0, 0.0]])}
-    np.testing.assert_allclose(far_end_probe.target_errors(12.0, info), [5.0, 13.0])
-    spec = study.RunSpec("precision", "c-cma-es", samples=6, iterations=2, features="affine")
-    study.train_run(spec, precision_env, 0, 0, tmp_path, checkpoint_every=1)
-    lines = far_end_probe.probe(tmp_path / "c-cma-es-trial0", 12.0, samples=8, generations=5, seed=0)
-    assert [sorted(line) for line in lines] == [
-        [
-            "fall_rate",
-            "mean_kick_error_m",
-            "mean_kick_fell",
-            "run",
-            "search_scale",
-            "standing_distance_q10_q50_q90_max_m",
-            "target_m",
-        ],
-        ["episodes", "fall_rate", "mean_error_m", "moved_in_radii"],
-    ]
-    assert lines[0]["run"] == "c-cma-es-trial0" and 0.0 <= lines[0]["fall_rate"] <= 1.0
-    assert lines[1]["episodes"] == 5 * 13 and lines[1]["moved_in_radii"] > 0.0
-    assert far_end_probe.probe(tmp_path / "c-cma-es-trial0", 12.0, samples=8, generations=5, seed=0) == lines
-
-
-def test_the_selection_probe_sees_a_baseline_that_cannot_follow_the_returns(
-    precision_env, tmp_path: Path
-) -> None:
-    from benchmarks.kick import selection_probe
-
-    rng = np.random.default_rng(0)
-
-    def batches(profile) -> list[tuple[np.ndarray, np.ndarray]]:
-        drawn = [rng.uniform(3.0, 12.0, (20, 1)) for _ in range(60)]
-        return [(s, profile(s[:, 0]) + 0.01 * rng.standard_normal(20)) for s in drawn]
-
-    quadratic = selection_probe.selection_rates(batches(lambda s: -((s - 7.0) ** 2)), 2, "squared")
-    assert all(0.4 < rate < 0.6 for rate in quadratic)  # V follows E[R | s]: half of every bin is selected
-    hockey = batches(lambda s: np.where(s < 11.0, 0.0, 3.0 * (11.0 - s)))  # flat, then falling after 11 m
-    starved = selection_probe.selection_rates(hockey, 2, "squared")
-    assert starved[-1] < 0.3 and starved[3] > 0.9  # the far bin starves, the one before it takes over
-    spec = study.RunSpec("precision", "c-cma-es", samples=6, iterations=2, features="affine")
-    study.train_run(spec, precision_env, 0, 0, tmp_path, checkpoint_every=1)
-    lines = selection_probe.probe(tmp_path / "c-cma-es-trial0", n_batches=3, seed=0, degrees=[2])
-    assert sorted(lines[0]["median_return_per_bin"]) == sorted(
-        f"[{a:g}, {b:g})" for a, b in selection_probe.BINS
-    )
-    baselines = [(line["baseline_loss"], line["baseline_degree"]) for line in lines[1:]]
-    assert baselines == [("huber", 2), ("squared", 2)]
-    assert all(0.0 <= rate <= 1.0 for line in lines[1:] for rate in line["selected_per_bin"].values())
 
 
 def test_run_files_that_name_no_env_ran_on_the_legacy_one() -> None:
@@ -282,7 +218,9 @@ def test_a_finished_run_being_recomputed_under_another_setting_is_in_progress_no
     assert document["in_progress"] == {"precision/c-cma-es-trial1": 3}
 
 
-def test_the_script_runs_by_path_writes_results_summary_and_figures_and_resumes(tmp_path: Path) -> None:
+def test_the_script_runs_by_path_writes_results_summary_and_figures_and_quick_computes_again(
+    tmp_path: Path,
+) -> None:
     pytest.importorskip("matplotlib")
     script = Path(run.__file__)
     args = [sys.executable, str(script), "--quick", "--only", "precision", "--methods", "creps"]
@@ -293,11 +231,23 @@ def test_the_script_runs_by_path_writes_results_summary_and_figures_and_resumes(
     assert len(document["precision"]["creps"]["trial_errors"]) == 1
     assert (tmp_path / "summary.md").read_text() == report.summary_text(document)
     assert (tmp_path / "precision.png").stat().st_size > 10_000
-    written = (tmp_path / "runs" / "precision" / "creps-trial0.json").read_text()
-    second = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
-    assert second.returncode == 0, second.stderr[-2000:]
-    assert (tmp_path / "runs" / "precision" / "creps-trial0.json").read_text() == written  # read back
-    assert (tmp_path / "summary.md").read_text() == report.summary_text(document)
+    (group,) = document["provenance"]
+    assert group["runs"] == ["precision/creps-trial0"] and provenance.is_recorded(group["record"])
+    assert group["record"]["packages"]["mujoco"] != "not installed"
+    path = tmp_path / "runs" / "precision" / "creps-trial0.json"
+    written = json.loads(path.read_text())
+    path.write_text(json.dumps({**written, "values": [9.0] * 10, "provenance": None}))
+    rendered = subprocess.run(
+        [*args, "--render-only"], capture_output=True, text=True, timeout=300, check=False
+    )
+    assert rendered.returncode == 0, rendered.stderr[-2000:]
+    assert "9.00 ± 0.00 m" in (tmp_path / "summary.md").read_text()  # read back as it is
+    assert "1 run: computed before provenance" in (tmp_path / "summary.md").read_text()
+    again = subprocess.run(args, capture_output=True, text=True, timeout=300, check=False)
+    assert again.returncode == 0, again.stderr[-2000:]
+    recomputed = json.loads(path.read_text())  # --quick trains the run again, bit for bit
+    assert recomputed["values"] == written["values"] and recomputed["history"] == written["history"]
+    assert json.loads((tmp_path / "results.json").read_text())["precision"] == document["precision"]
 
 
 @pytest.mark.parametrize("mode", ["quick", "full"])
@@ -308,6 +258,12 @@ def test_the_committed_summary_is_rendered_from_the_committed_results(mode: str,
     shutil.copy(folder / "results.json", tmp_path / "results.json")
     document = json.loads((tmp_path / "results.json").read_text())
     assert (folder / "summary.md").read_text() == report.summary_text(document)
+    # ... it says where every run and oracle was computed, or that it was before provenance was recorded.
+    records = [group["record"] for group in document["provenance"] for _ in group["runs"]]
+    entries = [entry for x in ("precision", "flexibility") for entry in document[x].values()]
+    assert len(records) == sum(len(entry.get("trials", entry.get("contexts", []))) for entry in entries)
+    if not all(provenance.is_recorded(record) for record in records):
+        assert "recorded before provenance" in (FULL.parents[1] / "README.md").read_text(encoding="utf-8")
     # ... and results.json is what the committed code gathers from the committed run files: a run file
     # that the current code would compute again (another env or setting) cannot stay in it.
     gathered = report.collect(folder, mode, run.MODES[mode])

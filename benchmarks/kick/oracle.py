@@ -28,12 +28,14 @@ import numpy as np
 from benchmarks.kick.study import (
     ENV_IDS,
     LEGACY_ENV_IDS,
+    PACKAGES,
     TARGETS,
     episode_metric,
     evaluate,
     grid_contexts,
     write_json,
 )
+from benchmarks.provenance import provenance
 from creps_gym.envs.base import initial_distribution
 from creps_gym.optimizers.registry import make_optimizer, recommended_samples
 from creps_gym.wrappers import OffsetParams
@@ -101,18 +103,27 @@ def _start_seed(sequence: np.random.SeedSequence, start: int) -> int:
 
 
 def oracle_point(
-    env: OffsetParams, experiment: str, index: int, episodes: int, seed: int, folder: Path, name: str = "cma"
+    env: OffsetParams,
+    experiment: str,
+    index: int,
+    episodes: int,
+    seed: int,
+    folder: Path,
+    name: str = "cma",
+    fresh: bool = False,
 ) -> dict[str, Any]:
     """The oracle at one evaluation point (target ``TARGETS[index]`` or ball position
     ``grid_contexts()[index]``): ``name`` learning that context alone with IPOP restarts, ``episodes`` in all.
 
-    Cached as ``oracle-<index>.json`` under ``folder``. ``value`` is the best final mean's metric over the
-    starts (error to the target, or forward distance with 0 for a fall), ``best`` the best metric of any
-    sample that did not fall, ``starts`` each start's population, episodes, value and stop criteria.
+    Cached as ``oracle-<index>.json`` under ``folder`` (``fresh``: computed again all the same). ``value``
+    is the best final mean's metric over the starts (error to the target, or forward distance with 0 for a
+    fall), ``best`` the best metric of any sample that did not fall, ``starts`` each start's population,
+    episodes, value and stop criteria, ``provenance`` where it was computed
+    (:func:`benchmarks.provenance.provenance`).
     """
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"oracle-{index:02d}.json"
-    if path.exists() and _reusable(json.loads(path.read_text()), experiment, episodes):
+    if path.exists() and not fresh and _reusable(json.loads(path.read_text()), experiment, episodes):
         return read_oracle(path, experiment)
     context = TARGETS[index : index + 1] if experiment == "precision" else grid_contexts()[index]
     population = recommended_samples(name, env.action_space.shape[0], 0)
@@ -137,6 +148,7 @@ def oracle_point(
         "best": sign * best if np.isfinite(best) else None,
         "starts": starts,
         "seconds": time.perf_counter() - begin,
+        "provenance": provenance(PACKAGES),
     }
     write_json(path, result)
     return result

@@ -26,6 +26,7 @@ import numpy as np
 
 from benchmarks.kick.oracle import read_oracle
 from benchmarks.kick.study import ENV_IDS, EVAL_EVERY, GRID_X, GRID_Y, TARGETS, stored_setting
+from benchmarks.provenance import group_by_record, provenance_text
 
 __all__ = ["collect", "render", "summary_text"]
 
@@ -68,6 +69,7 @@ def _superseded(path: Path, result: dict[str, Any], experiment: str) -> bool:
 def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
     """The results document from the finished run files under ``out/runs`` (trials in order)."""
     document: dict[str, Any] = {"mode": mode, "budgets": budgets, "precision": {}, "flexibility": {}}
+    sources: dict[str, Any] = {}  # run -> its provenance record
     for experiment, (per_trial, per_point) in METRIC.items():
         for run in sorted(
             _runs(out / "runs" / experiment, experiment), key=lambda r: (r["name"], r["trial"])
@@ -77,6 +79,7 @@ def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
                 "training_contexts": [], "features": run["features"], "options": run["options"],
                 "samples": run["samples"], "budget_iterations": run["budget_iterations"],
             })  # fmt: skip
+            sources[f"{experiment}/{run['name']}-trial{run['trial']}"] = run.get("provenance")
             entry[per_trial].append(float(np.mean(run["values"])))
             entry[per_point].append(run["values"])
             entry["trials"].append(run["trial"])
@@ -85,7 +88,10 @@ def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
             entry["training_contexts"].append(stored_setting(run, experiment)["contexts"])
             entry["curves"].append([[i, float(np.mean(v))] for i, v in run["history"]["evaluations"]])
         paths = sorted((out / "runs" / experiment).glob("oracle-*.json"))
-        points = [r for p in paths if (r := read_oracle(p, experiment))["env"] == ENV_IDS[experiment]]
+        records = {path.stem: read_oracle(path, experiment) for path in paths}
+        current = {stem: r for stem, r in records.items() if r["env"] == ENV_IDS[experiment]}
+        points = list(current.values())
+        sources.update({f"{experiment}/{stem}": r.get("provenance") for stem, r in current.items()})
         if points:
             document[experiment]["oracle"] = {
                 per_point: [r["value"] for r in points],
@@ -96,6 +102,7 @@ def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
                 "optimizer": points[0]["optimizer"],
             }
     document["in_progress"] = _in_progress(out)
+    document["provenance"] = group_by_record(sources)
     return document
 
 
@@ -148,6 +155,9 @@ def summary_text(document: dict[str, Any]) -> str:
     if document["in_progress"]:
         lines += ["## Runs in progress (iterations done at the last checkpoint)", ""]
         lines += [f"- {run}: {done}" for run, done in document["in_progress"].items()] + [""]
+    groups = document.get("provenance", [])
+    records = [group["record"] for group in groups for _ in group["runs"]]
+    lines += ["## Provenance (the runs and the oracles)", "", provenance_text(records, "runs"), ""]
     return "\n".join(lines)
 
 

@@ -18,7 +18,8 @@ rerunning a command resumes them; ``results.json`` and the rendering (``summary.
 from the finished runs after every invocation (:mod:`benchmarks.kick.report`). Two invocations with
 different ``--only`` can run side by side.
 
-    python benchmarks/kick/run.py --quick                      # minutes on 2 cores
+    python benchmarks/kick/run.py --quick                      # computes every run again: minutes on 2 cores
+    python benchmarks/kick/run.py --quick --render-only        # re-renders the committed quick runs
     python benchmarks/kick/run.py --full --only precision      # hours; resumable
     python benchmarks/kick/run.py --full --render-only         # results.json, summary.md, figures
 
@@ -149,7 +150,8 @@ def trial_numbers(args: argparse.Namespace, trials: int) -> list[int]:
 
 def compute(args: argparse.Namespace) -> None:
     """Per selected experiment: the per-context oracle (unless ``--methods`` picks methods), then every
-    method's trials; finished runs are read back and unfinished ones resume."""
+    method's trials. ``--full``: finished runs are read back and unfinished ones resume; ``--quick`` is a
+    reproduction: it computes every selected run and oracle again."""
     envs: dict[str, Any] = {}
     experiments = [e for e in METHODS if args.only in (None, "oracle", e)]
     if args.methods is None:
@@ -157,7 +159,7 @@ def compute(args: argparse.Namespace) -> None:
             env = envs.setdefault(experiment, make_env(experiment, args.threads))
             for index in range(len(evaluation_contexts(experiment))):
                 result = oracle_point(env, experiment, index, MODES[args.mode]["oracle"], args.seed,
-                                      args.out / "runs" / experiment)  # fmt: skip
+                                      args.out / "runs" / experiment, fresh=args.mode == "quick")  # fmt: skip
                 print(f"{experiment} oracle at {result['context']}: {result['value']:.2f} m", flush=True)
     if args.only == "oracle":
         return
@@ -165,7 +167,7 @@ def compute(args: argparse.Namespace) -> None:
         env = envs.setdefault(spec.experiment, make_env(spec.experiment, args.threads))
         for trial in trial_numbers(args, trials):
             result = train_run(spec, env, trial, args.seed, args.out / "runs" / spec.experiment,
-                               args.checkpoint_every)  # fmt: skip
+                               args.checkpoint_every, fresh=args.mode == "quick")  # fmt: skip
             metric = sum(result["values"]) / len(result["values"])
             print(f"{spec.experiment} {spec.name} trial {trial}: {metric:.2f} m "
                   f"after {result['iterations']} iterations", flush=True)  # fmt: skip

@@ -31,6 +31,7 @@ import gymnasium as gym
 import numpy as np
 
 import creps_gym  # noqa: F401  (registers the ids)
+from benchmarks.provenance import provenance
 from creps_gym.envs.base import initial_distribution
 from creps_gym.optimizers.features import RBFFeatures
 from creps_gym.optimizers.registry import make_optimizer, optimizer_class
@@ -64,6 +65,8 @@ GRID_X, GRID_Y = np.linspace(0.15, 0.30, 4), np.linspace(-0.15, 0.15, 7)  # flex
 ENV_IDS = {"precision": "creps_gym/KickPrecision-v1", "flexibility": "creps_gym/KickFlexibility-v2"}
 #: The env of each experiment in run and oracle files that do not name theirs (written before they did).
 LEGACY_ENV_IDS = {"precision": "creps_gym/KickPrecision-v0", "flexibility": "creps_gym/KickFlexibility-v1"}
+#: The packages a kick run's provenance names besides numpy, scipy and gymnasium.
+PACKAGES = ("mujoco", "cma")
 EVAL_EVERY = 50  # iterations between evaluations of the mean policy (the learning curves)
 #: How a run draws its training contexts: the shape parameter a = b of a Beta(a, b) scaled into the env's
 #: context box, or None for the env's own (uniform) draw. Run files that name none drew "uniform".
@@ -202,15 +205,23 @@ def stored_setting(document: dict[str, Any], experiment: str) -> dict[str, Any]:
 
 
 def train_run(
-    spec: RunSpec, env: OffsetParams, trial: int, seed: int, folder: Path, checkpoint_every: int = 10
+    spec: RunSpec,
+    env: OffsetParams,
+    trial: int,
+    seed: int,
+    folder: Path,
+    checkpoint_every: int = 10,
+    fresh: bool = False,
 ) -> dict[str, Any]:
     """Train (or resume, or read back) one run and evaluate its mean policy; returns its result document.
 
     Files under ``folder``: ``<name>-trial<k>.npz`` (optimiser), ``.history.json`` (the setting; per
     iteration, mean return and fall rate of the batch; every ``EVAL_EVERY`` iterations the mean policy's
     metric) and, when finished, ``.json`` (the result). A result or checkpoint of another setting (env,
-    training contexts, features, options, batch size) is computed again. The run ends at
-    ``spec.iterations`` or when the optimiser's own stop criteria are met.
+    training contexts, features, options, batch size) is computed again, and so is every run with ``fresh``
+    (a reproduction: nothing is read back). The run ends at ``spec.iterations`` or when the optimiser's own
+    stop criteria are met. The result holds the ``provenance`` of the session that finished it
+    (:func:`benchmarks.provenance.provenance`).
     """
     folder.mkdir(parents=True, exist_ok=True)
     stem = folder / f"{spec.name}-trial{trial}"
@@ -218,12 +229,12 @@ def train_run(
     selector, selector_path = context_selector(spec, env), stem.with_suffix(".selector.json")
     setting = {"env": ENV_IDS[spec.experiment], "contexts": spec.contexts, "features": spec.features,
                "options": spec.options, "samples": spec.samples}  # fmt: skip
-    if result_path.exists():
+    if result_path.exists() and not fresh:
         done = json.loads(result_path.read_text())
         if done["budget_iterations"] == spec.iterations and stored_setting(done, spec.experiment) == setting:
             return done
     base_seed = [seed, spec.key, trial]
-    history = json.loads(history_path.read_text()) if ckpt.exists() else {}
+    history = json.loads(history_path.read_text()) if ckpt.exists() and not fresh else {}
     states = json.loads(selector_path.read_text()) if selector and selector_path.exists() else {}
     opt = load_run(stem) if stored_setting(history, spec.experiment) == setting else None
     if opt is not None and selector is not None and str(opt.iteration) not in states:
@@ -269,6 +280,7 @@ def train_run(
         "values": mean_policy_metric(env, spec.experiment, opt),
         "history": history,
         "seconds_last_session": time.perf_counter() - start,
+        "provenance": provenance(PACKAGES),
     }
     write_json(result_path, result)
     return result

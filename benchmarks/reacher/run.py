@@ -8,16 +8,21 @@ mean-policy return against iterations, with the 25-75 % band and the min-max ran
 * ``fig4a[_quick].png``: the learning curves (cost ``−R`` on a log axis, so both plateaus are visible);
 * ``fig4b[_quick].png``: the motion of the median CREPS-CMA-old policy for ``v50 = (1, 1)`` (Fig. 4b);
 * ``results[_quick].md``: the table, also copied between the markers in ``README.md``;
+* ``results[_quick].json``: what the three above are drawn from (every seed's mean-policy return curve, its
+  final via, goal and acceleration figures, Fig. 4b's policy parameters) and the ``provenance`` of the
+  computation (:mod:`benchmarks.provenance`); ``--render-only`` redraws everything from it;
 * ``runs[_quick]/``: one checkpoint per run (optimiser state and curve so far, ``.npz`` + JSON, no pickle).
-  A run that is interrupted resumes from its last checkpoint; finished runs are reused, unless the source
-  of the optimisers, the env or the DMP changed since (a fingerprint is stored). ``--fresh`` starts over.
+  A full run that is interrupted resumes from its last checkpoint; finished runs are reused, unless the
+  source of the optimisers, the env or the DMP changed since (a fingerprint is stored). ``--fresh`` starts
+  over, and so does every ``--quick`` invocation (a reproduction).
 
 The optimisers are driven directly with ``ask``/``tell``; the seeds make every number reproducible.
 
 Usage::
 
-    python benchmarks/reacher/run.py --quick     # 5 seeds x 200 iterations, about 15 s on 2 cores
+    python benchmarks/reacher/run.py --quick     # 5 seeds x 200 iterations, computed again: about 15 s
     python benchmarks/reacher/run.py             # 20 seeds x 400 iterations (the paper's x axis), ~3 min
+    python benchmarks/reacher/run.py --quick --render-only   # redraw from results_quick.json
 """
 
 from __future__ import annotations
@@ -25,18 +30,25 @@ from __future__ import annotations
 import argparse
 import hashlib
 import inspect
+import json
 import re
 import shutil
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+# Run by path: the repository root first on sys.path, as `python -m` puts it (see benchmarks/__init__.py).
+if not __package__:
+    sys.path[0] = str(Path(__file__).resolve().parents[2])
 
 import creps_gym.envs.reacher.planar as planar_module
 import creps_gym.movement.dmp as dmp_module
 import creps_gym.optimizers.creps as creps_module
 import creps_gym.optimizers.creps_cma as creps_cma_module
 import creps_gym.optimizers.features as features_module
+from benchmarks.provenance import provenance, provenance_text
 from creps_gym.envs.reacher import PlanarReacherEnv
 from creps_gym.optimizers import CREPS, CREPSCMA, ContextualOptimizer, load_state, save_state
 
@@ -195,55 +207,116 @@ def update_readme(mode: str, text: str) -> None:
         readme.write_text(pattern.sub(lambda _: f"{start}\n{text}{end}", content), encoding="utf-8")
 
 
-def draw_fig4b(curves: dict[str, np.ndarray], folder: Path, path: Path) -> None:
-    """Render the median-seed CREPS-CMA-old policy for the via-point (1, 1), like the paper's Fig. 4b."""
+def fig4b_policy(curves: dict[str, np.ndarray], folder: Path) -> dict | None:
+    """The median-seed CREPS-CMA-old run's mean policy at the via-point (1, 1): its seed and parameters."""
+    if "creps-cma-old" not in curves:
+        return None
+    finals = curves["creps-cma-old"][:, -1, 0]
+    seed = int(np.argsort(finals)[len(finals) // 2])
+    params = final_policy("creps-cma-old", seed, folder).recommend(np.array([[1.0, 1.0]]))[0]
+    return {"seed": seed, "params": params.tolist()}
+
+
+def draw_fig4b(policy: dict | None, path: Path) -> None:
+    """Render Fig. 4b's policy (see :func:`fig4b_policy`) for the via-point (1, 1), like the paper's."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    if "creps-cma-old" not in curves:
+    if policy is None:
         return
-    finals = curves["creps-cma-old"][:, -1, 0]
-    seed = int(np.argsort(finals)[len(finals) // 2])
-    opt = final_policy("creps-cma-old", seed, folder)
     env = PlanarReacherEnv(render_mode="rgb_array")
     env.reset(options={"context": [1.0, 1.0]})
-    env.step(opt.recommend(np.array([[1.0, 1.0]]))[0])
+    env.step(np.asarray(policy["params"]))
     plt.imsave(path, env.render())
 
 
-def main() -> None:
+def results_document(mode: str, curves: dict[str, np.ndarray], policy: dict | None) -> dict:
+    """What the table and figures are drawn from, with this computation's provenance."""
+    return {
+        "mode": mode,
+        "provenance": provenance(),
+        "returns": {name: curve[:, :, 0].tolist() for name, curve in curves.items()},
+        "finals": {name: curve[:, -1, 1:].tolist() for name, curve in curves.items()},
+        "fig4b": policy,
+    }
+
+
+def stored_curves(document: dict) -> dict[str, np.ndarray]:
+    """The curves (seeds, iterations + 1, 4) of a results document: returns in column 0, the final via,
+    goal and acceleration figures in the last row (the rest NaN: nothing drawn uses them)."""
+    curves = {}
+    for name, returns in document["returns"].items():
+        curve = np.full((*np.shape(returns), 4), np.nan)
+        curve[:, :, 0] = returns
+        curve[:, -1, 1:] = document["finals"][name]
+        curves[name] = curve
+    return curves
+
+
+def report_text(document: dict) -> str:
+    """The table of ``results[_quick].md`` and its provenance, from a results document."""
+    curves = stored_curves(document)
+    seeds, iterations = next(iter(curves.values())).shape[:2]
+    header = (
+        f"Planar reacher, {document['mode']} mode: {seeds} seeds x {iterations - 1} iterations x {SAMPLES} "
+        f"samples; mean-policy return R on {N_TEST} fixed test via-points, median [25 %, 75 %] over seeds."
+    )
+    runs = seeds * len(curves)  # one record for all of them
+    where = provenance_text([document["provenance"]] * runs)
+    return f"{table(curves, iterations - 1, header)}\n{where}\n"
+
+
+def render(document: dict, suffix: str) -> str:
+    """Write ``results[suffix].md`` (and README's block), ``fig4a``, ``fig4b``; returns the table."""
+    curves = stored_curves(document)
+    text = report_text(document)
+    (HERE / f"results{suffix}.md").write_text(text, encoding="utf-8")
+    update_readme(document["mode"], text)
+    seeds = next(iter(curves.values())).shape[0]
+    plot_curves(curves, HERE / f"fig4a{suffix}.png", f"Planar reacher (Fig. 4a), {seeds} seeds")
+    draw_fig4b(document["fig4b"], HERE / f"fig4b{suffix}.png")
+    return text
+
+
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description="Reproduce Fig. 4a (planar reacher): CREPS vs CREPS-CMA-old")
-    parser.add_argument("--quick", action="store_true", help="5 seeds x 200 iterations (default 20 x 400)")
+    parser.add_argument(
+        "--quick", action="store_true", help="5 seeds x 200 iterations, computed again (default 20 x 400)"
+    )
     parser.add_argument("--seeds", type=int, help="number of seeds (overrides the mode)")
     parser.add_argument("--iterations", type=int, help="iterations per run (overrides the mode)")
     parser.add_argument(
         "--algorithms", nargs="+", default=["creps", "creps-cma-old"], choices=list(ALGORITHMS)
     )
     parser.add_argument("--fresh", action="store_true", help="delete this mode's checkpoints first")
-    args = parser.parse_args()
+    parser.add_argument(
+        "--render-only", action="store_true", help="compute nothing: redraw from results[_quick].json"
+    )
+    args = parser.parse_args(argv)
     mode = "quick" if args.quick else "full"
     seeds = args.seeds or MODES[mode]["seeds"]
     iterations = args.iterations or MODES[mode]["iterations"]
     suffix = "_quick" if args.quick else ""
+    if args.render_only:
+        path = HERE / f"results{suffix}.json"
+        if not path.exists():  # the full results were computed before results.json existed
+            parser.error(f"--render-only: {path.name} not found; compute it: python benchmarks/reacher/run.py"
+                         + (" --quick" if args.quick else ""))  # fmt: skip
+        print(render(json.loads(path.read_text(encoding="utf-8")), suffix))
+        return
     folder = HERE / f"runs{suffix}"
-    if args.fresh and folder.exists():
+    if (args.fresh or args.quick) and folder.exists():  # --quick is a reproduction: it computes again
         shutil.rmtree(folder)
     folder.mkdir(exist_ok=True)
     curves, started = {}, time.perf_counter()
     for algorithm in args.algorithms:
         curves[algorithm] = np.stack([run_one(algorithm, seed, iterations, folder) for seed in range(seeds)])
         print(f"{ALGORITHMS[algorithm][0]}: {seeds} runs done ({time.perf_counter() - started:.1f} s so far)")
-    header = (
-        f"Planar reacher, {mode} mode: {seeds} seeds x {iterations} iterations x {SAMPLES} samples; "
-        f"mean-policy return R on {N_TEST} fixed test via-points, median [25 %, 75 %] over seeds."
-    )
-    text = table(curves, iterations, header)
-    (HERE / f"results{suffix}.md").write_text(text, encoding="utf-8")
-    update_readme(mode, text)
-    plot_curves(curves, HERE / f"fig4a{suffix}.png", f"Planar reacher (Fig. 4a), {seeds} seeds")
-    draw_fig4b(curves, folder, HERE / f"fig4b{suffix}.png")
+    document = results_document(mode, curves, fig4b_policy(curves, folder))
+    (HERE / f"results{suffix}.json").write_text(json.dumps(document) + "\n", encoding="utf-8")
+    text = render(json.loads((HERE / f"results{suffix}.json").read_text(encoding="utf-8")), suffix)
     print(text)
     elapsed = time.perf_counter() - started
     print(f"total {elapsed:.1f} s; wrote fig4a{suffix}.png, fig4b{suffix}.png and results{suffix}.md")

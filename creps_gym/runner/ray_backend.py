@@ -51,8 +51,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym.optimizers.adapters.base import import_optional
-from creps_gym.runner.backends import Array, Backend, EnvSource, EpisodeError, run_episodes
 from creps_gym.runner.config import check_ray_address
+from creps_gym.runner.episodes import Array, Backend, EnvSource, EpisodeError, run_episodes
 from creps_gym.runner.watchdog import Watchdog, child_pids
 
 __all__ = [

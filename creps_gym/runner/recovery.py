@@ -11,16 +11,19 @@ from __future__ import annotations
 import json
 import warnings
 import zlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from creps_gym.runner import files
 from creps_gym.runner.history import History, IterationRecord
-from creps_gym.runner.rundir import RESTART, RunDir
 from creps_gym.runner.runlog import record_chain
 from creps_gym.runner.session import RunDirWarning
 
-__all__ = ["REBUILD", "chain_crc", "checkpoint_history", "history_crc", "read_history"]
+if TYPE_CHECKING:  # for annotations only: rundir imports this module
+    from creps_gym.runner.rundir import RunDir
 
+__all__ = ["REBUILD", "RESTART", "chain_crc", "checkpoint_history", "history_crc", "read_history"]
+
+RESTART = "delete it to restart the run from its first iteration, or restore it from a backup"
 REBUILD = (
     "the history up to the checkpoint cannot be rebuilt: restore it from a backup, or delete "
     "checkpoint.npz to restart the run from its first iteration"
@@ -114,7 +117,7 @@ def read_history(run_dir: RunDir) -> History:
     _warn_log_problems(run_dir, records, damaged, (len(history), checkpointed), legacy_part)
     if foreign is not None:
         warnings.warn(
-            f"{run_dir.file(RunDir.LOG)}: logged iteration {foreign} is not this run's (its line has no "
+            f"{run_dir.file(run_dir.LOG)}: logged iteration {foreign} is not this run's (its line has no "
             f"chain or another run's; copied or written by hand?), so the history ends at iteration "
             f"{len(history)}; `creps-gym resume` redoes the rest",
             RunDirWarning,
@@ -167,9 +170,9 @@ def _warn_log_problems(
     if lost:
         problems.append(f"logged iterations {lost[0]} to {lost[-1]} follow a gap and are left out")
     if problems:
-        where = "" if legacy is None else f" ({legacy} from {RunDir.CHECKPOINT}, the rest from the log)"
+        where = "" if legacy is None else f" ({legacy} from {run_dir.CHECKPOINT}, the rest from the log)"
         warnings.warn(
-            f"{run_dir.file(RunDir.LOG)}: {'; '.join(problems)}; the history has iterations 1 to "
+            f"{run_dir.file(run_dir.LOG)}: {'; '.join(problems)}; the history has iterations 1 to "
             f"{length}{where}",
             RunDirWarning,
             stacklevel=4,

@@ -47,6 +47,8 @@ from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.runner import files
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History, IterationRecord
+from creps_gym.runner.ioh import iohanalyzer_text
+from creps_gym.runner.recovery import RESTART, read_history
 from creps_gym.runner.runlog import entry_crc as _crc
 from creps_gym.runner.runlog import log_line, parse_log, record_chain
 from creps_gym.runner.session import RunDirError, RunDirWarning, RunLock
@@ -59,8 +61,6 @@ from creps_gym.runner.trust import (
 )
 
 __all__ = ["RESTART", "RunDir", "RunDirError", "RunDirWarning", "package_versions"]
-
-RESTART = "delete it to restart the run from its first iteration, or restore it from a backup"
 
 
 def package_versions() -> dict[str, str]:
@@ -361,8 +361,6 @@ class RunDir:
         With ``only_changed``, a file whose content is already right is left alone (a missing, truncated or
         damaged one is rewritten).
         """
-        from creps_gym.runner.export import iohanalyzer_text
-
         texts = {
             self.HISTORY_JSON: history.json_text(),
             self.HISTORY_CSV: history.csv_text(),
@@ -388,6 +386,4 @@ class RunDir:
 
     def read_history(self) -> History:
         """The run's history: see :func:`creps_gym.runner.recovery.read_history`."""
-        from creps_gym.runner.recovery import read_history
-
         return read_history(self)

@@ -29,15 +29,10 @@ try:
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 
+from creps_gym.runner.errors import RunDirError, RunDirWarning
+from creps_gym.runner.files import open_run_file, os_failure
+
 __all__ = ["DeferredInterrupt", "RunDirError", "RunDirWarning", "RunLock"]
-
-
-class RunDirError(ValueError):
-    """A run directory that cannot be used as it is: a damaged, foreign or locked file (CLI exit code 3)."""
-
-
-class RunDirWarning(UserWarning):
-    """Something in a run directory was repaired or recovered (what and how is in the message)."""
 
 
 class RunLock:
@@ -68,8 +63,6 @@ class RunLock:
 
     def _open_locked(self) -> int:
         """A descriptor of the lock file on disk, with the ``flock`` held."""
-        from creps_gym.runner.files import open_run_file  # (it imports this module)
-
         while True:
             fd = open_run_file(self.path, os.O_RDWR | os.O_CREAT)  # never through a link
             try:
@@ -108,7 +101,6 @@ class RunLock:
             os.write(fd, json.dumps({"pid": os.getpid(), "host": socket.gethostname()}).encode())
         except OSError as exc:  # e.g. a full disk
             os.close(fd)
-            from creps_gym.runner.files import os_failure
 
             raise os_failure(self.path, exc, "write the lock file") from None
         self._fd = fd

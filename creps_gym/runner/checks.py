@@ -166,13 +166,17 @@ def check_box_spaces(env: gym.Env) -> None:
 
 
 def check_ray_cluster(config: Any) -> None:
-    """For the Ray backend joining a cluster: ``ValueError`` naming the address unless Ray answers there.
+    """For the Ray backend: ``ImportError`` without Ray, and, joining a cluster, ``ValueError`` naming the
+    address unless Ray answers there.
 
     Called before a new run directory is created, so a wrong address leaves nothing behind.
     """
     if config.backend != "ray":
         return
+    from creps_gym.optimizers.adapters.base import import_optional
     from creps_gym.runner.ray_backend import check_reachable, resolve_address
+
+    import_optional("ray", "ray")  # a missing Ray (exit 4) leaves no run folder behind either
 
     address, origin = resolve_address(config.ray_address, os.environ)
     if address is not None and address != "auto":

@@ -112,21 +112,19 @@ def provenance_text(records: Iterable[Any], what: str = "runs") -> str:
     CPU, BLAS, commit) with its count, and the count recorded before provenance existed (None or an
     :func:`unrecorded` record)."""
     stacks: Counter[str] = Counter()
-    unknown = 0
+    unknown: Counter[str] = Counter()  # by what is known of them: a record's "partial" text, else nothing
     for record in records:
         if is_recorded(record):
             stacks[_stack_text(record)] += 1
         else:
-            unknown += 1
+            partial = record.get("partial") if isinstance(record, dict) else None
+            unknown[partial or "computed before provenance was recorded (versions and CPU unknown)"] += 1
 
     def counted(count: int) -> str:
         return f"{count} {what if count != 1 else what.removesuffix('s')}"
 
     lines = [f"- {counted(n)}: {stack}" for stack, n in sorted(stacks.items(), key=lambda s: -s[1])]
-    if unknown:
-        lines.append(
-            f"- {counted(unknown)}: computed before provenance was recorded (versions and CPU unknown)"
-        )
+    lines += [f"- {counted(n)}: {text}" for text, n in unknown.items()]
     return "Computed on (provenance):\n\n" + "\n".join(lines)
 
 

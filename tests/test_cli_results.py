@@ -22,15 +22,15 @@ SMALL = {"eval_every": 1, "eval_contexts": 4, "env_kwargs": {"dim": 3}}
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    """Sphere p = 3: two seeds at N = 8, two at N = 12, one with epsilon = 0.8; one run on p = 4."""
+    """Sphere p = 3: two seeds at N = 10, two at N = 12, one with epsilon = 0.8; one run on p = 4."""
     root = tmp_path_factory.mktemp("settings")
-    settings = [("n8-0", 0, 8, {}), ("n8-1", 1, 8, {}), ("n12-0", 0, 12, {}), ("n12-1", 1, 12, {}),
-                ("eps-0", 0, 8, {"epsilon": 0.8})]  # fmt: skip
+    settings = [("n8-0", 0, 10, {}), ("n8-1", 1, 10, {}), ("n12-0", 0, 12, {}), ("n12-1", 1, 12, {}),
+                ("eps-0", 0, 10, {"epsilon": 0.8})]  # fmt: skip
     for name, seed, samples, options in settings:
         run(
             "creps-cma-old", SPHERE, 5, samples, seed, run_dir=root / name, optimizer_options=options, **SMALL
         )
-    run("c-cma-es", SPHERE, 5, 8, 0, run_dir=root / "p4", **{**SMALL, "env_kwargs": {"dim": 4}})
+    run("c-cma-es", SPHERE, 5, 10, 0, run_dir=root / "p4", **{**SMALL, "env_kwargs": {"dim": 4}})
     return root
 
 
@@ -41,9 +41,9 @@ def _paths(root, *names):
 def test_runs_are_grouped_by_their_whole_setting_not_by_optimiser(runs):
     groups, labels = group_runs(load_runs(_paths(runs, "n8-0", "n12-0", "n8-1", "eps-0", "n12-1")))
     assert list(groups) == [
-        "creps-cma-old, epsilon=default, samples=8",
+        "creps-cma-old, epsilon=default, samples=10",
         "creps-cma-old, epsilon=default, samples=12",
-        "creps-cma-old, epsilon=0.8, samples=8",
+        "creps-cma-old, epsilon=0.8, samples=10",
     ]
     assert [len(histories) for histories in groups.values()] == [2, 2, 1]
     assert labels[0] == labels[2] and labels[1] == labels[4]
@@ -78,7 +78,7 @@ def test_the_default_export_ids_tell_the_settings_apart(runs, tmp_path):
     assert main(["export", *_paths(runs, "n8-0", "n12-0", "n8-1"), "-o", str(out)]) == 0
     with open(out, newline="") as file:
         ids = {row["algorithm_id"] for row in csv.DictReader(file)}
-    assert ids == {"creps-cma-old, samples=8", "creps-cma-old, samples=12"}
+    assert ids == {"creps-cma-old, samples=10", "creps-cma-old, samples=12"}
 
 
 def _overlap(a, b):

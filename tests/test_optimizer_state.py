@@ -316,7 +316,7 @@ def test_a_user_state_that_needs_pickle_stops_the_run_at_its_first_checkpoint(tm
             optimizer,
             "creps_gym/Sphere-v0",
             5,
-            8,
+            10,
             0,
             env_kwargs={"dim": 2},
             run_dir=tmp_path,
@@ -365,7 +365,7 @@ def test_an_entry_the_state_does_not_list_is_refused(tmp_path):
 
 
 def test_resume_refuses_a_checkpoint_with_a_deflated_entry(tmp_path):
-    run("creps-cma-old", "creps_gym/Sphere-v0", 2, 8, 0, env_kwargs={"dim": 2}, run_dir=tmp_path)
+    run("creps-cma-old", "creps_gym/Sphere-v0", 2, 10, 0, env_kwargs={"dim": 2}, run_dir=tmp_path)
     _add_bomb(tmp_path / "checkpoint.npz", 8 * 2**20)
     with pytest.raises(
         RunDirError, match=r"checkpoint\.npz: damaged .*entry 'bomb\.npy': expected an uncompressed"

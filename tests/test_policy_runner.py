@@ -111,7 +111,7 @@ def test_a_damaged_or_linked_policy_file_in_a_run_folder_is_a_run_dir_error(tmp_
 def test_overwrite_deletes_the_policy_files_of_the_old_run(tmp_path):
     _run(tmp_path / "run")
     with pytest.raises(_Crash):  # the new run writes nothing before its first checkpoint
-        run("creps", SPHERE, 9, 6, 0, run_dir=tmp_path / "run", overwrite=True, callbacks=[_crash_at(1)])
+        run("creps", SPHERE, 9, 12, 0, run_dir=tmp_path / "run", overwrite=True, callbacks=[_crash_at(1)])
     assert not (tmp_path / "run" / RunDir.BEST_POLICY).exists()
     assert not (tmp_path / "run" / RunDir.POLICY).exists()
 

@@ -48,7 +48,7 @@ class _Crash(Callback):
 def finished(tmp_path_factory) -> Path:
     """A finished run of 3 iterations (stop reason "iterations")."""
     path = tmp_path_factory.mktemp("finished")
-    run("creps", SPHERE, 3, 8, 0, env_kwargs={"dim": 2}, run_dir=path)
+    run("creps", SPHERE, 3, 10, 0, env_kwargs={"dim": 2}, run_dir=path)
     return path
 
 
@@ -61,7 +61,7 @@ def unfinished(tmp_path_factory) -> Path:
             "creps",
             SPHERE,
             4,
-            8,
+            10,
             0,
             env_kwargs={"dim": 2},
             run_dir=path,

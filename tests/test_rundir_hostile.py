@@ -36,7 +36,7 @@ from creps_gym.runner.watchdog import child_pids
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="POSIX files, /proc, rlimits")
 
-SETTINGS = {"iterations": 6, "samples_per_iteration": 6, "env_kwargs": {"dim": 2}, "eval_every": 2,
+SETTINGS = {"iterations": 6, "samples_per_iteration": 10, "env_kwargs": {"dim": 2}, "eval_every": 2,
             "checkpoint_every": 2}  # fmt: skip
 SECONDS = 30  # every hostile case must end well within this
 DEEP = "[" * 100_000 + "]" * 100_000
@@ -381,7 +381,7 @@ def test_a_write_that_fails_stops_the_run_with_exit_3_and_resume_is_bit_identica
 
         monkeypatch.setattr(rundir, "save_state", save)
     flags = ["--env", SPHERE, "--env-kwarg", "dim=2", "--optimizer", "creps-cma-old", "--iterations", "6",
-             "--samples", "6", "--eval-every", "2", "--checkpoint-every", "2", "--seed", "0"]  # fmt: skip
+             "--samples", "10", "--eval-every", "2", "--checkpoint-every", "2", "--seed", "0"]  # fmt: skip
     exit_code, error = cli(capsys, "run", *flags, "--out", out, "--no-progress", "--no-plot")
     assert exit_code == 3
     name = RunDir.LOG if failing == "log" else RunDir.CHECKPOINT
@@ -398,7 +398,7 @@ def test_a_file_size_limit_gives_exit_3_not_a_signal_and_resume_is_bit_identical
         resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))  # `ulimit -f 2`: log.jsonl outgrows it
 
     flags = ["--env", SPHERE, "--env-kwarg", "dim=2", "--optimizer", "creps-cma-old", "--iterations", "6",
-             "--samples", "6", "--eval-every", "2", "--checkpoint-every", "2", "--seed", "0"]  # fmt: skip
+             "--samples", "10", "--eval-every", "2", "--checkpoint-every", "2", "--seed", "0"]  # fmt: skip
     command = cli_command("run", *flags, "--out", out, "--no-progress", "--no-plot")
     done = subprocess.run(command, capture_output=True, text=True, timeout=120, preexec_fn=limit_file_size)
     assert done.returncode == 3, (done.returncode, done.stderr)  # not -SIGXFSZ

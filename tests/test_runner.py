@@ -340,8 +340,8 @@ def test_progress_bar_shows_the_regret_only_when_asked():
 def test_progress_bar_of_an_early_stop_ends_at_100_percent_with_its_reason():
     """Issue 31: a run that met its target after 2 of 40 iterations left its bar at "5%"."""
     stream = io.StringIO()
-    history = run("creps-cma-old", SPHERE, 40, 8, 0, callbacks=[ProgressBar(True, stream)], target_regret=1e3,
-                  **SMALL)  # fmt: skip
+    history = run("creps-cma-old", SPHERE, 40, 10, 0, callbacks=[ProgressBar(True, stream)],
+                  target_regret=1e3, **SMALL)  # fmt: skip
     last = stream.getvalue().split("\r")[-1]
     assert history.stop_reason == "target_regret" and len(history) < 40
     assert "100%" in last and f"{len(history)}/{len(history)}" in last and "stop=target_regret" in last
@@ -536,7 +536,7 @@ def test_optimizer_output_that_breaks_the_protocol_is_refused_not_converted(faul
     optimizer = _Misbehaving(4, 1, seed=0)
     optimizer.fault = fault
     with pytest.raises(error, match=message):
-        run(optimizer, SPHERE, 2, 8, 0, env_kwargs={"dim": 4}, eval_every=1)
+        run(optimizer, SPHERE, 2, 10, 0, env_kwargs={"dim": 4}, eval_every=1)
 
 
 def test_complex_recommendations_are_refused_in_episodes_of_a_plain_env():
@@ -544,7 +544,7 @@ def test_complex_recommendations_are_refused_in_episodes_of_a_plain_env():
     optimizer.fault = "complex recommend"
     message = r"TypeError: optimizer\.recommend\(\) output: expected an array of real numbers, got a complex"
     with pytest.raises(EpisodeError, match=message):
-        run(optimizer, PlainEnv(), 2, 8, 0, eval_every=1)
+        run(optimizer, PlainEnv(), 2, 10, 0, eval_every=1)
 
 
 def test_finite_mean_never_overflows_and_keeps_the_bits_of_ordinary_means():

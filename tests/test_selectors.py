@@ -141,14 +141,14 @@ def test_the_bandit_practises_the_hard_region_once_the_easy_part_is_learnt():
 def test_an_interrupted_run_resumes_bit_identically_with_every_selector(tmp_path, name):
     kwargs = {"env_kwargs": SPHERE_2D, "context_selector": name, "checkpoint_every": 3, "eval_every": 2}
     kwargs["context_selector_options"] = {"fixed": {"contexts": [[0.5, 1.0], [2.0, 3.0]]}}.get(name, {})
-    uninterrupted = run("creps-cma-old", SPHERE, 10, 12, 2, **kwargs)
+    uninterrupted = run("creps-cma-old", SPHERE, 10, 16, 2, **kwargs)
 
     def crash(record, history):
         if record.iteration == 7:
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        run("creps-cma-old", SPHERE, 10, 12, 2, run_dir=tmp_path, callbacks=[crash], **kwargs)
+        run("creps-cma-old", SPHERE, 10, 16, 2, run_dir=tmp_path, callbacks=[crash], **kwargs)
     state = RunDir.open(tmp_path).load_checkpoint()[0]
     assert state["iteration"] == 6 and "selector" in state and "selector_rng" in state
     assert resume(tmp_path).equals(uninterrupted)
@@ -157,12 +157,12 @@ def test_an_interrupted_run_resumes_bit_identically_with_every_selector(tmp_path
 
 
 def test_runs_without_a_selector_keep_their_stream_checkpoint_and_fingerprint(tmp_path):
-    plain = run("creps-cma-old", SPHERE, 4, 12, 2, env_kwargs=SPHERE_2D)
-    assert plain.equals(run("creps-cma-old", SPHERE, 4, 12, 2, env_kwargs=SPHERE_2D, context_selector=None))
+    plain = run("creps-cma-old", SPHERE, 4, 16, 2, env_kwargs=SPHERE_2D)
+    assert plain.equals(run("creps-cma-old", SPHERE, 4, 16, 2, env_kwargs=SPHERE_2D, context_selector=None))
     assert not plain.equals(
-        run("creps-cma-old", SPHERE, 4, 12, 2, env_kwargs=SPHERE_2D, context_selector="env")
+        run("creps-cma-old", SPHERE, 4, 16, 2, env_kwargs=SPHERE_2D, context_selector="env")
     )
-    run("creps-cma-old", SPHERE, 4, 12, 2, env_kwargs=SPHERE_2D, run_dir=tmp_path, checkpoint_every=2)
+    run("creps-cma-old", SPHERE, 4, 16, 2, env_kwargs=SPHERE_2D, run_dir=tmp_path, checkpoint_every=2)
     config = RunDir.open(tmp_path).config()
     data = config.to_dict()
     old = {"format": "creps_gym.run/3", **{name: data[name] for name in FINGERPRINT_FIELDS}}
@@ -181,7 +181,7 @@ def test_runs_without_a_selector_keep_their_stream_checkpoint_and_fingerprint(tm
 
 def test_evaluation_stays_on_the_envs_own_test_contexts():
     fixed = {"contexts": [[1.5, 1.5]]}
-    base = RunConfig(SPHERE, "creps-cma-old", 3, 12, 7, env_kwargs=SPHERE_2D)
+    base = RunConfig(SPHERE, "creps-cma-old", 3, 16, 7, env_kwargs=SPHERE_2D)
     chosen = RunConfig(**{**base.to_dict(), "context_selector": "fixed", "context_selector_options": fixed})
     plain, selected = Runner(base), Runner(chosen)
     assert (plain.test_contexts == selected.test_contexts).all()  # from the evaluation seed only

@@ -64,6 +64,17 @@ def specs_for(mode: str, functions: Sequence[str], seeds: int | None = None) -> 
     ]
 
 
+def with_partial_provenance(document: dict) -> dict:
+    """A run written before the shared provenance record: what its ``environment`` field recorded."""
+    env = document.get("environment")
+    if "provenance" in document or not isinstance(env, dict):
+        return document
+    known = ", ".join(f"{name} {env[name]}" for name in ("python", "numpy", "scipy") if name in env)
+    cpu = f"{env.get('cpu')} ({env.get('cores')} cores)"
+    partial = f"recorded before the shared provenance record: {known}; CPU {cpu}"
+    return {**document, "provenance": {"recorded": False, "partial": partial}}
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_mode_options(parser, quick="3 runs per cell", full="20 runs per cell (the protocol)")
@@ -72,16 +83,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, help="runs per cell (default: 3 quick, 20 full)")
     args = parser.parse_args(argv)
     args.mode = args.mode or "quick"
+    if args.cache is None:  # --quick computes its runs again, never replacing the documents --full reads
+        args.cache = STUDY / "runs" / "quick" if args.mode == "quick" else STUDY / "runs"
     out = args.out or STUDY / "results" / args.mode
     out.mkdir(parents=True, exist_ok=True)
     specs = specs_for(args.mode, args.functions, args.seeds)
     start = time.perf_counter()
     cached = sum((args.cache / f"{spec.key}.json").exists() for spec in specs)
+    recompute = args.mode == "quick" and not args.render_only
     documents = run_all(specs, args.cache, workers=args.workers, worker=run_protocol,
-                        compute=not args.render_only)  # fmt: skip
+                        compute=not args.render_only, recompute=recompute)  # fmt: skip
     if not documents:
         print(f"no cached runs in {args.cache}: nothing to render")
         return 1
+    documents = [with_partial_provenance(document) for document in documents]
     computed = 0 if args.render_only else len(documents) - cached
     timing = invocation_timing(out, time.perf_counter() - start, computed, len(specs))
     command = f"python benchmarks/contextual_bbo/run.py {command_flags(argv, args.mode)}"

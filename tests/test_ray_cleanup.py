@@ -130,7 +130,7 @@ def test_a_local_ray_is_started_once_per_process_and_stopped_at_its_exit(tmp_pat
         def cluster(path):
             return next(e for e in map(json.loads, open(path + "/log.jsonl")) if e["event"] == "ray")
 
-        args = ("creps-cma-old", "creps_gym/Sphere-v0", 2, 8, 0)
+        args = ("creps-cma-old", "creps_gym/Sphere-v0", 2, 10, 0)
         kwargs = dict(env_kwargs={{"dim": 3}}, backend="ray", workers=2)
         run(*args, **kwargs, run_dir={str(tmp_path / "one")!r})
         after_first = ray.is_initialized()

@@ -18,6 +18,7 @@ __all__ = [
     "check_bool",
     "check_finite",
     "check_fits_in_memory",
+    "check_in_box",
     "check_positive_int",
     "check_real",
     "check_real_in_range",
@@ -96,6 +97,19 @@ def _as_float(value: Any, name: str) -> float:
         return float(value)
     except OverflowError:
         raise ValueError(f"{name}: expected a finite number, got an integer beyond the float range") from None
+
+
+def check_in_box(values: NDArray[np.float64], low: Any, high: Any, name: str, hint: str = "") -> None:
+    """``ValueError`` naming ``name`` and the first value of ``values`` (n, z) outside the box [low, high]
+    (per dimension), with ``hint`` appended to the message."""
+    outside = (values < low) | (values > high)
+    if outside.any():
+        row, col = (int(i) for i in np.argwhere(outside)[0])
+        low, high = np.broadcast_to(low, values.shape[1:]), np.broadcast_to(high, values.shape[1:])
+        raise ValueError(
+            f"{name}: expected values in the context box [{low[col]}, {high[col]}] in dimension {col}, "
+            f"got {values[row, col]}{hint}"
+        )
 
 
 def check_finite(array: NDArray[np.float64], name: str) -> None:

@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from creps_gym.cli_parsers import add_import
 from creps_gym.cli_types import UsageError, integer
 
 __all__ = ["COMMANDS", "add_commands"]
@@ -45,14 +46,7 @@ def add_commands(commands: Any) -> None:
             default="best",
             help="the best evaluated mean policy (default) or the final one",
         )
-        parser.add_argument(
-            "--import",
-            dest="imports",
-            action="append",
-            default=[],
-            metavar="MODULE",
-            help="import MODULE first (e.g. the package that registers the env; repeatable)",
-        )
+        add_import(parser)
     policy.add_argument(
         "--context",
         action="append",

@@ -36,7 +36,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_fits_in_memory, check_positive_int
+from creps_gym._validation import as_float_array, check_fits_in_memory, check_in_box, check_positive_int
 from creps_gym.envs.initial import box_initial_distribution, initial_distribution
 
 __all__ = [
@@ -164,14 +164,7 @@ class ContextualEpisodicEnv(gym.Env[Array, Array]):
     def check_contexts(self, contexts: Any, name: str = "options['context']") -> Array:
         """Validate contexts of shape (n, z) that must lie in the observation box."""
         contexts = as_float_array(contexts, name, (None, self.context_dim))
-        low, high = self.observation_space.low, self.observation_space.high
-        outside = (contexts < low) | (contexts > high)
-        if outside.any():
-            row, col = (int(i) for i in np.argwhere(outside)[0])
-            raise ValueError(
-                f"{name}: expected values in the context box [{low[col]}, {high[col]}] in dimension {col}, "
-                f"got {contexts[row, col]}"
-            )
+        check_in_box(contexts, self.observation_space.low, self.observation_space.high, name)
         return contexts
 
     def check_params(self, params: Any, name: str = "action") -> Array:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_bool, check_positive_int
+from creps_gym._validation import as_float_array, check_bool, check_in_box, check_positive_int
 from creps_gym.optimizers.base import MAX_CONTEXT, overflowing_contexts
 from creps_gym.optimizers.features import FeatureMap, make_features
 
@@ -178,13 +178,7 @@ class Policy:
             raise ValueError(f"contexts: expected |s| <= {MAX_CONTEXT:g}, got max |s| = {largest:g}")
         if self.context_box is not None and not extrapolate:
             low, high = self.context_box
-            outside = (rows < low) | (rows > high)
-            if outside.any():
-                row, col = (int(i) for i in np.argwhere(outside)[0])
-                raise ValueError(
-                    f"contexts: expected values in the context box [{low[col]}, {high[col]}] in dimension "
-                    f"{col}, got {rows[row, col]} (pass extrapolate=True to go outside it)"
-                )
+            check_in_box(rows, low, high, "contexts", " (pass extrapolate=True to go outside it)")
         with np.errstate(over="ignore", invalid="ignore"):
             mean = self.features(rows) @ self.coefficients
         if not np.isfinite(mean).all():

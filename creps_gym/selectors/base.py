@@ -34,7 +34,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_positive_int, check_real
+from creps_gym._validation import as_float_array, check_in_box, check_positive_int, check_real
 from creps_gym.wrappers.samplers import BetaContexts, UniformContexts
 from creps_gym.wrappers.sources import FixedSource
 
@@ -207,13 +207,7 @@ class FixedSelector:
         contexts = self.source.contexts
         if contexts.shape[1] != low.shape[0]:
             raise ValueError(f"contexts: expected shape (m, {low.shape[0]}), got {contexts.shape}")
-        outside = (contexts < low) | (contexts > high)
-        if outside.any():
-            row, col = (int(i) for i in np.argwhere(outside)[0])
-            raise ValueError(
-                f"contexts: expected values in the context box [{low[col]}, {high[col]}] in dimension "
-                f"{col}, got {contexts[row, col]}"
-            )
+        check_in_box(contexts, low, high, "contexts")
 
     def select(self, rng: np.random.Generator, n: int) -> Array:
         """The next ``n`` contexts (n, z) of the cycle, or ``n`` drawn at random with ``rng``."""

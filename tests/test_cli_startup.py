@@ -13,7 +13,7 @@ import sys
 import textwrap
 
 import pytest
-from helpers import cli_command
+from helpers import EXTRAS, cli_command
 
 HEAVY = ["numpy", "gymnasium", "scipy", "matplotlib", "ray", "mujoco", "tqdm", "creps_gym.envs"]
 
@@ -60,6 +60,7 @@ def test_importing_the_package_registers_the_ids_when_gymnasium_is_imported_in_e
     assert int(count) == int(before.stdout) > 20 and name == "creps_gym.envs" and version == "True"
 
 
+@EXTRAS  # the table records which optional modules each env needs: every extra must be installed
 def test_the_static_table_agrees_with_the_registries_and_run_config():
     result = subprocess.run(
         [sys.executable, "-m", "creps_gym.listing", "--check"], capture_output=True, text=True, timeout=600

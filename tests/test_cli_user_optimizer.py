@@ -15,7 +15,7 @@ import subprocess
 import time
 from pathlib import Path
 
-from helpers import cli_command
+from helpers import EXTRAS, cli_command
 
 GUIDE = Path(__file__).resolve().parent.parent / "docs" / "writing_an_adapter.md"
 SECTION = GUIDE.read_text().split("## Your own optimiser from the command line", 1)[1].split("\n## ", 1)[0]
@@ -41,6 +41,7 @@ def _workspace(tmp_path: Path) -> Path:
     return tmp_path
 
 
+@EXTRAS  # `plot` needs matplotlib
 def test_the_guide_module_is_short_and_its_commands_run_resume_plot_and_export(tmp_path):
     work = _workspace(tmp_path)
     code = [
@@ -78,6 +79,7 @@ def test_without_import_every_command_refuses_the_run_and_names_the_flag(tmp_pat
     assert not (work / "scipy.py.imported").exists()
 
 
+@EXTRAS  # `plot` needs matplotlib
 def test_a_run_folder_never_puts_its_files_on_the_path(tmp_path):
     work = _workspace(tmp_path)
     run = cli(*COMMANDS[0][:-2], "--out", "runs/x", "--iterations", "3", "--no-plot", cwd=work)

@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytest.importorskip("matplotlib")  # the study renders its figures with it (extra 'plot')
+
 from benchmarks.contextual_bbo import problems, protocol, run
 from benchmarks.contextual_bbo.problems import PROBLEMS, draw_run
 from benchmarks.study_tools import load_document

@@ -422,6 +422,7 @@ def test_a_listener_that_is_not_ray_is_refused_within_seconds(http_server):
     assert time.monotonic() - start < 30
 
 
+@EXTRAS  # the Ray backend checks that Ray is installed first
 def test_run_with_a_ray_address_that_is_not_ray_exits_2_and_leaves_no_run_folder(
     http_server, tmp_path, capsys
 ):
@@ -446,6 +447,7 @@ def test_run_with_a_ray_address_that_is_not_ray_exits_2_and_leaves_no_run_folder
     assert not (tmp_path / "run").exists()
 
 
+@EXTRAS  # the Ray backend checks that Ray is installed first
 def test_resume_with_a_ray_address_that_is_not_ray_exits_2_at_once(
     http_server, tmp_path, capsys, monkeypatch
 ):

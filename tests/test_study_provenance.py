@@ -10,8 +10,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import EXTRAS
 
 from benchmarks import provenance, study_runner
+
+pytestmark = EXTRAS  # the studies need matplotlib and pycma, and record the full environment's BLAS
 
 REPO = Path(__file__).resolve().parents[1]
 BENCHMARKS = REPO / "benchmarks"

@@ -37,6 +37,7 @@ __all__ = [
     "check_optimizer",
     "check_optimizer_sizes",
     "check_ray_cluster",
+    "generator_state",
     "real_params",
     "stop_criteria",
     "unwrapped_model",
@@ -181,6 +182,26 @@ def check_ray_cluster(config: Any) -> None:
     address, origin = resolve_address(config.ray_address, os.environ)
     if address is not None and address != "auto":
         check_reachable(address, origin)
+
+
+def generator_state(state: Any) -> Any:
+    """``state`` if it is a PCG64 state a Generator can have written, else ``ValueError``.
+
+    Checked here because numpy itself differs: recent versions raise ``OverflowError`` for a state outside
+    [0, 2**128), older ones (1.23) take ``-1`` silently as another state.
+    """
+    inner = state.get("state") if isinstance(state, dict) else None
+    words = [inner.get("state"), inner.get("inc")] if isinstance(inner, dict) else [None]
+    if not (
+        isinstance(state, dict)
+        and state.get("bit_generator") == "PCG64"
+        and all(type(w) is int and 0 <= w < 2**128 for w in words)
+        and state.get("has_uint32") in (0, 1)
+        and type(state.get("uinteger")) is int
+        and 0 <= state["uinteger"] < 2**32
+    ):
+        raise ValueError(f"env_rng: expected a PCG64 state with 128-bit words, got {str(state)[:200]}")
+    return state
 
 
 def real_params(value: Any, method: str) -> NDArray[np.float64]:

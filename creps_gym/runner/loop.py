@@ -211,7 +211,7 @@ class Runner:
             else:
                 self.optimizer = (optimizer_class or type(optimizer)).from_state_dict(optimizer_state)
             checks.check_optimizer_sizes(self.optimizer, "optimizer state", self)
-            self.env_rng.bit_generator.state = state["env_rng"]
+            self.env_rng.bit_generator.state = checks.generator_state(state["env_rng"])
             self.draws.selection.load(state)
             self.history = self._checkpoint_history(run_dir, state)
             self.policies.restore(state.get("best_policy"))  # None in older checkpoints

@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym.optimizers.state_files import replace_atomically
+
 __all__ = ["MAX_JSON_BYTES", "MAX_POLICY_BYTES", "read_policy_file", "write_policy_file"]
 
 MAX_POLICY_BYTES = 64 * 2**20
@@ -47,16 +49,7 @@ def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]],
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0)
     handle = os.open(tmp, flags, 0o644)
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(buffer.getvalue())
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, path)
-    finally:
-        if os.path.lexists(tmp):
-            os.unlink(tmp)
-    return path
+    return replace_atomically(handle, tmp, path, lambda stream: stream.write(buffer.getvalue()))
 
 
 def _read_bytes(path: Path) -> bytes:

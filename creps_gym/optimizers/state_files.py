@@ -18,7 +18,7 @@ import json
 import os
 import tempfile
 import zipfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -26,7 +26,7 @@ import numpy as np
 
 from creps_gym._validation import check_fits_in_memory, load_json
 
-__all__ = ["ARRAY_KINDS", "JSON_KEY", "MANIFEST_KEY", "load_state", "save_state"]
+__all__ = ["ARRAY_KINDS", "JSON_KEY", "MANIFEST_KEY", "load_state", "replace_atomically", "save_state"]
 
 JSON_KEY = "__state__.json"
 #: The document's key listing the array entries (files written before it existed have none).
@@ -114,14 +114,24 @@ def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
     arrays[JSON_KEY] = np.frombuffer(payload, dtype=np.uint8)
     path.parent.mkdir(parents=True, exist_ok=True)
     handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    return replace_atomically(handle, tmp, path, lambda stream: np.savez(stream, **arrays))
+
+
+def replace_atomically(
+    handle: int, tmp: str | os.PathLike[str], path: Path, write: Callable[[BinaryIO], Any]
+) -> Path:
+    """``write`` the open temporary file ``handle`` (named ``tmp``), sync it and rename it to ``path``.
+
+    A crash never leaves a half-written ``path``; the temporary is removed whatever happens.
+    """
     try:
         with os.fdopen(handle, "wb") as stream:
-            np.savez(stream, **arrays)
+            write(stream)
             stream.flush()
             os.fsync(stream.fileno())
         os.replace(tmp, path)
     finally:
-        if os.path.exists(tmp):
+        if os.path.lexists(tmp):
             os.unlink(tmp)
     return path
 

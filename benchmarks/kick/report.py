@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.kick.oracle import read_oracle
+from benchmarks.kick.selector_table import comparison, comparison_section, selector_folders
 from benchmarks.kick.study import ENV_IDS, EVAL_EVERY, GRID_X, GRID_Y, TARGETS, stored_setting
 from benchmarks.provenance import group_by_record, provenance_text
 
@@ -66,8 +67,10 @@ def _superseded(path: Path, result: dict[str, Any], experiment: str) -> bool:
     return stored_setting(json.loads(history.read_text()), experiment) != stored_setting(result, experiment)
 
 
-def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
-    """The results document from the finished run files under ``out/runs`` (trials in order)."""
+def collect(out: Path, mode: str, budgets: dict[str, Any], selectors: bool = True) -> dict[str, Any]:
+    """The results document from the finished run files under ``out/runs`` (trials in order) and, with
+    ``selectors`` and if ``run.py --contexts`` wrote any ``<out>-<contexts>`` folder beside ``out``, the
+    comparison of every such folder's runs with ``out``'s (``"selectors"``, :mod:`.selector_table`)."""
     document: dict[str, Any] = {"mode": mode, "budgets": budgets, "precision": {}, "flexibility": {}}
     sources: dict[str, Any] = {}  # run -> its provenance record
     for experiment, (per_trial, per_point) in METRIC.items():
@@ -103,6 +106,9 @@ def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
             }
     document["in_progress"] = _in_progress(out)
     document["provenance"] = group_by_record(sources)
+    if selectors and (folders := selector_folders(out)):
+        others = {folder.name: collect(folder, mode, budgets, selectors=False) for folder in folders}
+        document["selectors"] = comparison({out.name: document, **others}, METRIC)
     return document
 
 
@@ -152,6 +158,8 @@ def summary_text(document: dict[str, Any]) -> str:
     lines = [f"# Kick study ({document['mode']} mode): rendered from `results.json`", ""]
     lines += [f"Budgets: {json.dumps(document['budgets'])}. A ± is the standard deviation across trials.", ""]
     lines += _precision_section(document) + _flexibility_section(document)
+    if "selectors" in document:
+        lines += comparison_section(document["selectors"], document["mode"])
     if document["in_progress"]:
         lines += ["## Runs in progress (iterations done at the last checkpoint)", ""]
         lines += [f"- {run}: {done}" for run, done in document["in_progress"].items()] + [""]

@@ -10,7 +10,8 @@ figures from ``results.json`` alone (a test checks the committed summary against
      "flexibility": {"<registry name>": {"trial_distances": [...],
                                          "position_distances": [[28 per trial]], ...},
                      "oracle": {"position_distances": [...]}},
-     "in_progress": {"<experiment>/<name>-trial<k>": iterations done}}
+     "in_progress": {"<experiment>/<name>-trial<k>": iterations done},
+     "selectors": {...}}  # if a results/<mode>-<contexts> folder exists (:mod:`.selector_table`)
 
 A "±" in the summary is the standard deviation across trials (population, ddof = 0) unless it says otherwise.
 """

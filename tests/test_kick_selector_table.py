@@ -119,6 +119,11 @@ def test_full_render_only_renders_the_section_when_a_contexts_folder_exists(fold
     text = (folders / "summary.md").read_text()
     assert text == report.summary_text(document)
     assert "## Training contexts: uniform, arcsine and the learning selectors (issue 32)" in text
+    bandit = folders.parent / "full-bandit"  # rendered again from the same run files, on its own
+    assert (bandit / "summary.md").read_text() == report.summary_text(
+        json.loads((bandit / "results.json").read_text())
+    )
+    assert "- precision/c-cma-es-trial2: 30" in (bandit / "summary.md").read_text()
     assert "selectors" not in report.collect(folders.parent / "full-bandit", "full", run.MODES["full"])
     for path in selector_table.selector_folders(folders):
         path.rename(path.with_name("elsewhere"))

@@ -340,7 +340,9 @@ def _plot_heatmaps(plt: Any, document: dict[str, Any], out: Path) -> None:
 
 
 def render(out: Path, mode: str, budgets: dict[str, Any]) -> str:
-    """Rebuild ``results.json`` from the finished runs, then ``summary.md`` and the figures from it."""
+    """Rebuild ``results.json`` from the finished runs, then ``summary.md`` and the figures from it; the
+    ``--contexts`` folders beside ``out`` (:func:`.selector_table.selector_folders`) are rendered again too,
+    so that their files and ``out``'s comparison come from the same run files. Returns ``out``'s summary."""
     out.mkdir(parents=True, exist_ok=True)
     document = collect(out, mode, budgets)
     tmp = out / "results.json.tmp"
@@ -349,4 +351,6 @@ def render(out: Path, mode: str, budgets: dict[str, Any]) -> str:
     text = summary_text(json.loads((out / "results.json").read_text()))
     (out / "summary.md").write_text(text)
     plot(document, out)
+    for folder in selector_folders(out):
+        render(folder, mode, budgets)
     return text

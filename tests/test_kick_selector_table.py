@@ -42,7 +42,7 @@ def folders(tmp_path: Path) -> Path:
     _write_run(full, "precision", "c-cma-es", 1, "arcsine", [[50, 1.0], [100, 0.8], [150, 0.9], [200, 0.7]])
     _write_run(full, "precision", "creps", 0, "arcsine", [[50, 3.0], [100, 2.0], [150, 2.5], [200, 2.6]])
     _write_run(bandit, "precision", "c-cma-es", 0, "bandit", [[50, 0.55], [100, 0.3], [150, 0.2], [200, 0.3]])
-    _write_run(bandit, "precision", "c-cma-es", 1, "bandit", [[50, 0.9], [100, 0.7], [150, 0.8], [200, 0.8]])
+    _write_run(bandit, "precision", "c-cma-es", 1, "bandit", [[50, 0.9], [100, 0.7], [150, 1.2], [200, 0.8]])
     history = {"setting": {"env": study.ENV_IDS["precision"], "contexts": "bandit"}, "batch": [[0, 0]] * 30}
     (bandit / "runs" / "precision" / "c-cma-es-trial2.history.json").write_text(json.dumps(history))
     _write_run(full, "flexibility", "c-cma-es", 0, "uniform", [[50, 3.0], [100, 5.0]])
@@ -79,12 +79,13 @@ def test_the_section_compares_every_contexts_folder_with_the_study_by_episodes_t
     # The arcsine mean curve reaches its own final value (0.60 m) at its end; trial 0 alone at 100.
     assert (
         "| c-cma-es | arcsine | `results/full` | 2 | 0.60 ± 0.10 m | 0.50, 0.70 | 4,000 "
-        "| 2,000, not reached | 1.00 |" in lines
+        "| 2,000, not reached | 1.00 | 4,000 | 1.00 |" in lines
     )
-    # The bandit's mean curve: 0.725 at 50, 0.50 at 100 (≤ 0.60): 2,000 episodes, half arcsine's 4,000.
+    # The bandit's mean curve: 0.725 at 50, 0.50 at 100 (≤ 0.60): 2,000 episodes, half arcsine's 4,000;
+    # 0.70 at 150, so it stays at or below 0.60 only from 200 on.
     assert (
         "| c-cma-es | bandit | `results/full-bandit` | 2 | 0.55 ± 0.25 m | 0.30, 0.80 | 2,000 "
-        "| 1,000, not reached | 0.50 |" in lines
+        "| 1,000, not reached | 0.50 | 4,000 | 1.00 |" in lines
     )
     assert any(
         line.startswith("*Uniform draws*: not in these folders;") and "`bd108c5`" in line for line in lines
@@ -97,18 +98,22 @@ def test_the_section_compares_every_contexts_folder_with_the_study_by_episodes_t
     assert "Resolution: 50 iterations × 100 episodes = 5,000 episodes." in flexibility
     # A distance is reached from below: the bandit's 6.0 m at iteration 50 is past uniform's 5.00 m.
     assert (
-        "| c-cma-es | bandit | `results/full-bandit` | 1 | 6.50 ± 0.00 m | 6.50 | 5,000 | 5,000 | 0.50 |"
-        in flexibility
+        "| c-cma-es | bandit | `results/full-bandit` | 1 | 6.50 ± 0.00 m | 6.50 | 5,000 | 5,000 | 0.50 "
+        "| 5,000 | 0.50 |" in flexibility
     )
     assert not any(line.startswith("*Uniform draws*") for line in flexibility)  # uniform is flexibility's own
 
 
-def test_episodes_to_reach_is_the_first_evaluation_past_the_target() -> None:
+def test_episodes_to_reach_and_to_stay_past_a_target() -> None:
     curve = [[50, 2.0], [100, 0.5], [150, 0.7]]
     assert selector_table.episodes_to_reach(curve, 0.6, 20, lower_is_better=True) == 2000
     assert selector_table.episodes_to_reach(curve, 0.4, 20, lower_is_better=True) is None
     assert selector_table.episodes_to_reach(curve, 0.7, 100, lower_is_better=False) == 5000
     assert selector_table.episodes_to_reach([], 0.7, 100, lower_is_better=False) is None
+    # ... and from which it stays past it: none if the last point is not.
+    assert selector_table.episodes_to_stay(curve, 0.8, 20, lower_is_better=True) == 2000
+    assert selector_table.episodes_to_stay(curve, 0.6, 20, lower_is_better=True) is None
+    assert selector_table.episodes_to_stay([[50, 2.0], [100, 0.5], [150, 2.5]], 1.0, 1, False) == 150
 
 
 def test_full_render_only_renders_the_section_when_a_contexts_folder_exists(folders: Path) -> None:

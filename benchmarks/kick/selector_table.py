@@ -27,7 +27,14 @@ import numpy as np
 
 from benchmarks.kick.study import EVAL_EVERY, SELECTED_CONTEXTS, TRAINING, TRAINING_CONTEXTS
 
-__all__ = ["LAWS", "comparison", "comparison_section", "episodes_to_reach", "selector_folders"]
+__all__ = [
+    "LAWS",
+    "comparison",
+    "comparison_section",
+    "episodes_to_reach",
+    "episodes_to_stay",
+    "selector_folders",
+]
 
 #: The laws of training contexts, in the tables' order (``run.py --contexts``).
 LAWS = (*TRAINING_CONTEXTS, *SELECTED_CONTEXTS)
@@ -119,6 +126,17 @@ def episodes_to_reach(curve: list[Any], target: float, samples: int, lower_is_be
     return None
 
 
+def episodes_to_stay(curve: list[Any], target: float, samples: int, lower_is_better: bool) -> int | None:
+    """The episodes at the first point of ``curve`` from which every later point reaches ``target`` too
+    (the curves are not monotone), or None if its last point does not."""
+    episodes = None
+    for iteration, value in reversed(curve):
+        if not _reached(value, target, lower_is_better):
+            break
+        episodes = int(iteration) * samples
+    return episodes
+
+
 def _mean_curve(curves: list[Any]) -> list[list[float]]:
     """``[[iteration, mean over trials], ...]`` at the iterations where every trial was evaluated."""
     by_iteration = [dict((int(i), v) for i, v in curve) for curve in curves]
@@ -138,14 +156,19 @@ def _row(row: dict[str, Any], reference: dict[str, Any] | None, experiment: str)
     cells = [row["method"], row["contexts"], f"`results/{row['folder']}`", str(len(finals))]
     cells += [f"{finals.mean():.2f} ± {finals.std():.2f} {unit}", ", ".join(f"{v:.2f}" for v in finals)]
     if reference is None:
-        return "| " + " | ".join([*cells, "— (no reference run)", "—", "—"]) + " |"
-    target = float(np.mean(reference["finals"]))
-    mean_curve = episodes_to_reach(_mean_curve(row["curves"]), target, row["samples"], lower)
+        return "| " + " | ".join([*cells, "— (no reference run)", *["—"] * 4]) + " |"
+    target, mean_curve = float(np.mean(reference["finals"])), _mean_curve(row["curves"])
+    reach = episodes_to_reach(mean_curve, target, row["samples"], lower)
+    stay = episodes_to_stay(mean_curve, target, row["samples"], lower)
     per_trial = [episodes_to_reach(curve, target, row["samples"], lower) for curve in row["curves"]]
     budget = reference["budget_iterations"] * reference["samples"]
-    ratio = "—" if mean_curve is None else f"{mean_curve / budget:.2f}"
-    cells += [_episodes(mean_curve), ", ".join(_episodes(e) for e in per_trial), ratio]
+    cells += [_episodes(reach), ", ".join(_episodes(e) for e in per_trial), _ratio(reach, budget)]
+    cells += [_episodes(stay), _ratio(stay, budget)]
     return "| " + " | ".join(cells) + " |"
+
+
+def _ratio(episodes: int | None, budget: int) -> str:
+    return "—" if episodes is None else f"{episodes / budget:.2f}"
 
 
 def _experiment_table(experiment: str, data: dict[str, Any], mode: str) -> list[str]:
@@ -170,9 +193,10 @@ def _experiment_table(experiment: str, data: dict[str, Any], mode: str) -> list[
         header = (
             f"| method | {METRICS[experiment]['contexts']} | source | trials | final {what} | per trial "
             f"| episodes to reach the {reference_law} final {what} (mean curve) | per trial "
+            f"| × {reference_law}'s budget episodes | episodes from which the mean curve stays there "
             f"| × {reference_law}'s budget episodes |"
         )
-        lines += [header, "|---" * 9 + "|"]
+        lines += [header, "|---" * 11 + "|"]
         lines += [_row(row, references.get(row["method"]), experiment) for row in rows]
         lines.append("")
     shown = {row["contexts"] for row in rows}
@@ -195,9 +219,10 @@ def comparison_section(data: dict[str, Any], mode: str) -> list[str]:
         "selectors of `creps_gym.selectors`) and folder. The final "
         "value is the mean policy's at the end of each run (± across trials, then per trial). *Episodes to "
         "reach*: the first evaluation at which the mean over the row's trials (*mean curve*), or each "
-        "trial's own value (*per trial*), reaches the reference row's final value of the same method. The "
+        "trial's own value (*per trial*), reaches the reference row's final value of the same method; "
+        "*stays*: the first evaluation from which the mean curve reaches it at every later one too. The "
         f"mean policy is evaluated every {EVAL_EVERY} iterations and at the run's end, so the resolution is "
-        f"{EVAL_EVERY} iterations × N episodes (below). The last column divides the mean curve's episodes by "
+        f"{EVAL_EVERY} iterations × N episodes (below). The × columns divide the mean curve's episodes by "
         "the reference row's budget (iterations × N), the episodes its final value cost. The curves are not "
         "monotone: a value once reached is not always kept, and the reference row itself may reach its "
         "final value before its end. Each folder's own `summary.md` has its runs' per-target values and "

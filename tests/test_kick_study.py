@@ -16,7 +16,7 @@ pytest.importorskip("mujoco")
 pytest.importorskip("cma")
 
 from benchmarks import provenance
-from benchmarks.kick import oracle, report, run, study
+from benchmarks.kick import oracle, report, run, selector_table, study
 from creps_gym.wrappers import BetaContexts
 
 pytestmark = pytest.mark.extras
@@ -250,14 +250,25 @@ def test_the_script_runs_by_path_writes_results_summary_and_figures_and_quick_co
     assert json.loads((tmp_path / "results.json").read_text())["precision"] == document["precision"]
 
 
-@pytest.mark.parametrize("mode", ["quick", "full"])
-def test_the_committed_summary_is_rendered_from_the_committed_results(mode: str, tmp_path: Path) -> None:
-    folder = FULL.parent / mode
+#: Every committed results folder: the study's (quick, full) and the ``--contexts`` ones beside them.
+FOLDERS = sorted({"quick", "full", *(path.parent.name for path in FULL.parent.glob("*/results.json"))})
+
+
+@pytest.mark.parametrize("name", FOLDERS)
+def test_the_committed_summary_is_rendered_from_the_committed_results(name: str, tmp_path: Path) -> None:
+    folder = FULL.parent / name
     if not (folder / "results.json").exists():
-        pytest.skip(f"no committed {mode} results yet: python benchmarks/kick/run.py --{mode}")
+        pytest.skip(f"no committed {name} results yet: python benchmarks/kick/run.py --{name}")
     shutil.copy(folder / "results.json", tmp_path / "results.json")
     document = json.loads((tmp_path / "results.json").read_text())
+    mode = document["mode"]
     assert (folder / "summary.md").read_text() == report.summary_text(document)
+    # ... with the comparison of training contexts if run.py --contexts wrote a folder beside it (issue 32).
+    beside = [path.name for path in selector_table.selector_folders(folder)]
+    assert document.get("selectors", {}).get("folders", [name])[1:] == beside
+    if beside:
+        section = "## Training contexts: uniform, arcsine and the learning selectors (issue 32)"
+        assert section in (folder / "summary.md").read_text()
     # ... it says where every run and oracle was computed, or that it was before provenance was recorded.
     records = [group["record"] for group in document["provenance"] for _ in group["runs"]]
     entries = [entry for x in ("precision", "flexibility") for entry in document[x].values()]

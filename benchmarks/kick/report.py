@@ -10,7 +10,8 @@ figures from ``results.json`` alone (a test checks the committed summary against
      "flexibility": {"<registry name>": {"trial_distances": [...],
                                          "position_distances": [[28 per trial]], ...},
                      "oracle": {"position_distances": [...]}},
-     "in_progress": {"<experiment>/<name>-trial<k>": iterations done}}
+     "in_progress": {"<experiment>/<name>-trial<k>": iterations done},
+     "selectors": {...}}  # if a results/<mode>-<contexts> folder exists (:mod:`.selector_table`)
 
 A "±" in the summary is the standard deviation across trials (population, ddof = 0) unless it says otherwise.
 """
@@ -25,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.kick.oracle import read_oracle
+from benchmarks.kick.selector_table import comparison, comparison_section, selector_folders
 from benchmarks.kick.study import ENV_IDS, EVAL_EVERY, GRID_X, GRID_Y, TARGETS, stored_setting
 from benchmarks.provenance import group_by_record, provenance_text
 
@@ -66,8 +68,10 @@ def _superseded(path: Path, result: dict[str, Any], experiment: str) -> bool:
     return stored_setting(json.loads(history.read_text()), experiment) != stored_setting(result, experiment)
 
 
-def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
-    """The results document from the finished run files under ``out/runs`` (trials in order)."""
+def collect(out: Path, mode: str, budgets: dict[str, Any], selectors: bool = True) -> dict[str, Any]:
+    """The results document from the finished run files under ``out/runs`` (trials in order) and, with
+    ``selectors`` and if ``run.py --contexts`` wrote any ``<out>-<contexts>`` folder beside ``out``, the
+    comparison of every such folder's runs with ``out``'s (``"selectors"``, :mod:`.selector_table`)."""
     document: dict[str, Any] = {"mode": mode, "budgets": budgets, "precision": {}, "flexibility": {}}
     sources: dict[str, Any] = {}  # run -> its provenance record
     for experiment, (per_trial, per_point) in METRIC.items():
@@ -103,6 +107,9 @@ def collect(out: Path, mode: str, budgets: dict[str, Any]) -> dict[str, Any]:
             }
     document["in_progress"] = _in_progress(out)
     document["provenance"] = group_by_record(sources)
+    if selectors and (folders := selector_folders(out)):
+        others = {folder.name: collect(folder, mode, budgets, selectors=False) for folder in folders}
+        document["selectors"] = comparison({out.name: document, **others}, METRIC)
     return document
 
 
@@ -152,6 +159,8 @@ def summary_text(document: dict[str, Any]) -> str:
     lines = [f"# Kick study ({document['mode']} mode): rendered from `results.json`", ""]
     lines += [f"Budgets: {json.dumps(document['budgets'])}. A ± is the standard deviation across trials.", ""]
     lines += _precision_section(document) + _flexibility_section(document)
+    if "selectors" in document:
+        lines += comparison_section(document["selectors"], document["mode"])
     if document["in_progress"]:
         lines += ["## Runs in progress (iterations done at the last checkpoint)", ""]
         lines += [f"- {run}: {done}" for run, done in document["in_progress"].items()] + [""]
@@ -331,7 +340,9 @@ def _plot_heatmaps(plt: Any, document: dict[str, Any], out: Path) -> None:
 
 
 def render(out: Path, mode: str, budgets: dict[str, Any]) -> str:
-    """Rebuild ``results.json`` from the finished runs, then ``summary.md`` and the figures from it."""
+    """Rebuild ``results.json`` from the finished runs, then ``summary.md`` and the figures from it; the
+    ``--contexts`` folders beside ``out`` (:func:`.selector_table.selector_folders`) are rendered again too,
+    so that their files and ``out``'s comparison come from the same run files. Returns ``out``'s summary."""
     out.mkdir(parents=True, exist_ok=True)
     document = collect(out, mode, budgets)
     tmp = out / "results.json.tmp"
@@ -340,4 +351,6 @@ def render(out: Path, mode: str, budgets: dict[str, Any]) -> str:
     text = summary_text(json.loads((out / "results.json").read_text()))
     (out / "summary.md").write_text(text)
     plot(document, out)
+    for folder in selector_folders(out):
+        render(folder, mode, budgets)
     return text

@@ -45,6 +45,7 @@ from benchmarks.kick.oracle import oracle_point
 from benchmarks.kick.report import render
 from benchmarks.kick.study import (
     SELECTED_CONTEXTS,
+    TRAINING,
     TRAINING_CONTEXTS,
     RunSpec,
     evaluation_contexts,
@@ -60,11 +61,6 @@ MODES = {
     "full": {"precision": (1000, 3), "flexibility": (700, 3), "oracle": 3000},
 }
 SAMPLES = {"precision": 20, "flexibility": 100}
-#: Training contexts per experiment (``study.TRAINING_CONTEXTS``). Precision: the arcsine law Beta(½, ½) on
-#: [3, 12] m trains each outer quarter of the range on a third of the draws; uniform draws put 1 in
-#: 18 in the last half metre, too few to fix the far end of an affine policy that the targets in between
-#: pin (README, "Where the precision error came from"). Every precision method draws the same way.
-TRAINING = {"precision": "arcsine", "flexibility": "uniform"}
 #: Every method runs the paper's whole budget: the stagnation criterion (meant for noise-free problems) is
 #: off, the optimisers' other stop criteria (a degenerate covariance, ...) still end a run.
 FULL_BUDGET = {"tolstagnation": NO_STAGNATION}

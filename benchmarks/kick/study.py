@@ -45,6 +45,7 @@ __all__ = [
     "LEGACY_ENV_IDS",
     "SELECTED_CONTEXTS",
     "TARGETS",
+    "TRAINING",
     "TRAINING_CONTEXTS",
     "RunSpec",
     "context_sampler",
@@ -73,6 +74,12 @@ EVAL_EVERY = 50  # iterations between evaluations of the mean policy (the learni
 TRAINING_CONTEXTS = {"uniform": None, "arcsine": 0.5}
 #: Training contexts chosen by a learning selector (registry names of :mod:`creps_gym.selectors`).
 SELECTED_CONTEXTS = ("bandit", "progress")
+#: The study's training contexts per experiment (``results/<mode>``; ``--contexts`` trains on others).
+#: Precision: the arcsine law Beta(½, ½) on [3, 12] m trains each outer quarter of the range on a third of
+#: the draws; uniform draws put 1 in 18 in the last half metre, too few to fix the far end of an affine
+#: policy that the targets in between pin (README, "Where the precision error came from"). Every precision
+#: method draws the same way.
+TRAINING = {"precision": "arcsine", "flexibility": "uniform"}
 
 
 @dataclass(frozen=True)

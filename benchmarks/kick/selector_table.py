@@ -1,0 +1,235 @@
+"""The kick study's comparison of training contexts (issue 32): the study's own folder ``results/<mode>`` and
+every ``results/<mode>-<contexts>`` folder that ``run.py --contexts NAME`` wrote, in one table per
+experiment of ``results/<mode>/summary.md``, drawn from the ``"selectors"`` entry of its ``results.json``::
+
+    {"folders": ["full", "full-bandit"],
+     "precision": {"reference": "arcsine",
+                   "rows": [{"folder": "full-bandit", "method": "creps-cma-old", "contexts": "bandit",
+                             "samples": 20, "budget_iterations": 1000, "trials": [...], "finals": [...],
+                             "iterations": [...], "curves": [[[iteration, value], ...] per trial]}, ...],
+                   "in_progress": {"full-bandit": {"creps-cma-old-trial1": 340}}},
+     "flexibility": {...}}
+
+A row is one method trained on one law of training contexts in one folder. ``finals`` is each trial's
+metric at its end (precision: the mean policy's error averaged over the 10 targets; flexibility: its forward
+distance averaged over the 28 ball positions) and ``curves`` each trial's metric every ``EVAL_EVERY``
+iterations (the run's history) and at its end. The *reference* is the study's own training law
+(``study.TRAINING``): every row says how many episodes it needed to reach the reference row's final value
+of the same method.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.kick.study import EVAL_EVERY, SELECTED_CONTEXTS, TRAINING, TRAINING_CONTEXTS
+
+__all__ = [
+    "LAWS",
+    "comparison",
+    "comparison_section",
+    "episodes_to_reach",
+    "episodes_to_stay",
+    "selector_folders",
+]
+
+#: The laws of training contexts, in the tables' order (``run.py --contexts``).
+LAWS = (*TRAINING_CONTEXTS, *SELECTED_CONTEXTS)
+#: Laws whose runs are in git history only, not in any results folder: (experiment, law) -> where.
+HISTORY_ONLY = {
+    ("precision", "uniform"): (
+        "the study's uniform-draw precision runs (the paper's draw) are in git history only: commit "
+        '`bd108c5`, its `results/{mode}/summary.md` (README, "Where the precision error came from")'
+    ),
+}
+#: What each experiment's metric is, and which way is better.
+METRICS = {
+    "precision": {"value": "error", "unit": "m", "lower_is_better": True, "contexts": "training targets"},
+    "flexibility": {
+        "value": "forward distance", "unit": "m", "lower_is_better": False, "contexts": "training positions",
+    },
+}  # fmt: skip
+
+
+def selector_folders(out: Path) -> list[Path]:
+    """The folders ``<out.name>-<law>`` beside ``out`` that exist (``run.py --contexts``), in ``LAWS`` order;
+    a symbolic link is not followed."""
+    candidates = [out.parent / f"{out.name}-{law}" for law in LAWS]
+    return [path for path in candidates if path.is_dir() and not path.is_symlink()]
+
+
+def _rows(folder: str, entries: dict[str, Any], per_trial: str) -> list[dict[str, Any]]:
+    """One row per (method, training law) of one folder's collected entries (the oracle is not a row)."""
+    rows: dict[tuple[str, str], dict[str, Any]] = {}
+    for method, entry in entries.items():
+        if method == "oracle":
+            continue
+        for k, law in enumerate(entry["training_contexts"]):
+            row = rows.setdefault((method, law), {
+                "folder": folder, "method": method, "contexts": law, "samples": entry["samples"],
+                "budget_iterations": entry["budget_iterations"], "trials": [], "finals": [],
+                "iterations": [], "curves": [],
+            })  # fmt: skip
+            final, iterations = entry[per_trial][k], entry["iterations"][k]
+            curve = [[int(i), float(v)] for i, v in entry["curves"][k] if int(i) < iterations]
+            row["trials"].append(entry["trials"][k])
+            row["finals"].append(final)
+            row["iterations"].append(iterations)
+            row["curves"].append([*curve, [iterations, final]])  # the end is one more evaluation
+    return list(rows.values())
+
+
+def _method(run: str) -> str:
+    """``"c-cma-es"`` of the run stem ``"c-cma-es-trial0"``."""
+    return run.rsplit("-trial", 1)[0]
+
+
+def comparison(documents: dict[str, dict[str, Any]], metrics: dict[str, tuple[str, str]]) -> dict[str, Any]:
+    """The ``"selectors"`` entry from the collected results documents of the study's folder and of its
+    ``--contexts`` folders (``{folder name: document}``, the study's own folder first); ``metrics`` maps each
+    experiment to its (per-trial, per-point) keys (``report.METRIC``). Only the methods that a ``--contexts``
+    folder holds (finished or in progress) have rows; the runs in progress are those of the ``--contexts``
+    folders (the summary lists the study folder's own)."""
+    names = list(documents)
+    data: dict[str, Any] = {"folders": names}
+    order = {law: k for k, law in enumerate(LAWS)}
+    for experiment, (per_trial, _) in metrics.items():
+        prefix = f"{experiment}/"
+        in_progress = {
+            name: {run.removeprefix(prefix): done for run, done in documents[name]["in_progress"].items()
+                   if run.startswith(prefix)}
+            for name in names[1:]
+        }  # fmt: skip
+        in_progress = {name: runs for name, runs in in_progress.items() if runs}
+        methods = {_method(run) for runs in in_progress.values() for run in runs}
+        methods |= {method for name in names[1:] for method in documents[name][experiment]} - {"oracle"}
+        rows = [row for name in names for row in _rows(name, documents[name][experiment], per_trial)
+                if row["method"] in methods]  # fmt: skip
+        rows.sort(key=lambda r: (r["method"], order.get(r["contexts"], len(LAWS)), names.index(r["folder"])))
+        data[experiment] = {"reference": TRAINING[experiment], "rows": rows, "in_progress": in_progress}
+    return data
+
+
+def _reached(value: float, target: float, lower_is_better: bool) -> bool:
+    return value <= target if lower_is_better else value >= target
+
+
+def episodes_to_reach(curve: list[Any], target: float, samples: int, lower_is_better: bool) -> int | None:
+    """The episodes (iteration × ``samples``) at the first point ``[iteration, value]`` of ``curve`` whose
+    value reaches ``target`` (at most it if ``lower_is_better``, else at least), or None if none does."""
+    for iteration, value in curve:
+        if _reached(value, target, lower_is_better):
+            return int(iteration) * samples
+    return None
+
+
+def episodes_to_stay(curve: list[Any], target: float, samples: int, lower_is_better: bool) -> int | None:
+    """The episodes at the first point of ``curve`` from which every later point reaches ``target`` too
+    (the curves are not monotone), or None if its last point does not."""
+    episodes = None
+    for iteration, value in reversed(curve):
+        if not _reached(value, target, lower_is_better):
+            break
+        episodes = int(iteration) * samples
+    return episodes
+
+
+def _mean_curve(curves: list[Any]) -> list[list[float]]:
+    """``[[iteration, mean over trials], ...]`` at the iterations where every trial was evaluated."""
+    by_iteration = [dict((int(i), v) for i, v in curve) for curve in curves]
+    common = set.intersection(*(set(c) for c in by_iteration)) if by_iteration else set()
+    return [[i, float(np.mean([c[i] for c in by_iteration]))] for i in sorted(common)]
+
+
+def _episodes(episodes: int | None) -> str:
+    return "not reached" if episodes is None else f"{episodes:,}"
+
+
+def _row(row: dict[str, Any], reference: dict[str, Any] | None, experiment: str) -> str:
+    """One table row: method, law, source, trials, final value (± and per trial), episodes to reach the
+    reference's final value (mean curve, per trial) and their ratio to the reference's budget episodes."""
+    unit, lower = METRICS[experiment]["unit"], METRICS[experiment]["lower_is_better"]
+    finals = np.asarray(row["finals"], dtype=float)
+    cells = [row["method"], row["contexts"], f"`results/{row['folder']}`", str(len(finals))]
+    cells += [f"{finals.mean():.2f} ± {finals.std():.2f} {unit}", ", ".join(f"{v:.2f}" for v in finals)]
+    if reference is None:
+        return "| " + " | ".join([*cells, "— (no reference run)", *["—"] * 4]) + " |"
+    target, mean_curve = float(np.mean(reference["finals"])), _mean_curve(row["curves"])
+    reach = episodes_to_reach(mean_curve, target, row["samples"], lower)
+    stay = episodes_to_stay(mean_curve, target, row["samples"], lower)
+    per_trial = [episodes_to_reach(curve, target, row["samples"], lower) for curve in row["curves"]]
+    budget = reference["budget_iterations"] * reference["samples"]
+    cells += [_episodes(reach), ", ".join(_episodes(e) for e in per_trial), _ratio(reach, budget)]
+    cells += [_episodes(stay), _ratio(stay, budget)]
+    return "| " + " | ".join(cells) + " |"
+
+
+def _ratio(episodes: int | None, budget: int) -> str:
+    return "—" if episodes is None else f"{episodes / budget:.2f}"
+
+
+def _experiment_table(experiment: str, data: dict[str, Any], mode: str) -> list[str]:
+    """The table of one experiment, its reference and its notes (in progress, history only)."""
+    rows, reference_law = data["rows"], data["reference"]
+    what, unit = METRICS[experiment]["value"], METRICS[experiment]["unit"]
+    references = {}
+    for row in rows:  # the study's own folder comes first: its row is the reference
+        if row["contexts"] == reference_law:
+            references.setdefault(row["method"], row)
+    lines = [f"### {experiment.capitalize()}", ""]
+    for samples in sorted({row["samples"] for row in rows}):
+        lines += [
+            f"Resolution: {EVAL_EVERY} iterations × {samples} episodes = {EVAL_EVERY * samples:,} episodes.",
+            "",
+        ]
+    if references:
+        targets = ", ".join(f"{m} {np.mean(r['finals']):.2f} {unit} (`results/{r['folder']}`)"
+                            for m, r in references.items())  # fmt: skip
+        lines += [f"Reference ({reference_law}, the study's training law), final {what}: {targets}.", ""]
+    if rows:
+        header = (
+            f"| method | {METRICS[experiment]['contexts']} | source | trials | final {what} | per trial "
+            f"| episodes to reach the {reference_law} final {what} (mean curve) | per trial "
+            f"| × {reference_law}'s budget episodes | episodes from which the mean curve stays there "
+            f"| × {reference_law}'s budget episodes |"
+        )
+        lines += [header, "|---" * 11 + "|"]
+        lines += [_row(row, references.get(row["method"]), experiment) for row in rows]
+        lines.append("")
+    shown = {row["contexts"] for row in rows}
+    for (name, law), where in HISTORY_ONLY.items():
+        if name == experiment and law not in shown:
+            lines += [f"*{law.capitalize()} draws*: not in these folders; {where.format(mode=mode)}.", ""]
+    for folder, runs in data["in_progress"].items():
+        listed = ", ".join(f"{run} ({done} iterations)" for run, done in runs.items())
+        lines += [f"In progress in `results/{folder}` (checkpoint, no result yet): {listed}.", ""]
+    return lines
+
+
+def comparison_section(data: dict[str, Any], mode: str) -> list[str]:
+    """The summary's section "Training contexts: uniform, arcsine and the learning selectors"."""
+    folders = ", ".join(f"`results/{name}`" for name in data["folders"])
+    lines = ["## Training contexts: uniform, arcsine and the learning selectors (issue 32)", ""]
+    lines += [
+        f"The finished runs in {folders} of every method that a `--contexts` folder holds: one row per "
+        "method, law of training contexts (uniform, arcsine: fixed draws; bandit, progress: the learning "
+        "selectors of `creps_gym.selectors`) and folder. The final "
+        "value is the mean policy's at the end of each run (± across trials, then per trial). *Episodes to "
+        "reach*: the first evaluation at which the mean over the row's trials (*mean curve*), or each "
+        "trial's own value (*per trial*), reaches the reference row's final value of the same method; "
+        "*stays*: the first evaluation from which the mean curve reaches it at every later one too. The "
+        f"mean policy is evaluated every {EVAL_EVERY} iterations and at the run's end, so the resolution is "
+        f"{EVAL_EVERY} iterations × N episodes (below). The × columns divide the mean curve's episodes by "
+        "the reference row's budget (iterations × N), the episodes its final value cost. The curves are not "
+        "monotone: a value once reached is not always kept, and the reference row itself may reach its "
+        "final value before its end. Each folder's own `summary.md` has its runs' per-target values and "
+        "provenance.",
+        "",
+    ]
+    for experiment in METRICS:
+        if data[experiment]["rows"] or data[experiment]["in_progress"]:
+            lines += _experiment_table(experiment, data[experiment], mode)
+    return lines

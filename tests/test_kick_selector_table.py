@@ -1,0 +1,136 @@
+"""The kick study's table of training contexts (issue 32): the study's folder and its ``--contexts`` folders
+in one section of ``results/<mode>/summary.md``, rendered from ``results.json`` alone."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("mujoco")
+
+from benchmarks.kick import report, run, selector_table, study
+
+pytestmark = pytest.mark.extras
+POINTS = {"precision": 10, "flexibility": 28}
+
+
+def _write_run(folder: Path, experiment: str, name: str, trial: int, contexts: str, curve: list[Any]) -> None:
+    """A finished run whose mean policy's metric is ``value`` at every point at each ``[iteration, value]``
+    of ``curve``, the last one being its end."""
+    samples, points = (20, 10) if experiment == "precision" else (100, 28)
+    iterations, final = curve[-1]
+    document = {
+        "experiment": experiment, "name": name, "features": "affine", "options": {}, "trial": trial,
+        "samples": samples, "budget_iterations": iterations, "iterations": iterations,
+        "episodes": iterations * samples, "stopped": [],
+        "setting": {"env": study.ENV_IDS[experiment], "contexts": contexts},
+        "values": [final] * points,
+        "history": {"batch": [], "evaluations": [[i, [v] * points] for i, v in curve]},
+    }  # fmt: skip
+    (folder / "runs" / experiment).mkdir(parents=True, exist_ok=True)
+    (folder / "runs" / experiment / f"{name}-trial{trial}.json").write_text(json.dumps(document))
+
+
+@pytest.fixture
+def folders(tmp_path: Path) -> Path:
+    """``full`` (the study: arcsine precision, uniform flexibility) and ``full-bandit`` beside it."""
+    full, bandit = tmp_path / "full", tmp_path / "full-bandit"
+    _write_run(full, "precision", "c-cma-es", 0, "arcsine", [[50, 2.0], [100, 0.55], [150, 0.4], [200, 0.5]])
+    _write_run(full, "precision", "c-cma-es", 1, "arcsine", [[50, 1.0], [100, 0.8], [150, 0.9], [200, 0.7]])
+    _write_run(full, "precision", "creps", 0, "arcsine", [[50, 3.0], [100, 2.0], [150, 2.5], [200, 2.6]])
+    _write_run(bandit, "precision", "c-cma-es", 0, "bandit", [[50, 0.55], [100, 0.3], [150, 0.2], [200, 0.3]])
+    _write_run(bandit, "precision", "c-cma-es", 1, "bandit", [[50, 0.9], [100, 0.7], [150, 1.2], [200, 0.8]])
+    history = {"setting": {"env": study.ENV_IDS["precision"], "contexts": "bandit"}, "batch": [[0, 0]] * 30}
+    (bandit / "runs" / "precision" / "c-cma-es-trial2.history.json").write_text(json.dumps(history))
+    _write_run(full, "flexibility", "c-cma-es", 0, "uniform", [[50, 3.0], [100, 5.0]])
+    _write_run(bandit, "flexibility", "c-cma-es", 0, "bandit", [[50, 6.0], [100, 6.5]])
+    _write_run(tmp_path / "full-sobol", "precision", "c-cma-es", 0, "bandit", [[50, 0.1]])  # not a law
+    (tmp_path / "full-progress").symlink_to(bandit, target_is_directory=True)  # not followed
+    return full
+
+
+def test_the_section_compares_every_contexts_folder_with_the_study_by_episodes_to_its_final_value(
+    folders: Path,
+) -> None:
+    assert selector_table.selector_folders(folders) == [folders.parent / "full-bandit"]
+    document = report.collect(folders, "full", run.MODES["full"])
+    data = document["selectors"]
+    assert data["folders"] == ["full", "full-bandit"]
+    precision = data["precision"]
+    assert precision["reference"] == study.TRAINING["precision"] == "arcsine"
+    assert [(r["method"], r["contexts"], r["folder"]) for r in precision["rows"]] == [
+        ("c-cma-es", "arcsine", "full"),
+        ("c-cma-es", "bandit", "full-bandit"),
+    ]  # creps has no --contexts run: no row
+    curve = precision["rows"][1]["curves"][0]  # the history's evaluations, then the end
+    assert [i for i, _ in curve] == [50, 100, 150, 200]
+    assert [v for _, v in curve] == pytest.approx([0.55, 0.3, 0.2, 0.3])
+    assert precision["in_progress"] == {"full-bandit": {"c-cma-es-trial2": 30}}
+    lines = report.summary_text(document).splitlines()
+    start = lines.index("### Precision")
+    assert "Resolution: 50 iterations × 20 episodes = 1,000 episodes." in lines[start:]
+    assert (
+        "Reference (arcsine, the study's training law), final error: c-cma-es 0.60 m (`results/full`)."
+        in lines
+    )
+    # The arcsine mean curve reaches its own final value (0.60 m) at its end; trial 0 alone at 100.
+    assert (
+        "| c-cma-es | arcsine | `results/full` | 2 | 0.60 ± 0.10 m | 0.50, 0.70 | 4,000 "
+        "| 2,000, not reached | 1.00 | 4,000 | 1.00 |" in lines
+    )
+    # The bandit's mean curve: 0.725 at 50, 0.50 at 100 (≤ 0.60): 2,000 episodes, half arcsine's 4,000;
+    # 0.70 at 150, so it stays at or below 0.60 only from 200 on.
+    assert (
+        "| c-cma-es | bandit | `results/full-bandit` | 2 | 0.55 ± 0.25 m | 0.30, 0.80 | 2,000 "
+        "| 1,000, not reached | 0.50 | 4,000 | 1.00 |" in lines
+    )
+    assert any(
+        line.startswith("*Uniform draws*: not in these folders;") and "`bd108c5`" in line for line in lines
+    )
+    assert (
+        "In progress in `results/full-bandit` (checkpoint, no result yet): c-cma-es-trial2 (30 iterations)."
+        in lines
+    )
+    flexibility = lines[lines.index("### Flexibility") :]
+    assert "Resolution: 50 iterations × 100 episodes = 5,000 episodes." in flexibility
+    # A distance is reached from below: the bandit's 6.0 m at iteration 50 is past uniform's 5.00 m.
+    assert (
+        "| c-cma-es | bandit | `results/full-bandit` | 1 | 6.50 ± 0.00 m | 6.50 | 5,000 | 5,000 | 0.50 "
+        "| 5,000 | 0.50 |" in flexibility
+    )
+    assert not any(line.startswith("*Uniform draws*") for line in flexibility)  # uniform is flexibility's own
+
+
+def test_episodes_to_reach_and_to_stay_past_a_target() -> None:
+    curve = [[50, 2.0], [100, 0.5], [150, 0.7]]
+    assert selector_table.episodes_to_reach(curve, 0.6, 20, lower_is_better=True) == 2000
+    assert selector_table.episodes_to_reach(curve, 0.4, 20, lower_is_better=True) is None
+    assert selector_table.episodes_to_reach(curve, 0.7, 100, lower_is_better=False) == 5000
+    assert selector_table.episodes_to_reach([], 0.7, 100, lower_is_better=False) is None
+    # ... and from which it stays past it: none if the last point is not.
+    assert selector_table.episodes_to_stay(curve, 0.8, 20, lower_is_better=True) == 2000
+    assert selector_table.episodes_to_stay(curve, 0.6, 20, lower_is_better=True) is None
+    assert selector_table.episodes_to_stay([[50, 2.0], [100, 0.5], [150, 2.5]], 1.0, 1, False) == 150
+
+
+def test_full_render_only_renders_the_section_when_a_contexts_folder_exists(folders: Path) -> None:
+    pytest.importorskip("matplotlib")
+    assert run.main(["--full", "--render-only", "--out", str(folders)]) == 0
+    document = json.loads((folders / "results.json").read_text())
+    assert document["selectors"]["folders"] == ["full", "full-bandit"]
+    text = (folders / "summary.md").read_text()
+    assert text == report.summary_text(document)
+    assert "## Training contexts: uniform, arcsine and the learning selectors (issue 32)" in text
+    bandit = folders.parent / "full-bandit"  # rendered again from the same run files, on its own
+    assert (bandit / "summary.md").read_text() == report.summary_text(
+        json.loads((bandit / "results.json").read_text())
+    )
+    assert "- precision/c-cma-es-trial2: 30" in (bandit / "summary.md").read_text()
+    assert "selectors" not in report.collect(folders.parent / "full-bandit", "full", run.MODES["full"])
+    for path in selector_table.selector_folders(folders):
+        path.rename(path.with_name("elsewhere"))
+    assert run.main(["--full", "--render-only", "--out", str(folders)]) == 0
+    assert "Training contexts: uniform" not in (folders / "summary.md").read_text()  # none: no section

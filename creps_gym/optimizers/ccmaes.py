@@ -23,6 +23,8 @@ One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N
    policy as the best one if its score (the mean return of its last ``BEST_WINDOW`` batches, from the told
    returns only) beats the best so far; ``recommend`` gives the best policy until the running search's score
    beats it.
+7. A restart portfolio (C11, ``restart_baseline_loss``): the searches after a restart fit the baseline with
+   another loss (Huber's), so a restart does not repeat a search that failed with the squared fit.
 """
 
 from __future__ import annotations
@@ -130,7 +132,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         else:
             advantages, explained = context_advantages(  # Eq. (C1)
                 contexts, returns, config.baseline_degree, config.baseline_ridge, *past,
-                config.standardise_advantages, config.baseline_loss,
+                config.standardise_advantages, self._baseline_loss(),
             )  # fmt: skip
         constants = self.config.constants(returns.shape[0])
         order = np.argsort(-advantages, kind="stable")
@@ -155,6 +157,14 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             for stale in ("cond_cov", "max_std", "search_scale"):  # they described the abandoned distribution
                 self._diagnostics.pop(stale, None)
         self._diagnostics["restarts"] = float(self.restarts_done)
+
+    def _baseline_loss(self) -> str:
+        """The running search's baseline loss: ``baseline_loss`` until the first restart, then
+        ``restart_baseline_loss`` if set (Eq. (C11))."""
+        config = self.config
+        if self.restarts_done == 0 or config.restart_baseline_loss is None:
+            return config.baseline_loss
+        return config.restart_baseline_loss  # Eq. (C11): a restart searches with the other baseline fit
 
     def _step(self, contexts: Array, params: Array, weights: Array, constants: CMAConstants) -> _Step:
         policy = self.policy.copy()

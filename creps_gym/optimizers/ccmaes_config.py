@@ -58,6 +58,9 @@ class CCMAESConfig:
         far (score: the mean return of its last ``BEST_WINDOW`` batches); ``recommend`` gives it until the
         new search scores better, so a restart cannot make the recommendation worse (C10). Off by default
         until the committed studies' restarted ``c-cma-es`` runs are recomputed with it.
+    restart_baseline_loss : str or None   the baseline's loss in every search after a restart (C11: a
+        restart portfolio); None keeps ``baseline_loss``. The first search uses ``baseline_loss``, so a run
+        that never restarts does not depend on it.
     tolx, tolupsigma, max_condition, tolstagnation, tolflatfitness : stop criteria like pycma's
         (``tolstagnation=None`` means 100 + 100·p^1.5/N iterations).
     """
@@ -75,6 +78,7 @@ class CCMAESConfig:
     baseline_bandwidth: float = 0.0
     restarts: int = 3
     keep_best: bool = False
+    restart_baseline_loss: str | None = None
     step_size_signal: str = "mean"
     ridge: float = 1e-8
     baseline_ridge: float = 1e-10
@@ -113,6 +117,10 @@ class CCMAESConfig:
         object.__setattr__(self, "standardise_advantages", standardise)
         if self.baseline_loss not in LOSSES:
             raise ValueError(f"baseline_loss: expected one of {LOSSES}, got {self.baseline_loss!r}")
+        if self.restart_baseline_loss is not None and self.restart_baseline_loss not in LOSSES:
+            raise ValueError(
+                f"restart_baseline_loss: expected None or one of {LOSSES}, got {self.restart_baseline_loss!r}"
+            )
         if self.step_size_signal not in SIGNALS:
             raise ValueError(f"step_size_signal: expected one of {SIGNALS}, got {self.step_size_signal!r}")
         for name, low, high in (
@@ -135,6 +143,9 @@ class CCMAESConfig:
         defaults = {option.name: option.default for option in fields(self)}
         unused = {name: (getattr(self, name), defaults[name]) for name in UNUSED_BY_LOCAL_BASELINE}
         check_local_baseline(self.baseline_bandwidth, unused)
+        if self.baseline_bandwidth > 0.0 and self.restart_baseline_loss is not None:  # C1'' has no loss
+            got = self.restart_baseline_loss
+            raise ValueError(f"restart_baseline_loss: expected None with baseline_bandwidth > 0, got {got!r}")
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
         object.__setattr__(self, "seed", check_seed(self.seed))

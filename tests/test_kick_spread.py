@@ -14,7 +14,7 @@ import pytest
 
 from benchmarks.kick import report, run, selector_table, spread, study
 from creps_gym.optimizers.registry import make_optimizer
-from creps_gym.optimizers.state_files import save_state
+from creps_gym.optimizers.state_files import load_state, save_state
 
 
 def test_the_late_fall_rate_averages_the_last_batches_or_all_of_them() -> None:
@@ -123,3 +123,34 @@ def test_mean_and_std_says_how_many_trials_have_a_value() -> None:
     assert spread.mean_and_std([0.25, 0.75]) == "0.50 ± 0.25"
     assert spread.mean_and_std([None, 1.0, 3.0]) == "2.00 ± 1.00 (2 of 3)"
     assert spread.mean_and_std([None]) == "—"
+
+
+def test_the_readme_s_reason_holds_for_the_committed_precision_runs() -> None:
+    """Each statement of the README's section "CREPS-CMA-old and the 0.34 m target", on the committed data."""
+    folder = Path(run.__file__).resolve().parent
+    readme = (folder / "README.md").read_text(encoding="utf-8")
+    section = readme.split("## CREPS-CMA-old and the 0.34 m target", 1)[1].split("\n## ", 1)[0]
+    words = " ".join(section.split())  # the columns it points at, as the summary names them
+    assert all(f"*{column}*" in words for column in spread.COLUMNS.split(" | "))
+    document = json.loads((folder / "results" / "full" / "results.json").read_text())
+    old, cma = document["precision"]["creps-cma-old"], document["precision"]["c-cma-es"]
+    target = float(report.PAPER["precision"].split()[0])
+    assert target == 0.34 and len(old["trials"]) >= 3
+    # The spread: every trial starts at 1.00; C-CMA-ES's ends narrower, CREPS-CMA-old's wider.
+    assert max(cma["final_spread"]) < 1.0 < min(old["final_spread"])
+    runs = folder / "results" / "full" / "runs" / "precision"
+    for trial in cma["trials"]:
+        assert np.all(np.diag(load_state(runs / f"c-cma-es-trial{trial}.npz")["initial_cov"]) == 1.0)
+    for trial in old["trials"]:
+        state = load_state(runs / f"creps-cma-old-trial{trial}.npz")
+        assert np.all(np.diag(state["initial_cov"]) == 1.0) and state["step_size"] == 1.0  # no step size
+        config, diagnostics = state["config"], state["diagnostics"]
+        assert config["epsilon"] == 0.5 and config["divide_by_z"] and config["variant"] == "old"
+        assert diagnostics["interpolation"] < 0.05  # a small blend: λ of Eq. (14)
+        assert diagnostics["ess"] >= old["samples"] / 4  # the weights keep many of the batch's samples
+    # The falls: every CREPS-CMA-old trial's late fall rate is above every C-CMA-ES trial's.
+    assert min(old["late_fall_rate"]) > max(cma["late_fall_rate"])
+    # The mean: over the second half of each trial it swings by more than the target and never meets it.
+    for curve in old["curves"]:
+        late = [value for iteration, value in curve if iteration >= old["budget_iterations"] // 2]
+        assert len(late) >= 10 and max(late) - min(late) > target and min(late) > target

@@ -27,6 +27,7 @@ import numpy as np
 
 from benchmarks.kick.oracle import read_oracle
 from benchmarks.kick.selector_table import comparison, comparison_section, selector_folders
+from benchmarks.kick.spread import COLUMNS, KEYS, LATE_BATCHES, final_spread, late_fall_rate, mean_and_std
 from benchmarks.kick.study import ENV_IDS, EVAL_EVERY, GRID_X, GRID_Y, TARGETS, stored_setting
 from benchmarks.provenance import group_by_record, provenance_text
 
@@ -40,6 +41,14 @@ PAPER = {
 TRAINING_NOTE = (
     "Training targets: *uniform* in the env's context box (the paper's draw), or *arcsine*, Beta(½, ½) "
     "scaled into it (a third of the draws in each outer quarter of [3, 12] m)."
+)
+#: What the columns of :mod:`.spread`'s two quantities mean.
+SPREAD_NOTE = (
+    f"*Falls, last {LATE_BATCHES} it.*: the fraction of training samples that fell, averaged over each run's "
+    f"last {LATE_BATCHES} batches (all of them in a shorter run). *Final spread*: the search distribution's "
+    "standard deviation at the run's final checkpoint, σ·√(mean of diag(C)), in σ units of the offset "
+    "parameters (every method starts at 1.00; an optimiser without step-size control keeps σ = 1). Both are "
+    "mean ± std across trials."
 )
 METRIC = {
     "precision": ("trial_errors", "target_errors"),
@@ -80,7 +89,8 @@ def collect(out: Path, mode: str, budgets: dict[str, Any], selectors: bool = Tru
         ):
             entry = document[experiment].setdefault(run["name"], {
                 per_trial: [], per_point: [], "trials": [], "iterations": [], "stopped": [], "curves": [],
-                "training_contexts": [], "features": run["features"], "options": run["options"],
+                "training_contexts": [], "late_fall_rate": [], "final_spread": [],
+                "features": run["features"], "options": run["options"],
                 "samples": run["samples"], "budget_iterations": run["budget_iterations"],
             })  # fmt: skip
             sources[f"{experiment}/{run['name']}-trial{run['trial']}"] = run.get("provenance")
@@ -90,6 +100,9 @@ def collect(out: Path, mode: str, budgets: dict[str, Any], selectors: bool = Tru
             entry["iterations"].append(run["iterations"])
             entry["stopped"].append(run["stopped"])
             entry["training_contexts"].append(stored_setting(run, experiment)["contexts"])
+            entry["late_fall_rate"].append(late_fall_rate(run["history"]["batch"]))
+            checkpoint = out / "runs" / experiment / f"{run['name']}-trial{run['trial']}.npz"
+            entry["final_spread"].append(final_spread(checkpoint, run["iterations"]))
             entry["curves"].append([[i, float(np.mean(v))] for i, v in run["history"]["evaluations"]])
         paths = sorted((out / "runs" / experiment).glob("oracle-*.json"))
         records = {path.stem: read_oracle(path, experiment) for path in paths}
@@ -150,6 +163,7 @@ def _method_rows(experiment: str, document: dict[str, Any]) -> list[str]:
             ratio = np.mean(values) / np.mean(oracle["position_distances"]) if complete else float("nan")
             at_far = np.asarray(entry["position_distances"])[:, -len(GRID_Y) :]
             cells += [f"{ratio:.2f}" if complete else "— (oracle incomplete)", f"{np.mean(at_far > 0.5):.0%}"]
+        cells += [mean_and_std(entry.get(key, [None] * len(values))) for key in KEYS]
         rows.append("| " + " | ".join(cells) + " |")
     return rows
 
@@ -172,11 +186,12 @@ def summary_text(document: dict[str, Any]) -> str:
 
 def _precision_section(document: dict[str, Any]) -> list[str]:
     lines = ["## Precision (Fig. 5c)", "", f"Paper: {PAPER['precision']}.", "", TRAINING_NOTE, ""]
+    lines += [SPREAD_NOTE, ""]
     header = (
         "| method | training targets | budget (it. × N) | trials | mean error | per trial | iterations "
-        "| stopped by |"
+        f"| stopped by | {COLUMNS} |"
     )
-    lines += [header, "|---" * 8 + "|", *_method_rows("precision", document), ""]
+    lines += [header, "|---" * 10 + "|", *_method_rows("precision", document), ""]
     columns = {  # the oracle once it has every target
         name: np.asarray(entry["target_errors"]).reshape(-1, len(TARGETS))
         for name, entry in document["precision"].items()
@@ -256,12 +271,15 @@ def _flexibility_section(document: dict[str, Any]) -> list[str]:
         "",
         f"Paper: {PAPER['flexibility']}.",
         "",
+        SPREAD_NOTE,
+        "",
     ]
     header = (
         "| method | training positions | budget (it. × N) | trials | mean forward distance | per trial "
-        "| iterations | stopped by | fraction of the oracle | balls at x_B = 0.30 m kicked > 0.5 m |"
+        "| iterations | stopped by | fraction of the oracle | balls at x_B = 0.30 m kicked > 0.5 m "
+        f"| {COLUMNS} |"
     )
-    lines += [header, "|---" * 10 + "|", *_method_rows("flexibility", document), ""]
+    lines += [header, "|---" * 12 + "|", *_method_rows("flexibility", document), ""]
     title = "Mean policy's forward distance (m) while learning, mean over trials (— once a trial has stopped)"
     lines += _curve_table(document["flexibility"], title)
     oracle = document["flexibility"].get("oracle")

@@ -6,14 +6,16 @@ experiment of ``results/<mode>/summary.md``, drawn from the ``"selectors"`` entr
      "precision": {"reference": "arcsine",
                    "rows": [{"folder": "full-bandit", "method": "creps-cma-old", "contexts": "bandit",
                              "samples": 20, "budget_iterations": 1000, "trials": [...], "finals": [...],
-                             "iterations": [...], "curves": [[[iteration, value], ...] per trial]}, ...],
+                             "iterations": [...], "curves": [[[iteration, value], ...] per trial],
+                             "late_fall_rate": [...], "final_spread": [...]}, ...],
                    "in_progress": {"full-bandit": {"creps-cma-old-trial1": 340}}},
      "flexibility": {...}}
 
 A row is one method trained on one law of training contexts in one folder. ``finals`` is each trial's
 metric at its end (precision: the mean policy's error averaged over the 10 targets; flexibility: its forward
 distance averaged over the 28 ball positions) and ``curves`` each trial's metric every ``EVAL_EVERY``
-iterations (the run's history) and at its end. The *reference* is the study's own training law
+iterations (the run's history) and at its end; ``late_fall_rate`` and ``final_spread`` are each trial's
+:mod:`.spread` quantities (None where it has none). The *reference* is the study's own training law
 (``study.TRAINING``): every row says how many episodes it needed to reach the reference row's final value
 of the same method.
 """
@@ -25,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.kick.spread import COLUMNS, KEYS, mean_and_std
 from benchmarks.kick.study import EVAL_EVERY, SELECTED_CONTEXTS, TRAINING, TRAINING_CONTEXTS
 
 __all__ = [
@@ -71,13 +74,15 @@ def _rows(folder: str, entries: dict[str, Any], per_trial: str) -> list[dict[str
             row = rows.setdefault((method, law), {
                 "folder": folder, "method": method, "contexts": law, "samples": entry["samples"],
                 "budget_iterations": entry["budget_iterations"], "trials": [], "finals": [],
-                "iterations": [], "curves": [],
+                "iterations": [], "curves": [], "late_fall_rate": [], "final_spread": [],
             })  # fmt: skip
             final, iterations = entry[per_trial][k], entry["iterations"][k]
             curve = [[int(i), float(v)] for i, v in entry["curves"][k] if int(i) < iterations]
             row["trials"].append(entry["trials"][k])
             row["finals"].append(final)
             row["iterations"].append(iterations)
+            for key in KEYS:  # (:mod:`.spread`) None where a run has none
+                row[key].append(entry.get(key, [None] * len(entry["trials"]))[k])
             row["curves"].append([*curve, [iterations, final]])  # the end is one more evaluation
     return list(rows.values())
 
@@ -155,15 +160,16 @@ def _row(row: dict[str, Any], reference: dict[str, Any] | None, experiment: str)
     finals = np.asarray(row["finals"], dtype=float)
     cells = [row["method"], row["contexts"], f"`results/{row['folder']}`", str(len(finals))]
     cells += [f"{finals.mean():.2f} ± {finals.std():.2f} {unit}", ", ".join(f"{v:.2f}" for v in finals)]
+    spread = [mean_and_std(row.get(key, [None] * len(finals))) for key in KEYS]
     if reference is None:
-        return "| " + " | ".join([*cells, "— (no reference run)", *["—"] * 4]) + " |"
+        return "| " + " | ".join([*cells, "— (no reference run)", *["—"] * 4, *spread]) + " |"
     target, mean_curve = float(np.mean(reference["finals"])), _mean_curve(row["curves"])
     reach = episodes_to_reach(mean_curve, target, row["samples"], lower)
     stay = episodes_to_stay(mean_curve, target, row["samples"], lower)
     per_trial = [episodes_to_reach(curve, target, row["samples"], lower) for curve in row["curves"]]
     budget = reference["budget_iterations"] * reference["samples"]
     cells += [_episodes(reach), ", ".join(_episodes(e) for e in per_trial), _ratio(reach, budget)]
-    cells += [_episodes(stay), _ratio(stay, budget)]
+    cells += [_episodes(stay), _ratio(stay, budget), *spread]
     return "| " + " | ".join(cells) + " |"
 
 
@@ -194,9 +200,9 @@ def _experiment_table(experiment: str, data: dict[str, Any], mode: str) -> list[
             f"| method | {METRICS[experiment]['contexts']} | source | trials | final {what} | per trial "
             f"| episodes to reach the {reference_law} final {what} (mean curve) | per trial "
             f"| × {reference_law}'s budget episodes | episodes from which the mean curve stays there "
-            f"| × {reference_law}'s budget episodes |"
+            f"| × {reference_law}'s budget episodes | {COLUMNS} |"
         )
-        lines += [header, "|---" * 11 + "|"]
+        lines += [header, "|---" * 13 + "|"]
         lines += [_row(row, references.get(row["method"]), experiment) for row in rows]
         lines.append("")
     shown = {row["contexts"] for row in rows}
@@ -225,8 +231,9 @@ def comparison_section(data: dict[str, Any], mode: str) -> list[str]:
         f"{EVAL_EVERY} iterations × N episodes (below). The × columns divide the mean curve's episodes by "
         "the reference row's budget (iterations × N), the episodes its final value cost. The curves are not "
         "monotone: a value once reached is not always kept, and the reference row itself may reach its "
-        "final value before its end. Each folder's own `summary.md` has its runs' per-target values and "
-        "provenance.",
+        "final value before its end. The last two columns are the runs' late fall rate and final search "
+        "spread (as in the study's tables above). Each folder's own `summary.md` has its runs' per-target "
+        "values and provenance.",
         "",
     ]
     for experiment in METRICS:

@@ -23,8 +23,6 @@ __all__ = ["KINDS", "SurrogateModel", "choose_kind", "fit_model", "kendall_tau",
 Array = NDArray[np.float64]
 #: Model kinds from the poorest to the richest; the diagnostic ``model_kind`` is the index (0: no model).
 KINDS = ("none", "linear", "diagonal", "full")
-#: Ridge of the normal equations, relative to the mean diagonal of the weighted Gram matrix.
-MODEL_RIDGE = 1e-12
 
 
 def model_coefficients(kind: str, n_params: int, n_context_dims: int) -> int:
@@ -169,11 +167,10 @@ def fit_model(
     ranks = np.empty(distance.size)
     ranks[np.argsort(distance, kind="stable")] = np.arange(distance.size)
     weights = 1.0 - 0.9 * ranks / max(distance.size - 1, 1)  # Eq. (S3): 1 (nearest) down to 0.1 (farthest)
-    weighted = design.T * weights
-    gram = weighted @ design
-    gram.flat[:: gram.shape[0] + 1] += MODEL_RIDGE * max(gram.trace() / gram.shape[0], 1e-300)
-    try:
-        fit = linalg.solve(gram, weighted @ ((returns - r_centre) / r_scale), assume_a="pos")  # Eq. (S3)
+    root = np.sqrt(weights)
+    try:  # Eq. (S3): a QR least-squares solve of √w·X c = √w·y (the normal equations square cond X)
+        fit = linalg.lstsq(design * root[:, None], root * (returns - r_centre) / r_scale, check_finite=False,
+                           lapack_driver="gelsy")[0]  # fmt: skip
     except (linalg.LinAlgError, ValueError):
         return None
     if not np.isfinite(fit).all():

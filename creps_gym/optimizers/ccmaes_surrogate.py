@@ -42,6 +42,7 @@ from creps_gym.optimizers.surrogate_model import (
     fit_model,
     kendall_tau,
     model_coefficients,
+    richest_kind,
 )
 
 __all__ = ["CCMAESSurrogate", "SurrogateConfig", "next_model_generations"]
@@ -59,8 +60,9 @@ class SurrogateConfig(CCMAESConfig):
     max_model_generations : int     the most model generations after one true generation (S5); 0 turns the
         surrogate off (plain ``c-cma-es``).
     min_tau : float                 Kendall τ in [−1, 1) below which no model generation runs (S5).
-    archive_factor : float          the archive keeps the most recent ⌈factor·m⌉ true episodes, m the full
-        quadratic's coefficient count, 1 + d + d(d + 1)/2 with d = p + z (S1); at least 1.
+    archive_factor : float          the archive keeps the most recent ⌈factor·m⌉ true episodes, m the
+        coefficient count of the richest model (S1), the full quadratic's 1 + d + d(d + 1)/2 with d = p + z
+        up to ``MAX_COEFFICIENTS`` = 600 coefficients; at least 1.
     model_margin : float            the model is the richest of linear, diagonal and full quadratic whose
         coefficients times ``model_margin`` are at most the archived episodes (S2); at least 1.
     (and every option of ``c-cma-es``: see :class:`~creps_gym.optimizers.ccmaes_config.CCMAESConfig`)
@@ -85,8 +87,9 @@ class SurrogateConfig(CCMAESConfig):
 
     @property
     def archive_size(self) -> int:
-        """The archive's bound ⌈archive_factor·m⌉ (S1)."""
-        return math.ceil(self.archive_factor * model_coefficients("full", self.n_params, self.n_context_dims))
+        """The archive's bound ⌈archive_factor·m⌉, m the richest usable model's coefficient count (S1)."""
+        p, z = self.n_params, self.n_context_dims
+        return math.ceil(self.archive_factor * model_coefficients(richest_kind(p, z), p, z))
 
 
 def next_model_generations(tau: float | None, previous: int, most: int, min_tau: float) -> int:

@@ -18,11 +18,24 @@ from scipy import linalg
 from creps_gym._validation import as_float_array
 from creps_gym.optimizers.features import FeatureMap
 
-__all__ = ["KINDS", "SurrogateModel", "choose_kind", "fit_model", "kendall_tau", "model_coefficients"]
+__all__ = [
+    "KINDS",
+    "MAX_COEFFICIENTS",
+    "SurrogateModel",
+    "choose_kind",
+    "fit_model",
+    "kendall_tau",
+    "model_coefficients",
+    "richest_kind",
+]
 
 Array = NDArray[np.float64]
 #: Model kinds from the poorest to the richest; the diagnostic ``model_kind`` is the index (0: no model).
 KINDS = ("none", "linear", "diagonal", "full")
+#: The most coefficients a model may have (S2): a richer kind is never used. A fit costs O(n m²) for m
+#: coefficients on n ≈ 2m episodes, so this bounds a fit's time and memory (a full quadratic up to d = 33
+#: inputs, the diagonal one up to about p = 290 at z = 1; beyond it the linear model).
+MAX_COEFFICIENTS = 600
 
 
 def model_coefficients(kind: str, n_params: int, n_context_dims: int) -> int:
@@ -40,10 +53,20 @@ def model_coefficients(kind: str, n_params: int, n_context_dims: int) -> int:
     return 1 + d + d * (d + 1) // 2
 
 
-def choose_kind(n_data: int, n_params: int, n_context_dims: int, margin: float) -> str:
-    """The richest kind whose coefficients times ``margin`` fit in ``n_data`` archived episodes (S2), or
-    ``"none"`` when not even the linear model does."""
+def richest_kind(n_params: int, n_context_dims: int) -> str:
+    """The richest kind with at most :data:`MAX_COEFFICIENTS` coefficients (``"none"`` if not even the
+    linear model has)."""
     for kind in reversed(KINDS[1:]):
+        if model_coefficients(kind, n_params, n_context_dims) <= MAX_COEFFICIENTS:
+            return kind
+    return "none"
+
+
+def choose_kind(n_data: int, n_params: int, n_context_dims: int, margin: float) -> str:
+    """The richest kind up to :func:`richest_kind` whose coefficients times ``margin`` fit in ``n_data``
+    archived episodes (S2), or ``"none"`` when not even the linear model does."""
+    allowed = KINDS.index(richest_kind(n_params, n_context_dims))
+    for kind in reversed(KINDS[1 : allowed + 1]):
         if n_data >= margin * model_coefficients(kind, n_params, n_context_dims):
             return kind
     return "none"

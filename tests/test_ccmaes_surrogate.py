@@ -15,6 +15,7 @@ from creps_gym.optimizers.surrogate_model import (
     fit_model,
     kendall_tau,
     model_coefficients,
+    richest_kind,
 )
 
 P, Z, N = 6, 1, 20
@@ -90,6 +91,15 @@ def test_model_kind_grows_with_the_archive():
         "diagonal",
         "full",
     ]
+
+
+def test_models_beyond_600_coefficients_are_never_used():
+    assert [richest_kind(p, 1) for p in (15, 32, 33, 64, 199, 200, 598, 599)] == [
+        "full", "full", "diagonal", "diagonal", "diagonal", "linear", "linear", "none"
+    ]  # fmt: skip
+    assert choose_kind(10**6, 64, 1, 1.0) == "diagonal"
+    config = CCMAESSurrogate(64, 1).config
+    assert config.archive_size == 2 * model_coefficients("diagonal", 64, 1)
 
 
 def test_tau_decides_the_number_of_model_generations():

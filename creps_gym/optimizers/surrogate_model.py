@@ -34,7 +34,7 @@ Array = NDArray[np.float64]
 KINDS = ("none", "linear", "diagonal", "full")
 #: The most coefficients a model may have (S2): a richer kind is never used. A fit costs O(n m²) for m
 #: coefficients on n ≈ 2m episodes, so this bounds a fit's time and memory (a full quadratic up to d = 33
-#: inputs, the diagonal one up to about p = 290 at z = 1; beyond it the linear model).
+#: inputs, the diagonal one up to p = 199 at z = 1, then the linear one up to p + z = 599).
 MAX_COEFFICIENTS = 600
 
 

@@ -190,12 +190,15 @@ class CCMAESSurrogate(CCMAES):
         """Run up to ``count`` model generations of ``batch`` samples (S6); returns how many ran.
 
         They stop early at a restart or when the model's scores or the update are not finite. The histories
-        of the stop criteria and of the baseline (C1) are restored afterwards: only true returns enter them.
+        of the stop criteria are restored afterwards (only true returns enter them); the baseline (C1) reuses
+        the model batches only, and after them the next true update fits V on its own batch.
         """
         if self.model is None or count == 0:
             return 0
         kept = (list(self.mean_returns), self.flat_iterations, self.past_contexts, self.past_returns)
         restarts, ran = self.restarts_done, 0
+        empty = (np.empty((0, self.n_context_dims)), np.empty(0))
+        self.past_contexts, self.past_returns = empty  # Eq. (S6): the baseline reuses model batches only
         archived = self.archive[0]
         for _ in range(count):
             contexts = archived[self.rng.integers(0, archived.shape[0], batch)]  # Eq. (S6)
@@ -212,7 +215,10 @@ class CCMAESSurrogate(CCMAES):
             ran += 1
             if self.restarts_done != restarts:
                 return ran  # the restart reset the histories
-        self.mean_returns, self.flat_iterations, self.past_contexts, self.past_returns = kept
+        self.mean_returns, self.flat_iterations = kept[:2]
+        # Eq. (S6): after model generations the next true update's V fits its own batch (the reused true
+        # batches are from a distribution the model generations have left); without any, nothing changed.
+        self.past_contexts, self.past_returns = empty if ran else kept[2:]
         return ran
 
     # -- checkpoints ---------------------------------------------------------------------------------------

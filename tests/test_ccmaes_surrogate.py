@@ -141,6 +141,8 @@ def test_model_generations_never_count_as_episodes():
     assert optimizer.evaluations == 40 * N
     assert optimizer.diagnostics["true_episodes"] == 40 * N
     assert optimizer.iteration == 40
+    # The baseline's reuse held true batches from a distribution the model generations left: emptied (S6).
+    assert optimizer.diagnostics["model_generations"] > 0 and optimizer.past_returns.size == 0
 
 
 BAD_OPTIONS = [

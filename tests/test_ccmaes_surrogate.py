@@ -148,7 +148,8 @@ def test_model_generations_never_count_as_episodes():
 BAD_OPTIONS = [
     ("max_model_generations", -1, ValueError),
     ("max_model_generations", 2.5, TypeError),
-    ("min_tau", 1.0, ValueError),
+    ("min_tau", 1.0, ValueError),  # [-1, 1): τ = 1 would never run a model generation
+    ("min_tau", 2, ValueError),
     ("min_tau", -1.5, ValueError),
     ("min_tau", float("nan"), ValueError),
     ("archive_factor", 0.5, ValueError),
@@ -159,7 +160,7 @@ BAD_OPTIONS = [
 
 @pytest.mark.parametrize(("option", "value", "error"), BAD_OPTIONS)
 def test_bad_options_are_refused_naming_the_option(option, value, error):
-    with pytest.raises(error, match=option):
+    with pytest.raises(error, match=rf"^{option}: expected"):
         make_optimizer("c-cma-es-surrogate", P, Z, 0, **{option: value})
 
 

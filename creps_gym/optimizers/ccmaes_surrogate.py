@@ -77,10 +77,8 @@ class SurrogateConfig(CCMAESConfig):
         super().__post_init__()
         generations = check_positive_int(self.max_model_generations, "max_model_generations", minimum=0)
         object.__setattr__(self, "max_model_generations", generations)
-        tau = check_real_in_range(self.min_tau, "min_tau", -1.0, 1.0, low_inclusive=True)
-        if tau >= 1.0:
-            raise ValueError(f"min_tau: expected a value in [-1, 1), got {tau}")
-        object.__setattr__(self, "min_tau", tau)
+        bounds = {"low_inclusive": True, "high_inclusive": False}  # τ = 1 would never run a model generation
+        object.__setattr__(self, "min_tau", check_real_in_range(self.min_tau, "min_tau", -1.0, 1.0, **bounds))
         for name in ("archive_factor", "model_margin"):
             value = check_real_in_range(getattr(self, name), name, 1.0, 1e6, low_inclusive=True)
             object.__setattr__(self, name, value)

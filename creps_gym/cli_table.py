@@ -39,6 +39,7 @@ OPTIMIZERS = [['creps', 'Contextual REPS: KL-bounded weights, weighted ML mean a
  ['creps-cma-current', 'CREPS-CMA, current-mean variant: rank-mu covariance around the new mean (Eq. 13)'],
  ['creps-cma-csa', 'CREPS-CMA with step-size control: CREPS weights and mean, CMA covariance and CSA'],
  ['c-cma-es', 'Contextual CMA-ES: rank weights on context-baselined returns, step-size control (CSA)'],
+ ['c-cma-es-surrogate', 'C-CMA-ES with a linear-quadratic surrogate of the return, used while it ranks'],
  ['cma', "pycma CMA-ES (non-contextual: ignores the context; extra 'adapters')"],
  ['nevergrad', "nevergrad optimiser, TwoPointsDE by default (non-contextual; extra 'adapters')"],
  ['optuna', "optuna TPE sampler, ask-and-tell (non-contextual; extra 'adapters')"]]

@@ -441,6 +441,40 @@ def test_ccmaes_targets_are_computed_from_medians_with_missed_seeds_as_infinite(
     assert row[9] == "not met |"  # 3,150 > 2 x 1,550
 
 
+def test_ccmaes_surrogate_table_sets_the_surrogate_against_c_cma_es_and_pycma_in_its_cells() -> None:
+    from benchmarks.ccmaes import run, surrogate_table
+
+    def runs(samples, *hits):
+        return [{"hit": hit, "spec": {"samples": samples, "seed": i}} for i, hit in enumerate(hits)]
+
+    cells = {
+        ("Sphere", 1, "c-cma-es-surrogate"): runs(50, 700, 650, 800),
+        ("Sphere", 1, "c-cma-es"): runs(50, 5000, 4800, 5200),
+        ("Sphere", 1, "c-cma-es-surrogate-rec"): runs(24, 3000, None, None),  # the median seed missed
+        ("Sphere", 1, "c-cma-es-rec"): runs(24, 3900, 4000),
+        ("Sphere", 1, "cma-fixed"): runs(50, 1500, 1600),
+    }
+    lines = surrogate_table.surrogate_table(cells, 200_000).splitlines()
+    assert len(lines) == 4  # no runs in the other cells: no rows
+    assert lines[2].split(" | ")[1:] == [
+        "1", "50", "700 (3/3)", "5,000 (3/3)", "0.14 (≤ 0.7: met)", "1,550 (2/2)", "0.45 (≤ 2: met) |"
+    ]  # fmt: skip
+    assert lines[3].split(" | ")[3:] == [
+        ">200,000 (1/3)", "3,950 (2/2)", "∞ (≤ 0.7: not met)", "1,550 (2/2)", "∞ (≤ 2: not met) |"
+    ]  # fmt: skip
+    args = run.parse_args(
+        ["--full", "--columns", "c-cma-es-surrogate", "--seeds", "1", "--headline-seeds", "2"]
+    )
+    specs = {(s.function, s.context_dim, s.samples) for _, s in run.column_specs(args)}
+    assert specs == {
+        ("Sphere", 1, 50),
+        ("Sphere", 3, 50),
+        ("Rosenbrock", 1, 50),
+        ("ShiftedRotatedElliptic", 1, 50),
+    }
+    assert len(run.column_specs(args)) == 8  # 2 seeds (the headline seeds) in each of issue 33's cells
+
+
 def test_ccmaes_columns_without_a_recommended_batch_size_are_skipped_with_a_message(monkeypatch) -> None:
     from benchmarks.ccmaes import run
 

@@ -53,6 +53,7 @@ from benchmarks.ccmaes.report import (
     signal_table,
     sweep_table,
 )
+from benchmarks.ccmaes.surrogate_table import SURROGATE_COLUMNS, surrogate_table
 from benchmarks.study_runner import (
     add_mode_options,
     add_output_options,
@@ -69,9 +70,12 @@ FUNCTIONS = ("Sphere", "Rosenbrock", "ShiftedRotatedElliptic")
 SAMPLES, EVAL_CONTEXTS, INITIAL = 50, 100, "uniform5"
 #: Every column: the methods', then the remedies' variants of C-CMA-ES (on Rosenbrock), its batch sizes (on
 #: the Sphere at z = 1), its step-size signals (every cell), the bound table's variants (each in its cell) and
-#: pycma on the Sphere with 2p parameters (at z = 1); all but the methods' with the headline seeds.
+#: pycma on the Sphere with 2p parameters (at z = 1) and the surrogate (issue 33's cells); all but the
+#: methods' with the headline seeds.
 REMEDY_VARIANTS = tuple(c for c in REMEDIES if c.name not in {m.name for m in COLUMNS})
-ALL_COLUMNS = COLUMNS + REMEDY_VARIANTS + BATCH_SWEEP + SIGNAL_COLUMNS + BOUND_COLUMNS + YARDSTICK
+ALL_COLUMNS = (
+    COLUMNS + REMEDY_VARIANTS + BATCH_SWEEP + SIGNAL_COLUMNS + BOUND_COLUMNS + YARDSTICK + SURROGATE_COLUMNS
+)
 PRESETS = {
     "quick": {"seeds": 2, "headline_seeds": 2, "budget": 100_000},
     "full": {"seeds": 5, "headline_seeds": 20, "budget": 200_000},
@@ -90,7 +94,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--headline-seeds", type=int, help="seeds of the headline table's columns")
     parser.add_argument("--budget", type=int, help="episode budget per run (censoring level)")
     parser.add_argument("--dim", type=int, default=15, help="problem dimension p (the targets are for 15)")
-    names = [c.name for c in ALL_COLUMNS]
+    names = list(dict.fromkeys(c.name for c in ALL_COLUMNS))
     parser.add_argument("--columns", nargs="+", choices=names, default=names, help="methods to run")
     parser.add_argument(
         "--remedies",
@@ -262,6 +266,12 @@ def extra_sections(args: argparse.Namespace, documents: list[dict]) -> list[str]
             f"## C-CMA-ES's step-size signal ({seeds} seed(s))",
             "",
             signal_table(cells, rows, args.budget, seeds),
+        ]
+    if names & {c.name for c in SURROGATE_COLUMNS}:
+        text += [
+            f"## The surrogate: C-CMA-ES + surrogate against C-CMA-ES and pycma ({seeds} seed(s))",
+            "",
+            surrogate_table(cells, args.budget),
         ]
     return text
 

@@ -49,17 +49,22 @@ COLUMNS: tuple[tuple[str, str, tuple[tuple[str, object], ...]], ...] = (
     ("", "c-cma-es", ()),
     ("c-cma-es-keep-best", "c-cma-es", (("keep_best", True),)),
     ("c-cma-es-no-restarts", "c-cma-es", (("restarts", 0),)),
+    ("", "c-cma-es-surrogate", ()),
 )
+#: Columns run on some functions only (column name -> functions): the surrogate on the Sphere (issue 33).
+ONLY = {"c-cma-es-surrogate": ("Sphere",)}
 
 
 def specs_for(mode: str, functions: Sequence[str], seeds: int | None = None) -> list[ProtocolSpec]:
-    """Every run of the study: the columns × functions × seeds (registered methods only)."""
+    """Every run of the study: the columns × functions × seeds (registered methods only; a column of
+    :data:`ONLY` on its functions only)."""
     known = set(optimizer_names())
     return [
         ProtocolSpec(function, method, seed, options, label)
         for label, method, options in COLUMNS
         if method in known
         for function in functions
+        if function in ONLY.get(label or method, (function,))
         for seed in range(seeds or SEEDS[mode])
     ]
 

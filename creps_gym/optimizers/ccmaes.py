@@ -92,10 +92,12 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
     """
 
     kind: ClassVar[str] = "c-cma-es"
+    #: The options' dataclass (a subclass of :class:`CCMAESConfig` for a variant with more options).
+    config_class: ClassVar[type[CCMAESConfig]] = CCMAESConfig
 
     def __init__(self, n_params: int, n_context_dims: int, **options: Any) -> None:
-        check_option_names(CCMAESConfig, options)
-        self._init_from_config(CCMAESConfig(n_params=n_params, n_context_dims=n_context_dims, **options))
+        check_option_names(self.config_class, options)
+        self._init_from_config(self.config_class(n_params=n_params, n_context_dims=n_context_dims, **options))
 
     def _init_from_config(self, config: CCMAESConfig) -> None:
         super().__init__()
@@ -126,14 +128,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
 
     def _update(self, contexts: Array, params: Array, returns: Array) -> None:
         config = self.config
-        past = (self.past_contexts, self.past_returns)
-        if config.baseline_bandwidth > 0.0:  # Eq. (C1'')
-            advantages, explained = local_advantages(contexts, returns, config.baseline_bandwidth, *past)
-        else:
-            advantages, explained = context_advantages(  # Eq. (C1)
-                contexts, returns, config.baseline_degree, config.baseline_ridge, *past,
-                config.standardise_advantages, self._baseline_loss(),
-            )  # fmt: skip
+        advantages, explained = self._advantages(contexts, returns)
         constants = self.config.constants(returns.shape[0])
         order = np.argsort(-advantages, kind="stable")
         weights = np.empty_like(constants.weights)
@@ -165,6 +160,17 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         if self.restarts_done == 0 or config.restart_baseline_loss is None:
             return config.baseline_loss
         return config.restart_baseline_loss  # Eq. (C11): a restart searches with the other baseline fit
+
+    def _advantages(self, contexts: Array, returns: Array) -> tuple[Array, float]:
+        """a_k = R_k − V(s_k) of a batch and the fraction of its variance V explains (C1), (C1'')."""
+        config = self.config
+        past = (self.past_contexts, self.past_returns)
+        if config.baseline_bandwidth > 0.0:  # Eq. (C1'')
+            return local_advantages(contexts, returns, config.baseline_bandwidth, *past)
+        return context_advantages(  # Eq. (C1)
+            contexts, returns, config.baseline_degree, config.baseline_ridge, *past,
+            config.standardise_advantages, self._baseline_loss(),
+        )  # fmt: skip
 
     def _step(self, contexts: Array, params: Array, weights: Array, constants: CMAConstants) -> _Step:
         policy = self.policy.copy()
@@ -277,7 +283,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
 
     @classmethod
     def _from_state(cls, state: Mapping[str, Any]) -> CCMAES:
-        config = CCMAESConfig(
+        config = cls.config_class(
             initial_mean=np.asarray(state["initial_mean"]),
             initial_cov=np.asarray(state["initial_cov"]),
             **dict(state["config"]),

@@ -5,18 +5,19 @@ Each entry has a one-line description, a factory with the common signature
 ``from_state_dict`` restores a checkpoint. Classes are imported only when an entry is used, so listing the
 registry never imports an optional library. Users add their own with :func:`register_optimizer`.
 
-==================== =====================================================================================
-name                 optimiser
-==================== =====================================================================================
-``creps``            :class:`~creps_gym.optimizers.creps.CREPS`
-``creps-cma-old``    :class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``variant="old"``
-``creps-cma-current``:class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``variant="current"``
-``creps-cma-csa``    :class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``step_size="csa"``
-``c-cma-es``         :class:`~creps_gym.optimizers.ccmaes.CCMAES`
-``cma``              :class:`~creps_gym.optimizers.adapters.pycma.CMAAdapter`
-``nevergrad``        :class:`~creps_gym.optimizers.adapters.nevergrad.NevergradAdapter`
-``optuna``           :class:`~creps_gym.optimizers.adapters.optuna.OptunaAdapter`
-==================== =====================================================================================
+====================== =====================================================================================
+name                   optimiser
+====================== =====================================================================================
+``creps``              :class:`~creps_gym.optimizers.creps.CREPS`
+``creps-cma-old``      :class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``variant="old"``
+``creps-cma-current``  :class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``variant="current"``
+``creps-cma-csa``      :class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``step_size="csa"``
+``c-cma-es``           :class:`~creps_gym.optimizers.ccmaes.CCMAES`
+``c-cma-es-surrogate`` :class:`~creps_gym.optimizers.ccmaes_surrogate.CCMAESSurrogate`
+``cma``                :class:`~creps_gym.optimizers.adapters.pycma.CMAAdapter`
+``nevergrad``          :class:`~creps_gym.optimizers.adapters.nevergrad.NevergradAdapter`
+``optuna``             :class:`~creps_gym.optimizers.adapters.optuna.OptunaAdapter`
+====================== =====================================================================================
 """
 
 from __future__ import annotations
@@ -221,6 +222,8 @@ _DEFAULTS = (
      "creps_gym.optimizers.creps_cma:CREPSCMA", {"step_size": "csa"}),
     ("c-cma-es", "Contextual CMA-ES: rank weights on context-baselined returns, step-size control (CSA)",
      "creps_gym.optimizers.ccmaes:CCMAES", {}),
+    ("c-cma-es-surrogate", "C-CMA-ES with a linear-quadratic surrogate of the return, used while it ranks",
+     "creps_gym.optimizers.ccmaes_surrogate:CCMAESSurrogate", {}),
     ("cma", "pycma CMA-ES (non-contextual: ignores the context; extra 'adapters')",
      "creps_gym.optimizers.adapters.pycma:CMAAdapter", {}),
     ("nevergrad", "nevergrad optimiser, TwoPointsDE by default (non-contextual; extra 'adapters')",

@@ -4,6 +4,7 @@ tables and docs/contexts.md are what the committed code renders from the committ
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,8 @@ from helpers import EXTRAS, python_blocks
 
 from benchmarks.contexts import report, run
 from benchmarks.contexts.tasks import SteepFunction
+
+ROOT = Path(__file__).resolve().parent.parent
 
 RESULTS = Path(run.__file__).resolve().parent / "results"
 
@@ -71,3 +74,13 @@ def test_a_committed_quick_run_is_what_the_code_computes(key):
     task, optimizer, selector, trial = key.split("/")
     computed = run.one_run(task, optimizer, selector, int(trial), "quick")
     assert {**computed, "seconds": 0} == {**committed, "seconds": 0}
+
+
+def test_the_kick_figures_quoted_in_the_contexts_doc_are_the_kick_summarys():
+    """Every "a ± b" of docs/contexts.md's kick paragraph is a cell the kick study rendered."""
+    doc = (ROOT / "docs" / "contexts.md").read_text(encoding="utf-8")
+    kick = doc[doc.index("**The kick's precision task**") :]
+    summary = (ROOT / "benchmarks" / "kick" / "results" / "full" / "summary.md").read_text(encoding="utf-8")
+    quoted = re.findall(r"\d+\.\d+ ± \d+\.\d+", kick)
+    assert len(quoted) >= 8
+    assert [figure for figure in quoted if figure not in summary] == []

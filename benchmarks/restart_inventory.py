@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from creps_gym.optimizers.state_files import load_state
+
 __all__ = ["climbs_back", "inventory", "main", "summary"]
 
 HERE = Path(__file__).resolve().parent
@@ -67,8 +69,7 @@ def _recorded_studies() -> list[tuple[str, str, float]]:
         if document.get("restarts", 0) > 0:
             rows.append(("recorded", str(path.relative_to(HERE)), float(document["seconds"])))
     for path in sorted((HERE / "kick" / "results").glob("*/runs/*/c-cma-es-trial*.npz")):
-        with np.load(path, allow_pickle=False) as checkpoint:
-            state = json.loads(checkpoint["__state__.json"].tobytes().decode("utf-8"))
+        state = load_state(path)  # the project's checkpoint reader: bounded, never unpickles
         if state.get("restarts_done", 0) > 0:
             seconds = json.loads(path.with_suffix(".json").read_text(encoding="utf-8"))[
                 "seconds_last_session"

@@ -63,11 +63,11 @@ def _converge_then_restart(**options) -> tuple[CCMAES, np.ndarray]:
 def test_a_restart_keeps_the_best_mean_policy_as_the_recommendation():
     """C10: the restart resets the search to its initial mean, but ``recommend`` keeps the converged policy
     until the new search scores better; with ``keep_best=False`` the recommendation restarts too."""
-    optimizer, tests = _converge_then_restart(keep_best=True)
+    optimizer, tests = _converge_then_restart()  # keep_best=True, the default
     assert np.array_equal(optimizer.coefficients, optimizer.config.initial_mean)  # the search restarted
     regret = ((optimizer.recommend(tests) - tests) ** 2).sum(axis=1)
     assert regret.max() < 1e-2 and np.isfinite(optimizer.best_score)
-    plain, _ = _converge_then_restart()  # keep_best=False, the default
+    plain, _ = _converge_then_restart(keep_best=False)
     assert np.allclose(plain.recommend(tests), 3.0) and plain.best_coefficients is None
 
 

@@ -48,16 +48,43 @@ def _same_state(a: CCMAES, b: CCMAES) -> bool:
 
 
 def test_the_option_is_validated():
-    with pytest.raises(ValueError, match=r"restart_baseline_loss: expected None or one of .*got 'l1'"):
+    with pytest.raises(ValueError, match=r"restart_baseline_loss: expected one of .*'other'.*got 'l1'"):
         CCMAES(3, 1, restart_baseline_loss="l1")
+    with pytest.raises(ValueError, match="restart_baseline_loss"):
+        CCMAES(3, 1, restart_baseline_loss=["huber"])
     with pytest.raises(ValueError, match="restart_baseline_loss"):  # the local baseline has no loss
         CCMAES(3, 1, baseline_bandwidth=0.5, restart_baseline_loss="huber")
-    assert CCMAES(3, 1).config.restart_baseline_loss is None
+    assert CCMAES(3, 1, baseline_bandwidth=0.5).config.restart_baseline_loss == "other"  # the default: kept
+
+
+@pytest.mark.parametrize(
+    ("baseline_loss", "restart_baseline_loss", "expected"),
+    [("squared", "other", "huber"), ("huber", "other", "squared"), ("huber", None, "huber"),
+     ("squared", None, "squared"), ("huber", "huber", "huber"), ("squared", "huber", "huber")],
+)  # fmt: skip
+def test_the_restart_loss_of_each_setting(baseline_loss, restart_baseline_loss, expected):
+    """C11: ``"other"`` (the default) alternates the two losses, None keeps ``baseline_loss``."""
+    config = CCMAES(3, 1, baseline_loss=baseline_loss, restart_baseline_loss=restart_baseline_loss).config
+    assert config.restart_loss() == expected
+    assert (
+        CCMAES(3, 1).config.restart_baseline_loss == "other" and CCMAES(3, 1).config.restart_loss() == "huber"
+    )
+
+
+def test_the_default_restarts_with_huber():
+    """The default portfolio is bit-identical to ``restart_baseline_loss="huber"`` after a restart."""
+    default, rng = _until_restart()
+    huber, _ = _until_restart(restart_baseline_loss="huber")
+    for _ in range(3):
+        contexts = _contexts(rng)
+        _tell_sphere(default, contexts)
+        _tell_sphere(huber, contexts)
+    assert _same_state(default, huber)
 
 
 def test_a_run_is_bit_identical_until_its_first_restart():
     """The twin check: the first search does not depend on the option, up to and including the restart."""
-    plain, _ = _until_restart()
+    plain, _ = _until_restart(restart_baseline_loss=None)
     portfolio, _ = _until_restart(restart_baseline_loss="huber")
     assert plain.iteration == portfolio.iteration and _same_state(plain, portfolio)
     never = [CCMAES(4, 1, seed=3, restart_baseline_loss=loss) for loss in (None, "huber")]
@@ -72,7 +99,7 @@ def test_a_run_is_bit_identical_until_its_first_restart():
 def test_after_a_restart_the_baseline_is_fitted_with_the_restart_loss():
     """After the restart, the portfolio's update is the plain update with ``baseline_loss`` set to Huber's."""
     portfolio, rng = _until_restart(restart_baseline_loss="huber")
-    plain, _ = _until_restart()
+    plain, _ = _until_restart(restart_baseline_loss=None)
     state = portfolio.state_dict()
     state["config"] = dict(state["config"], baseline_loss="huber", restart_baseline_loss=None)
     huber = CCMAES.from_state_dict(state)
@@ -98,7 +125,8 @@ def test_the_portfolio_survives_a_checkpoint_bit_identically(tmp_path):
 @pytest.mark.slow
 def test_different_powers_at_z3_is_solved_after_a_restart_with_huber():
     """Different Powers at z = 3 with the function study's settings (p = 15, N = 50, seed 2): the first search
-    diverges and stops; the restart with the squared baseline fails again, the one with Huber's solves it."""
+    diverges and stops; the restart with the squared baseline fails again, the default one with Huber's solves
+    it."""
 
     def regrets(**options):
         history = run(
@@ -109,7 +137,7 @@ def test_different_powers_at_z3_is_solved_after_a_restart_with_huber():
         )  # fmt: skip
         return history.column("eval_regret"), history.column("diag.restarts")
 
-    huber, restarts = regrets(restart_baseline_loss="huber")
+    huber, restarts = regrets()  # the default portfolio
     assert huber[-1] <= 1e-5 and restarts[-1] == 1
-    squared, restarts = regrets()
+    squared, restarts = regrets(restart_baseline_loss=None)
     assert squared.min() > 1e-5 and restarts[-1] >= 1

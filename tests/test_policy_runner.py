@@ -20,8 +20,12 @@ from creps_gym.runner.build import split_seed
 from creps_gym.runner.policy_store import evaluate_on_env
 
 # c-cma-es restarts at iteration 24 with these options (its stagnation criterion after 5 iterations), and
-# its evaluations get worse after that: the best policy is iteration 22's, the final one much worse.
-RESTARTING = {"env_kwargs": {"dim": 3}, "optimizer_options": {"tolstagnation": 5, "restarts": 3}}
+# its evaluations get worse after that (``keep_best=False``: its recommendation restarts with the search): the
+# best policy is iteration 22's, the final one much worse.
+RESTARTING = {
+    "env_kwargs": {"dim": 3},
+    "optimizer_options": {"tolstagnation": 5, "restarts": 3, "keep_best": False},
+}
 
 
 def _run(path, **options):

@@ -30,6 +30,7 @@ matplotlib.use("Agg")
 from benchmarks.contextual_bbo.problems import PROBLEMS
 from benchmarks.contextual_bbo.protocol import ProtocolSpec, run_protocol
 from benchmarks.contextual_bbo.report import load_published, plot_curves, render
+from benchmarks.restart_defaults import FORMER
 from benchmarks.study_runner import (
     add_mode_options,
     add_output_options,
@@ -44,10 +45,12 @@ from creps_gym.optimizers import optimizer_names
 
 STUDY = Path(__file__).resolve().parent
 SEEDS = {"quick": 3, "full": 20}
-#: The columns: (label, registry name, options). An empty label is the method with its defaults.
+#: The columns: (label, registry name, options). An empty label is the method with its defaults;
+#: ``c-cma-es-former-restarts`` is ``c-cma-es`` with its restart defaults before issue 33 (no kept best,
+#: squared restarts).
 COLUMNS: tuple[tuple[str, str, tuple[tuple[str, object], ...]], ...] = (
     ("", "c-cma-es", ()),
-    ("c-cma-es-keep-best", "c-cma-es", (("keep_best", True),)),
+    ("c-cma-es-former-restarts", "c-cma-es", FORMER),
     ("c-cma-es-no-restarts", "c-cma-es", (("restarts", 0),)),
     ("", "c-cma-es-surrogate", ()),
     ("c-cma-es-surrogate-no-restarts", "c-cma-es-surrogate", (("restarts", 0),)),

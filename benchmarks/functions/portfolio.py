@@ -29,6 +29,7 @@ if not __package__:
 import numpy as np
 
 from benchmarks.provenance import provenance_text
+from benchmarks.restart_defaults import FORMER
 from benchmarks.study_runner import run_all, update_block
 from benchmarks.study_tools import RunSpec
 
@@ -38,7 +39,7 @@ CELLS = (("DifferentPowers", 3), ("Rosenbrock", 3), ("ShiftedRotatedElliptic", 3
 #: (label, options) of ``c-cma-es``; the first is the default, the others are compared with it.
 VARIANTS = (
     ("default", ()),
-    ('restart_baseline_loss="huber"', (("restart_baseline_loss", "huber"),)),
+    ("former restarts", FORMER),
 )
 SEEDS, BUDGET, DIM, SAMPLES = 20, 200_000, 15, 50
 BLOCK = "restart-portfolio"

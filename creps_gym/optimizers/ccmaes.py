@@ -23,8 +23,9 @@ One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N
    policy as the best one if its score (the mean return of its last ``BEST_WINDOW`` batches, from the told
    returns only) beats the best so far; ``recommend`` gives the best policy until the running search's score
    beats it.
-7. A restart portfolio (C11, ``restart_baseline_loss``): the searches after a restart fit the baseline with
-   another loss (Huber's), so a restart does not repeat a search that failed with the squared fit.
+7. A restart portfolio (C11, ``restart_baseline_loss``): by default the searches after a restart fit the
+   baseline with the other loss (Huber's after the squared fit), so a restart does not repeat a search that
+   failed with the first fit.
 """
 
 from __future__ import annotations
@@ -154,12 +155,11 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         self._diagnostics["restarts"] = float(self.restarts_done)
 
     def _baseline_loss(self) -> str:
-        """The running search's baseline loss: ``baseline_loss`` until the first restart, then
-        ``restart_baseline_loss`` if set (Eq. (C11))."""
-        config = self.config
-        if self.restarts_done == 0 or config.restart_baseline_loss is None:
-            return config.baseline_loss
-        return config.restart_baseline_loss  # Eq. (C11): a restart searches with the other baseline fit
+        """The running search's baseline loss: ``baseline_loss`` until the first restart, then the one
+        ``restart_baseline_loss`` names (Eq. (C11))."""
+        if self.restarts_done == 0:
+            return self.config.baseline_loss
+        return self.config.restart_loss()  # Eq. (C11): a restart searches with the other baseline fit
 
     def _advantages(self, contexts: Array, returns: Array) -> tuple[Array, float]:
         """a_k = R_k − V(s_k) of a batch and the fraction of its variance V explains (C1), (C1'')."""

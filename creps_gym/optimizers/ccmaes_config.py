@@ -17,12 +17,23 @@ from creps_gym.optimizers.contextual import LOSSES, check_local_baseline
 from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import initial_coefficients, initial_covariance, split_step_size
 
-__all__ = ["SIGNALS", "UNUSED_BY_LOCAL_BASELINE", "CCMAESConfig", "options_doc", "options_signature"]
+__all__ = [
+    "OTHER_LOSS",
+    "RESTART_LOSSES",
+    "SIGNALS",
+    "UNUSED_BY_LOCAL_BASELINE",
+    "CCMAESConfig",
+    "options_doc",
+    "options_signature",
+]
 
 Array = NDArray[np.float64]
 #: The options of C1's polynomial fit, which the local baseline (C1'') ignores: they must keep their defaults.
 UNUSED_BY_LOCAL_BASELINE = ("standardise_advantages", "baseline_loss", "baseline_degree", "baseline_ridge")
 SIGNALS = ("coefficients", "mean")
+#: ``restart_baseline_loss``'s default: after a restart, the loss of ``LOSSES`` the first search did not use.
+OTHER_LOSS = "other"
+RESTART_LOSSES = (None, *LOSSES, OTHER_LOSS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,11 +67,13 @@ class CCMAESConfig:
         (``stop()`` reports criteria only once they are used up).
     keep_best : bool                at each restart, keep the ending search's mean policy if it scored best so
         far (score: the mean return of its last ``BEST_WINDOW`` batches); ``recommend`` gives it until the
-        new search scores better, so a restart cannot make the recommendation worse (C10). Off by default
-        until the committed studies' restarted ``c-cma-es`` runs are recomputed with it.
+        new search scores better, so a restart cannot make the recommendation worse (C10).
     restart_baseline_loss : str or None   the baseline's loss in every search after a restart (C11: a
-        restart portfolio); None keeps ``baseline_loss``. The first search uses ``baseline_loss``, so a run
-        that never restarts does not depend on it.
+        restart portfolio): ``"other"`` (the default) the loss of ``LOSSES`` that the first search did not use
+        (Huber's after the squared fit, and the reverse), ``"squared"`` or ``"huber"`` that one, None
+        ``baseline_loss``. The first search uses ``baseline_loss``, so a run that never restarts does not
+        depend on it. The local baseline (C1'') has no loss: with ``baseline_bandwidth > 0`` only None and
+        ``"other"`` are accepted, and both keep it.
     tolx, tolupsigma, max_condition, tolstagnation, tolflatfitness : stop criteria like pycma's
         (``tolstagnation=None`` means 100 + 100·p^1.5/N iterations).
     """
@@ -77,8 +90,8 @@ class CCMAESConfig:
     baseline_loss: str = "squared"
     baseline_bandwidth: float = 0.0
     restarts: int = 3
-    keep_best: bool = False
-    restart_baseline_loss: str | None = None
+    keep_best: bool = True
+    restart_baseline_loss: str | None = OTHER_LOSS
     step_size_signal: str = "mean"
     ridge: float = 1e-8
     baseline_ridge: float = 1e-10
@@ -117,9 +130,10 @@ class CCMAESConfig:
         object.__setattr__(self, "standardise_advantages", standardise)
         if self.baseline_loss not in LOSSES:
             raise ValueError(f"baseline_loss: expected one of {LOSSES}, got {self.baseline_loss!r}")
-        if self.restart_baseline_loss is not None and self.restart_baseline_loss not in LOSSES:
+        loss = self.restart_baseline_loss
+        if not (loss is None or (isinstance(loss, str) and loss in RESTART_LOSSES)):
             raise ValueError(
-                f"restart_baseline_loss: expected None or one of {LOSSES}, got {self.restart_baseline_loss!r}"
+                f"restart_baseline_loss: expected one of {RESTART_LOSSES}, got {self.restart_baseline_loss!r}"
             )
         if self.step_size_signal not in SIGNALS:
             raise ValueError(f"step_size_signal: expected one of {SIGNALS}, got {self.step_size_signal!r}")
@@ -143,9 +157,12 @@ class CCMAESConfig:
         defaults = {option.name: option.default for option in fields(self)}
         unused = {name: (getattr(self, name), defaults[name]) for name in UNUSED_BY_LOCAL_BASELINE}
         check_local_baseline(self.baseline_bandwidth, unused)
-        if self.baseline_bandwidth > 0.0 and self.restart_baseline_loss is not None:  # C1'' has no loss
+        if self.baseline_bandwidth > 0.0 and self.restart_baseline_loss in LOSSES:  # C1'' has no loss
             got = self.restart_baseline_loss
-            raise ValueError(f"restart_baseline_loss: expected None with baseline_bandwidth > 0, got {got!r}")
+            raise ValueError(
+                f"restart_baseline_loss: expected None or {OTHER_LOSS!r} with baseline_bandwidth > 0, "
+                f"got {got!r}"
+            )
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
         object.__setattr__(self, "seed", check_seed(self.seed))
@@ -158,6 +175,14 @@ class CCMAESConfig:
         sigma, shape = split_step_size(self.initial_cov)
         object.__setattr__(self, "initial_step_size", sigma)
         object.__setattr__(self, "initial_shape", shape)
+
+    def restart_loss(self) -> str:
+        """The baseline's loss in the searches after a restart (Eq. (C11))."""
+        if self.restart_baseline_loss is None:
+            return self.baseline_loss
+        if self.restart_baseline_loss == OTHER_LOSS:
+            return next(loss for loss in LOSSES if loss != self.baseline_loss)
+        return str(self.restart_baseline_loss)
 
     def constants(self, n_samples: int) -> CMAConstants:
         """The strategy constants for a batch of ``n_samples``, with this config's overrides."""

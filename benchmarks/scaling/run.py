@@ -182,7 +182,7 @@ def make_specs(args: argparse.Namespace) -> list[RunSpec]:
 
 #: Options pinned per extra method: ``c-cma-es`` keeps the restart defaults from before issue 33 (no kept
 #: best, squared restarts; ``benchmarks/restart_defaults.py``), with which its 440 committed runs were
-#: computed; recomputing the 45 that restarted under the new defaults would cost about 175 CPU-minutes.
+#: computed (see the README's "C-CMA-ES's restart options").
 PINNED = {"c-cma-es": FORMER}
 
 
@@ -214,7 +214,9 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
     ]
     lines += grid_lines(documents, args)
     for method in args.extra_methods:
-        lines += [f"## {EXTRA_LABELS[method]} (`{method}`)", "", *grid_lines(documents, args, method)]
+        pinned = ", ".join(f"{name}={value!r}" for name, value in PINNED.get(method, ()))
+        note = f"; `{pinned}`: its restart defaults before issue 33" if pinned else ""
+        lines += [f"## {EXTRA_LABELS[method]} (`{method}`{note})", "", *grid_lines(documents, args, method)]
     lines += baseline_lines(documents, args)
     lines += [f"![heatmaps]({figure})", ""]
     for method in args.extra_methods:

@@ -107,6 +107,9 @@ class RunSpec:
         Further options of the registered optimiser ``method`` (names of its config fields; values bool,
         int, float or str), sorted by name. They end the key's prefix (``-name=value`` each); without them
         the key is the same as before the field existed.
+    divergence : float or None
+        The runner's divergence rule (``RunConfig.divergence``); None (the studies' default) turns it off, as
+        for every run computed before the field existed. A factor ends the key's prefix (``-div<factor>``).
     """
 
     function: str
@@ -121,9 +124,17 @@ class RunSpec:
     eval_contexts: int = 16
     initial: str = "centre"
     options: tuple[tuple[str, Any], ...] = ()
+    divergence: float | None = None
 
     def __post_init__(self) -> None:
         function_spec(self.function)  # raises for an unknown function
+        if self.divergence is not None and not (
+            isinstance(self.divergence, int | float)
+            and not isinstance(self.divergence, bool)
+            and 0.0 < self.divergence < math.inf
+        ):
+            got = self.divergence
+            raise ValueError(f"divergence: expected None or a positive finite number, got {got!r}")
         object.__setattr__(self, "options", canonical_options(self.method, self.options))
         if not isinstance(self.method, str) or not self.method.replace("-", "").isalnum():
             raise ValueError(f"method: expected a name of letters, digits and '-', got {self.method!r}")
@@ -153,6 +164,7 @@ class RunSpec:
         cap += "" if self.eval_contexts == 16 else f"-e{self.eval_contexts}"
         cap += "" if self.initial == "centre" else f"-{self.initial}"
         cap += "".join(f"-{name}={value}" for name, value in self.options)
+        cap += "" if self.divergence is None else f"-div{self.divergence:g}"
         return f"{self.function}-p{self.dim}-z{self.context_dim}-{self.method}{cap}-s{self.seed}"
 
     @property
@@ -225,8 +237,9 @@ def result_document(
     target = function_spec(spec.function).target
     met = np.flatnonzero(values_arr <= target)
     keep = curve_indices(len(values_arr))
-    # Without options, the spec is described as before the field existed.
-    described = {name: v for name, v in asdict(spec).items() if name != "options" or spec.options}
+    # Without options or a divergence rule, the spec is described as before those fields existed.
+    unset = {"options": (), "divergence": None}
+    described = {name: v for name, v in asdict(spec).items() if name not in unset or v != unset[name]}
     return {
         "spec": described,
         "metric": "regret" if is_bounded(spec.function) else "f",
@@ -258,7 +271,8 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
     twice as fast). Contexts are read from one seeded reset per episode (``context_draws="reset"``, the
     runner's stream before issue 14), so every cached document stays what this code computes. An
     optimiser with a ``max_std_growth`` option stops a diverging run (:data:`DIVERGENCE_GROWTH`) and never
-    stops on stagnation (:data:`NO_STAGNATION`). The runner's ``divergence`` stop is off: 14 committed
+    stops on stagnation (:data:`NO_STAGNATION`). The runner's ``divergence`` stop is off unless
+    ``spec.divergence`` sets it: 14 committed
     runs diverge, and the tables report how far they went before their optimiser stopped them. With
     ``checkpoint_dir``, the run checkpoints there (at
     most :data:`MAX_CHECKPOINTS` times, at least :data:`CHECKPOINT_EVERY` iterations apart) and a run
@@ -298,7 +312,7 @@ def optimizer_result(spec: RunSpec, checkpoint_dir: Path | None = None) -> dict[
             backend="vector",
             vector_mode="native",
             context_draws="reset",  # the stream the committed run caches were computed with (see below)
-            divergence=None,  # the committed caches predate the runner's divergence stop
+            divergence=spec.divergence,  # None: the committed caches predate the runner's divergence stop
             run_dir=checkpoint_dir,
             checkpoint_every=max(CHECKPOINT_EVERY, iterations // MAX_CHECKPOINTS),
             **start,

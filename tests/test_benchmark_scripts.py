@@ -541,8 +541,10 @@ def test_issue_12_optimisers_fill_their_columns_once_registered(tmp_path: Path, 
     args = ["--functions", "Sphere", "--dims", "2", "--baselines", "--extra-methods", "c-cma-es"]
     assert scaling.main([*args, *common, "--cache", str(tmp_path / "c2"), "--out", str(out)]) == 0
     table = (out / "results.md").read_text()
-    assert "## C-CMA-ES (`c-cma-es`)" in table and (out / "heatmaps-c-cma-es.png").stat().st_size > 10_000
-    assert len(list((tmp_path / "c2").glob("Sphere-p2-z1-c-cma-es-s0-*.json"))) == 1
+    assert "## C-CMA-ES (`c-cma-es`; `keep_best=False, restart_baseline_loss='squared'`: its restart" in table
+    assert (out / "heatmaps-c-cma-es.png").stat().st_size > 10_000
+    pinned = "Sphere-p2-z1-c-cma-es-keep_best=False-restart_baseline_loss=squared-s0-*.json"
+    assert len(list((tmp_path / "c2").glob(pinned))) == 1
 
 
 def test_run_spec_options_are_sorted_validated_and_leave_the_keys_without_them_unchanged() -> None:
@@ -565,6 +567,21 @@ def test_run_spec_options_are_sorted_validated_and_leave_the_keys_without_them_u
     ]:
         with pytest.raises(ValueError, match="options"):
             dataclasses.replace(plain, method=method, options=options)
+
+
+def test_run_spec_divergence_is_validated_ends_the_key_and_reaches_the_runner(tmp_path: Path) -> None:
+    plain = study_tools.RunSpec("DifferentPowers", 15, 3, "c-cma-es", 4, 2_000, 50)
+    assert "divergence" not in study_tools.result_document(plain, [50], [1.0], None, 1.0)["spec"]
+    watched = dataclasses.replace(plain, divergence=1000.0)
+    assert watched.key == "DifferentPowers-p15-z3-c-cma-es-div1000-s4-b2000-n50"
+    document = json.loads(json.dumps(study_tools.result_document(watched, [50], [1.0], None, 1.0)))
+    assert study_tools.RunSpec(**document["spec"]) == watched
+    for bad in (0.0, -1.0, float("inf"), True, "1000"):
+        with pytest.raises(ValueError, match="divergence: expected None or a positive finite number"):
+            dataclasses.replace(plain, divergence=bad)
+    study_tools.execute(watched, tmp_path / "run")
+    config = json.loads((tmp_path / "run" / "config.json").read_text())["config"]
+    assert config["divergence"] == 1000.0
 
 
 def test_run_spec_options_reach_the_optimiser(tmp_path: Path) -> None:

@@ -49,10 +49,11 @@ def test_returns_count_through_minus_the_return_and_a_replay_equals_the_live_wat
     assert _observe(replayed, losses[7:]) == _observe(DivergenceWatch(1000.0), losses)[7:]
 
 
-def test_a_diverging_c_cma_es_run_stops_with_the_reason_divergence():
+def test_a_diverging_c_cma_es_run_without_restarts_stops_with_the_reason_divergence():
     """A legal batch (50 >= the recommended 48) that diverges: regret 2.2e6 at the first evaluation, past
     2.2e9 from iteration 25 on; stopped at iteration 34. With ``divergence=None`` it runs on."""
     options = {k: v for k, v in DIVERGING.items() if k not in ("env", "samples", "seed")}
+    options["optimizer_options"] = {"restarts": 0}  # no restart left: the rule stops the run
     history = run("c-cma-es", DIVERGING["env"], 60, DIVERGING["samples"], DIVERGING["seed"],
                   context_draws="reset", **options)  # fmt: skip
     regret = history.column("eval_regret")
@@ -65,10 +66,52 @@ def test_a_diverging_c_cma_es_run_stops_with_the_reason_divergence():
     np.testing.assert_array_equal(unchecked.column("eval_regret")[:34], regret)  # nothing else changes
 
 
+def test_with_a_restart_left_the_rule_restarts_the_search_and_the_run_reaches_its_target():
+    """The default ``c-cma-es`` (3 restarts): where the rule fires (iteration 34, as above) the runner calls
+    ``restart()`` instead of stopping; the Huber restart (C11) then reaches the target, and the samples
+    before the restart are the run without restarts'."""
+    options = {k: v for k, v in DIVERGING.items() if k not in ("env", "samples", "seed")}
+    args = ("c-cma-es", DIVERGING["env"], 600, DIVERGING["samples"], DIVERGING["seed"])
+    history = run(*args, context_draws="reset", target_regret=1e-5, **options)
+    restarts = history.column("diag.restarts")
+    assert restarts[33] == 1.0 and restarts[32] == 0.0  # restarted at iteration 34, where it would stop
+    assert history.stop_reason == "target_regret" and history.records[-1].eval_regret <= 1e-5
+    plain = run(*args[:3], DIVERGING["samples"], DIVERGING["seed"], context_draws="reset",
+                optimizer_options={"restarts": 0}, **options)  # fmt: skip
+    np.testing.assert_array_equal(history.column("eval_regret")[:34], plain.column("eval_regret"))
+
+
+def test_restart_is_refused_with_a_pending_ask_and_without_restarts_left():
+    from creps_gym.optimizers import CCMAES, CREPS
+
+    optimizer = CCMAES(3, 1, restarts=1, seed=0)
+    contexts = np.zeros((8, 1))
+    params = optimizer.ask(contexts)
+    with pytest.raises(RuntimeError, match="restart\\(\\): expected no pending ask"):
+        optimizer.restart()
+    optimizer.tell(contexts, params, -np.sum(params**2, axis=1))
+    before = optimizer.state_dict()
+    assert optimizer.restart() and optimizer.restarts_done == 1 and optimizer.diagnostics["restarts"] == 1.0
+    assert np.array_equal(optimizer.coefficients, optimizer.config.initial_mean)
+    assert not optimizer.restart() and optimizer.restarts_done == 1  # none left: nothing changes
+    assert before["restarts_done"] == 0
+    assert CREPS(3, 1).restart() is False  # an optimiser without restarts: the rule stops its run
+
+
+def test_a_replayed_history_that_went_on_after_the_rule_fired_counts_again():
+    losses = [1.0] + [1002.0] * (WINDOW + 3)
+    live = DivergenceWatch(1000.0)
+    for loss in losses:
+        if live.observe(loss):
+            live.restarted()
+    replayed = DivergenceWatch(1000.0).replay(losses)
+    assert replayed.run_length == live.run_length == 3
+
+
 def test_the_command_line_prints_the_stop_and_takes_divergence_none(tmp_path, capsys):
     args = ["run", "--env", DIVERGING["env"], "--env-kwarg", "dim=15", "--env-kwarg", "context_dim=3",
             "--optimizer", "c-cma-es", "--samples", "50", "--iterations", "60", "--seed", "4",
-            "--no-plot", "--no-progress"]  # fmt: skip
+            "--opt", "restarts=0", "--no-plot", "--no-progress"]  # fmt: skip
     assert main([*args, "--out", str(tmp_path / "a")]) == EXIT_CODES["ok"]
     assert "iterations 14, episodes 700, regret " in capsys.readouterr().out  # the batched context stream
     assert json.loads((tmp_path / "a" / "config.json").read_text())["config"]["divergence"] == 1000.0
@@ -119,6 +162,7 @@ def test_a_resumed_run_replays_its_history_and_stops_where_the_uninterrupted_one
     from creps_gym.runner import resume
 
     options = {"env_kwargs": DIVERGING["env_kwargs"], "checkpoint_every": 1}
+    options["optimizer_options"] = {"restarts": 0}
     args = ("c-cma-es", DIVERGING["env"], 60, DIVERGING["samples"], DIVERGING["seed"])
     uninterrupted = run(*args, **options)
     assert uninterrupted.stop_reason == "divergence" and len(uninterrupted) == 14
@@ -132,6 +176,23 @@ def test_a_resumed_run_replays_its_history_and_stops_where_the_uninterrupted_one
     assert resume(tmp_path / "run").equals(uninterrupted)
 
 
+def test_a_run_resumed_after_the_rule_restarted_its_search_goes_on_as_the_uninterrupted_one(tmp_path):
+    from creps_gym.runner import resume
+
+    options = {"env_kwargs": DIVERGING["env_kwargs"], "checkpoint_every": 1}
+    args = ("c-cma-es", DIVERGING["env"], 30, DIVERGING["samples"], DIVERGING["seed"])
+    uninterrupted = run(*args, **options)
+    assert uninterrupted.column("diag.restarts")[13] == 1.0 and len(uninterrupted) == 30
+
+    def crash_at_twenty(record, history):
+        if record.iteration == 20:  # after the restart at iteration 14
+            raise _Crash
+
+    with pytest.raises(_Crash):
+        run(*args, run_dir=tmp_path / "run", callbacks=[crash_at_twenty], **options)
+    assert resume(tmp_path / "run").equals(uninterrupted)
+
+
 def test_a_run_stopped_by_divergence_reads_back_and_its_factor_is_part_of_the_run(tmp_path):
     """The checkpoint's stop reason ``divergence`` is one the loop can write (it reloads), and a factor
     other than the default is fingerprinted (a run folder edited to another factor is another run)."""
@@ -139,6 +200,7 @@ def test_a_run_stopped_by_divergence_reads_back_and_its_factor_is_part_of_the_ru
     from creps_gym.runner.trust import config_fingerprint
 
     options = {"env_kwargs": DIVERGING["env_kwargs"], "checkpoint_every": 1}
+    options["optimizer_options"] = {"restarts": 0}
     args = ("c-cma-es", DIVERGING["env"], 60, DIVERGING["samples"], DIVERGING["seed"])
     finished = run(*args, run_dir=tmp_path / "run", **options)
     assert finished.stop_reason == "divergence"

@@ -188,6 +188,12 @@ class ContextualOptimizer(ABC):
         """Stop criteria that are met; empty while the optimiser should continue."""
         return {}
 
+    def restart(self) -> bool:
+        """Abandon the running search and start a new one now, if the optimiser has restarts (the runner
+        calls it when its divergence rule fires, between a ``tell`` and the next ``ask``); returns whether it
+        did. The base class has none: it returns False and changes nothing."""
+        return False
+
     @abstractmethod
     def recommend(self, contexts: Any) -> Array:
         """The mean policy's parameters for contexts (n, z): shape (n, p)."""

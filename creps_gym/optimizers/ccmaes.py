@@ -147,12 +147,32 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             )
         self._diagnostics = dict(step.diagnostics, baseline_r2=explained, mean_return=self.mean_returns[-1])
         if self.restarts_done < config.restarts and self.stop():
-            self._keep_if_best()
-            self._reset_search()
-            self.restarts_done += 1
-            for stale in ("cond_cov", "max_std", "search_scale"):  # they described the abandoned distribution
-                self._diagnostics.pop(stale, None)
+            self._restart()
         self._diagnostics["restarts"] = float(self.restarts_done)
+
+    def _restart(self) -> None:
+        """Keep the ending search's mean policy if it scored best (C10), then start again from the initial
+        distribution; the searches after it fit the baseline with the restart loss (C11)."""
+        self._keep_if_best()
+        self._reset_search()
+        self.restarts_done += 1
+        for stale in ("cond_cov", "max_std", "search_scale"):  # they described the abandoned distribution
+            self._diagnostics.pop(stale, None)
+
+    def restart(self) -> bool:
+        """Restart now, as the stop criteria would (C10, C11), if a restart is left; returns whether it did.
+
+        The runner calls it when its divergence rule fires, so a diverging search is abandoned early
+        instead of ending the run. Raises ``RuntimeError`` between ``ask`` and ``tell`` (the asked samples
+        belong to the search it would abandon); with no restart left it returns False and changes nothing.
+        """
+        if self._pending is not None:
+            raise RuntimeError("restart(): expected no pending ask(); tell() its samples first")
+        if self.restarts_done >= self.config.restarts:
+            return False
+        self._restart()
+        self._diagnostics["restarts"] = float(self.restarts_done)
+        return True
 
     def _baseline_loss(self) -> str:
         """The running search's baseline loss: ``baseline_loss`` until the first restart, then the one

@@ -7,9 +7,11 @@ reason ``"divergence"`` once :data:`WINDOW` consecutive evaluations all have
 
     L − L₀ > factor · |L₀|
 
-(``RunConfig.divergence``, 1000 by default: three orders of magnitude). A run whose first loss is exactly 0
-has no scale to measure by and is never stopped this way. A restart back to the initial distribution stays
-near L₀, and a single bad evaluation is not enough; the factor and the window were chosen against every
+(``RunConfig.divergence``, 1000 by default: three orders of magnitude), unless the optimiser has a restart
+left: then the runner calls its ``restart()`` (``c-cma-es``: the restart its stop criteria would make later,
+C10 and C11), the count starts again and the run goes on. A run whose first loss is exactly 0 has no scale to
+measure by and is never stopped this way. A restart back to the initial distribution stays near L₀, and a
+single bad evaluation is not enough; the factor and the window were chosen against every
 committed study run (``docs/optimizers.md``, *Divergence*): no run that reached its target or its budget
 would have been stopped.
 """
@@ -56,13 +58,19 @@ class DivergenceWatch:
         self.run_length = self.run_length + 1 if worse else 0
         return self.run_length >= WINDOW
 
+    def restarted(self) -> None:
+        """The optimiser restarted its search when the rule fired: count the next :data:`WINDOW` again."""
+        self.run_length = 0
+
     @classmethod
     def of_history(cls, factor: float | None, records: Iterable[Any]) -> DivergenceWatch:
         """A watch that has observed the evaluations of ``records`` (a resumed run's history)."""
         return cls(factor).replay(evaluation_loss(r.eval_return, r.eval_regret) for r in records)
 
     def replay(self, losses: Iterable[float]) -> DivergenceWatch:
-        """Observe ``losses`` in order (a resumed run's history); returns self."""
+        """Observe ``losses`` in order (a resumed run's history); returns self. A history that goes on after
+        the rule fired had its optimiser restart there, so the count starts again as it did."""
         for loss in losses:
-            self.observe(loss)
+            if self.observe(loss):
+                self.restarted()
         return self

@@ -62,6 +62,15 @@ class DivergenceWatch:
         """The optimiser restarted its search when the rule fired: count the next :data:`WINDOW` again."""
         self.run_length = 0
 
+    def restarts(self, optimizer: Any) -> bool:
+        """The rule fired: True if ``optimizer`` restarted its search (its optional ``restart()``), and then
+        the count starts again; False if it has no restart left (the run stops)."""
+        restart = getattr(optimizer, "restart", None)
+        if not (callable(restart) and restart()):
+            return False
+        self.restarted()
+        return True
+
     @classmethod
     def of_history(cls, factor: float | None, records: Iterable[Any]) -> DivergenceWatch:
         """A watch that has observed the evaluations of ``records`` (a resumed run's history)."""

@@ -310,22 +310,13 @@ class Runner:
             if reason is None and target is not None and eval_regret <= target:
                 reason = "target_regret"
             diverged = self._watch.observe(evaluation_loss(eval_return, eval_regret))
-            if diverged and reason is None and self._restarted():
+            if diverged and reason is None and self._watch.restarts(self.optimizer):
                 diverged = False  # the optimiser abandoned the diverged search: the run goes on
             reason = reason or ("divergence" if diverged else None)
         diagnostics = {str(k): float(v) for k, v in dict(self.optimizer.diagnostics).items()}
         counts = (self.iteration, self.episodes, finite_mean(returns))
         record = IterationRecord(*counts, eval_return, eval_regret, self.elapsed, diagnostics)
         return record, reason
-
-    def _restarted(self) -> bool:
-        """The divergence rule fired: True if the optimiser restarted its search (its optional ``restart()``,
-        :mod:`~creps_gym.runner.divergence`), and the watch starts counting again."""
-        restart = getattr(self.optimizer, "restart", None)
-        if not (callable(restart) and restart()):
-            return False
-        self._watch.restarted()
-        return True
 
     # -- the loop --------------------------------------------------------------------------------------------
     def run(self) -> History:

@@ -42,7 +42,18 @@ if not __package__:  # run by path: the repository root first on sys.path (see b
 
 from benchmarks.study_tools import RunSpec, load_document, store_document
 
-__all__ = ["FORMER", "METHODS", "STUDIES", "affected", "documents", "main", "pinned", "recompute"]
+__all__ = [
+    "FORMER",
+    "METHODS",
+    "STUDIES",
+    "affected",
+    "computed_at",
+    "documents",
+    "main",
+    "pin",
+    "pinned",
+    "recompute",
+]
 
 HERE = Path(__file__).resolve().parent
 METHODS = ("c-cma-es", "c-cma-es-surrogate")
@@ -128,6 +139,12 @@ def pin(study: str, paths: Iterable[Path], copy: bool) -> int:
     return count
 
 
+def computed_at(path: Path, commit: str) -> bool:
+    """Whether the document at ``path`` records that creps_gym's commit ``commit`` computed it."""
+    provenance = (load_document(path) or {}).get("provenance")
+    return isinstance(provenance, dict) and provenance.get("creps_gym_commit") == commit
+
+
 def recompute(study: str, paths: Sequence[Path], workers: int) -> tuple[int, int]:
     """Compute ``paths`` again with the study's own worker; returns (changed, total)."""
     from benchmarks.study_runner import run_all
@@ -163,8 +180,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--all", action="store_true", help="also the runs that record that they never restarted"
     )
+    parser.add_argument(
+        "--skip-commit", default=None, help="recompute: skip the documents this commit computed (a resume)"
+    )
     args = parser.parse_args(argv)
     paths = documents(args.study, args.match, recorded=not args.all)
+    if args.skip_commit:
+        paths = [path for path in paths if not computed_at(path, args.skip_commit)]
     if args.action == "list":
         for path in paths:
             print(path.relative_to(HERE))

@@ -115,11 +115,15 @@ def run_all(
     partial = cache / "partial"
     record = provenance(("cma",)) if todo else None  # the studies' baselines use pycma
 
+    running = {spec.key for spec in todo}
+
     def done(spec: RunSpec, document: dict[str, Any], count: int) -> None:
         document = {**document, "provenance": record}
         store_document(cache / f"{spec.key}.json", document)
-        for stale in partial.glob(f"{spec.prefix}-b*-n{spec.samples}"):  # this run, under any budget
-            shutil.rmtree(stale, ignore_errors=True)
+        running.discard(spec.key)
+        for stale in partial.glob(f"{spec.prefix}-b*-n{spec.samples}"):  # this run, under any budget ...
+            if stale.name not in running:  # ... but one this call is still computing
+                shutil.rmtree(stale, ignore_errors=True)
         results[spec.key] = document
         outcome = f"hit at {document['hit']}" if document["hit"] is not None else f"final {document['final']}"
         log(f"[{count}/{len(todo)}] {spec.key}: {outcome} ({document['seconds']:.1f} s)")

@@ -304,6 +304,24 @@ def test_scaling_cells_say_why_every_seed_missed() -> None:
     assert scaling.cell_text(row[0], 1000) == "diverged, regret 1e+09"
 
 
+def test_run_all_keeps_the_checkpoints_of_the_same_run_under_a_budget_it_is_still_computing(tmp_path):
+    """Two budgets of one run in one call (a recomputation): storing the first must not remove the other's
+    checkpoints, which a second worker may be writing."""
+    small = study_tools.RunSpec("Sphere", 2, 1, "c-cma-es", 0, 100, 10)
+    large = dataclasses.replace(small, budget=200)
+    seen = []
+
+    def worker(spec, checkpoint_dir):
+        if spec == small:  # the large run has checkpointed meanwhile, in another worker
+            (checkpoint_dir.parent / large.key).mkdir(parents=True)
+        seen.append((spec.budget, (checkpoint_dir.parent / large.key).exists()))
+        return study_tools.result_document(spec, [10], [1.0], None, 0.0)
+
+    study_runner.run_all([small, large], tmp_path, workers=1, worker=worker, log=str)
+    assert seen == [(100, True), (200, True)]
+    assert not (tmp_path / "partial" / large.key).exists()  # removed once its own document is stored
+
+
 def test_a_render_of_a_larger_study_runners_it_partial(tmp_path: Path) -> None:
     computed = study_runner.invocation_timing(tmp_path, wall=3.0, computed=5, total=5)
     assert "Partial" not in study_runner.timing_text(computed, [{"seconds": 1.0}] * 5)

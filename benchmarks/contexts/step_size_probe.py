@@ -3,7 +3,8 @@ fixed draw skewed towards the steep end like the bandit's (Beta(2, 1)): is it th
 distribution that makes the step size grow?
 
 Prints, for seeds 0-4 (the study's full-mode trials and budget), the step size (``diagnostics["step_size"]``)
-at iterations 1, 50, 100 and 150 and the final mean regret, per selector. ``docs/contexts.md`` quotes it.
+at iterations 1, 50, 100 and 150, the final mean regret and the restarts (the runner's divergence rule
+restarts a diverged search), per selector. ``docs/contexts.md`` quotes it.
 
     python benchmarks/contexts/step_size_probe.py
 """
@@ -33,8 +34,9 @@ def main() -> int:
                           context_selector_options=options)  # fmt: skip
             steps = {r.iteration: r.diagnostics["step_size"] for r in history.records}
             shown = ", ".join(f"{i}: {steps[i]:.3g}" for i in CHECKPOINTS if i in steps)
-            final = history.records[-1].eval_regret
-            print(f"{selector} {options or ''} seed {seed}: step size {shown}; final regret {final:.3g}")
+            final, restarts = history.records[-1].eval_regret, history.records[-1].diagnostics["restarts"]
+            print(f"{selector} {options or ''} seed {seed}: step size {shown}; final regret {final:.3g}; "
+                  f"restarts {restarts:g}")  # fmt: skip
     return 0
 
 

@@ -105,7 +105,8 @@ def table(documents: list[dict[str, Any]]) -> str:
         "Met: seeds whose mean policy's mean regret reached 1e-5; episodes: their median; missed: the median "
         "episodes of the others when they stopped (the budget, or the stop criteria with no restart left); "
         "worst final: the largest final regret; differ: seeds whose regret curve is not the default's "
-        "(the option acts only from a restart on, so these are the runs that restarted).",
+        "(the restart options act only from a restart on, and the divergence rule only where it fires, so "
+        "these are the runs that restarted).",
         "",
         "| cell | variant | met | episodes | missed after | worst final | differ |",
         "|---|---|---|---|---|---|---|",

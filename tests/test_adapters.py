@@ -483,3 +483,22 @@ def test_a_pending_batch_that_the_replay_does_not_ask_is_refused(name):
     }
     with pytest.raises(ValueError, match=r"state\['pending_params'\]: expected .* \(0 rows\), got 8 rows"):
         ADAPTERS[name].from_state_dict(after_tell)
+
+
+@pytest.mark.parametrize("name", marked(registry.optimizer_names()))
+def test_every_registered_optimizer_answers_restart_and_changes_nothing_when_it_cannot(name):
+    """The runner's divergence rule calls ``restart()``: a bool; where it is False, the state is unchanged
+    (the run then stops); where it is True, the next ask samples the initial distribution again."""
+    optimizer = registry.make_optimizer(name, 3, 1, 5, initial_mean=[0.1, 0.2, 0.3], initial_cov=0.5)
+    _drive(optimizer, 3)
+    before = optimizer.state_dict()
+    restarted = optimizer.restart()
+    assert isinstance(restarted, bool)
+    if not restarted:
+        after = optimizer.state_dict()
+        assert after.keys() == before.keys()
+        assert all(np.array_equal(after[key], value) for key, value in before.items())
+    else:
+        fresh = registry.make_optimizer(name, 3, 1, 5, initial_mean=[0.1, 0.2, 0.3], initial_cov=0.5)
+        assert np.array_equal(optimizer.mean_policy().coefficients, fresh.mean_policy().coefficients)
+    _drive(optimizer, 1)  # and it goes on

@@ -547,6 +547,7 @@ def test_issue_12_optimisers_fill_their_columns_once_registered(tmp_path: Path, 
     for name in ("c-cma-es", "creps-cma-csa"):
         alias = registry.OptimizerEntry(name, "stand-in", "creps_gym.optimizers.creps_cma:CREPSCMA")
         monkeypatch.setitem(registry._REGISTRY, name, alias)
+    monkeypatch.setattr(scaling, "PINNED", {})  # the stand-ins have no restart options to pin
     common = ["--context-dims", "1", "--seeds", "1", "--budget", "1000", "--workers", "1"]
     out = tmp_path / "functions"
     args = ["--functions", "Sphere", "--dim", "3", "--methods", "creps-cma-old", "c-cma-es", "creps-cma-csa"]
@@ -559,10 +560,8 @@ def test_issue_12_optimisers_fill_their_columns_once_registered(tmp_path: Path, 
     args = ["--functions", "Sphere", "--dims", "2", "--baselines", "--extra-methods", "c-cma-es"]
     assert scaling.main([*args, *common, "--cache", str(tmp_path / "c2"), "--out", str(out)]) == 0
     table = (out / "results.md").read_text()
-    assert "## C-CMA-ES (`c-cma-es`; `keep_best=False, restart_baseline_loss='squared'`: its restart" in table
-    assert (out / "heatmaps-c-cma-es.png").stat().st_size > 10_000
-    pinned = "Sphere-p2-z1-c-cma-es-keep_best=False-restart_baseline_loss=squared-s0-*.json"
-    assert len(list((tmp_path / "c2").glob(pinned))) == 1
+    assert "## C-CMA-ES (`c-cma-es`)" in table and (out / "heatmaps-c-cma-es.png").stat().st_size > 10_000
+    assert len(list((tmp_path / "c2").glob("Sphere-p2-z1-c-cma-es-s0-*.json"))) == 1
 
 
 def test_run_spec_options_are_sorted_validated_and_leave_the_keys_without_them_unchanged() -> None:

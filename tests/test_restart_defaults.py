@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from benchmarks import restart_defaults
@@ -73,6 +74,9 @@ def test_the_committed_pinned_document_is_its_run_and_the_new_defaults_change_it
     pinned, new = run_all([former, default], tmp_path, workers=1, log=lambda line: None)
     path = restart_defaults.HERE / "scaling" / "runs" / f"{former.key}.json"
     committed = json.loads(path.read_text(encoding="utf-8"))
-    assert pinned["values"] == committed["values"] and pinned["episodes"] == committed["episodes"]
+    # Bit for bit on the stack that computed it; elsewhere OpenBLAS's kernels change the last bits only
+    # (benchmarks/scaling/README.md, "what is bit-reproducible"), on this short p = 2 run.
+    np.testing.assert_allclose(pinned["values"], committed["values"], rtol=1e-9)
+    assert pinned["episodes"] == committed["episodes"]
     assert pinned["stop_reason"] == committed["stop_reason"] == "optimizer: tolstagnation"
     assert new["values"] != pinned["values"]

@@ -30,7 +30,6 @@ restarted. The other studies do not record restarts, so every such document is t
 from __future__ import annotations
 
 import argparse
-import json
 import re
 import sys
 from collections.abc import Iterable, Sequence
@@ -190,7 +189,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.action == "list":
         for path in paths:
             print(path.relative_to(HERE))
-        seconds = sum(float(json.loads(p.read_text(encoding="utf-8")).get("seconds", 0.0)) for p in paths)
+        seconds = sum(float((load_document(path) or {}).get("seconds", 0.0)) for path in paths)
         print(f"{len(paths)} documents, {seconds:,.0f} s recorded")
     elif args.action == "pin":
         print(f"pinned {pin(args.study, paths, args.copy)} documents of {args.study}")

@@ -79,8 +79,10 @@ def make_specs() -> list[RunSpec]:
 
 
 def _spec(function: str, z: int, seed: int, options: Any, divergence: float | None) -> RunSpec:
-    options = {"options": options, "divergence": divergence}
-    return RunSpec(function, DIM, z, "c-cma-es", seed, BUDGET, SAMPLES, **options)
+    """The run of a cell, seed and variant (its options and the runner's divergence factor)."""
+    return RunSpec(
+        function, DIM, z, "c-cma-es", seed, BUDGET, SAMPLES, options=options, divergence=divergence
+    )
 
 
 def _row(label: str, runs: list[dict[str, Any]], default: list[dict[str, Any]] | None) -> str:

@@ -134,3 +134,25 @@ def test_full_render_only_renders_the_section_when_a_contexts_folder_exists(fold
         path.rename(path.with_name("elsewhere"))
     assert run.main(["--full", "--render-only", "--out", str(folders)]) == 0
     assert "Training contexts: uniform" not in (folders / "summary.md").read_text()  # none: no section
+
+
+def test_the_flexibility_targets_table_gives_each_trials_peak_its_drop_and_the_oracle_fractions(
+    folders: Path,
+) -> None:
+    document = report.collect(folders, "full", run.MODES["full"])
+    assert document["selectors"]["flexibility"]["oracle_mean"] is None  # the fixture has no oracle runs
+    lines = report.summary_text(document).splitlines()
+    assert any(line.startswith("Flexibility targets") and "Oracle: incomplete" in line for line in lines)
+    # uniform's curve 3.0, 5.0 peaks at its end; the bandit's 6.0, 6.5 too: no drop, no fraction.
+    assert "| c-cma-es | bandit | 1 | 6.50 ± 0.00 m | 6.50 | 0.00 | 0.00 m | — | — |" in lines
+    rows = [
+        {"method": "c-cma-es", "contexts": "bandit", "finals": [5.0, 7.0, 6.0],
+         "curves": [[[50, 6.5], [100, 5.0]], [[50, 4.0], [100, 7.0]], [[50, 8.0], [100, 6.0]]]},
+    ]  # fmt: skip
+    table = selector_table.peak_table({"rows": rows, "oracle_mean": 10.0})
+    assert "Oracle: 10.00 m averaged over the grid." in table[0]
+    # peaks 6.5, 7.0, 8.0; drops 1.5, 0.0, 2.0; final mean 6.0 (0.60 of 10 m), best peak 8.0 (0.80).
+    assert (
+        "| c-cma-es | bandit | 3 | 6.00 ± 0.82 m | 6.50, 7.00, 8.00 | 1.50, 0.00, 2.00 | 2.00 m "
+        "| 0.60 | 0.80 |" in table
+    )

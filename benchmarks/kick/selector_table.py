@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.kick.spread import COLUMNS, KEYS, mean_and_std
-from benchmarks.kick.study import EVAL_EVERY, SELECTED_CONTEXTS, TRAINING, TRAINING_CONTEXTS
+from benchmarks.kick.study import EVAL_EVERY, GRID_X, GRID_Y, SELECTED_CONTEXTS, TRAINING, TRAINING_CONTEXTS
 
 __all__ = [
     "LAWS",
@@ -36,6 +36,7 @@ __all__ = [
     "comparison_section",
     "episodes_to_reach",
     "episodes_to_stay",
+    "peak_table",
     "selector_folders",
 ]
 
@@ -115,7 +116,15 @@ def comparison(documents: dict[str, dict[str, Any]], metrics: dict[str, tuple[st
                 if row["method"] in methods]  # fmt: skip
         rows.sort(key=lambda r: (r["method"], order.get(r["contexts"], len(LAWS)), names.index(r["folder"])))
         data[experiment] = {"reference": TRAINING[experiment], "rows": rows, "in_progress": in_progress}
+    data["flexibility"]["oracle_mean"] = _oracle_mean(documents[names[0]]["flexibility"].get("oracle"))
     return data
+
+
+def _oracle_mean(oracle: dict[str, Any] | None) -> float | None:
+    """The per-position oracle's forward distance averaged over the grid, or None until it has every
+    position."""
+    distances = [] if oracle is None else oracle["position_distances"]
+    return float(np.mean(distances)) if len(distances) == len(GRID_X) * len(GRID_Y) else None
 
 
 def _reached(value: float, target: float, lower_is_better: bool) -> bool:
@@ -239,4 +248,36 @@ def comparison_section(data: dict[str, Any], mode: str) -> list[str]:
     for experiment in METRICS:
         if data[experiment]["rows"] or data[experiment]["in_progress"]:
             lines += _experiment_table(experiment, data[experiment], mode)
+    if data["flexibility"]["rows"]:
+        lines += peak_table(data["flexibility"])
     return lines
+
+
+def peak_table(data: dict[str, Any]) -> list[str]:
+    """Issue 32's flexibility targets per row: each trial's peak along its curve, how far its end is below
+    that peak, and the final and best peak distances as fractions of the per-position oracle."""
+    oracle = data.get("oracle_mean")
+    where = "incomplete: no fraction" if oracle is None else f"{oracle:.2f} m averaged over the grid"
+    lines = [
+        "Flexibility targets (issue 32: a final mean of at least 6.5 m over at least 3 trials, no trial "
+        "ending more than 1 m below its own peak, and the fraction of the per-position oracle). *Peak*: "
+        "the largest value of a trial's curve (the evaluations every "
+        f"{EVAL_EVERY} iterations and its end); *drop*: peak minus final. Oracle: {where}.",
+        "",
+        "| method | training positions | trials | final (mean ± std) | peak per trial | drop per trial "
+        "| largest drop | final / oracle | best peak / oracle |",
+        "|---" * 9 + "|",
+    ]
+    for row in data["rows"]:
+        finals = np.asarray(row["finals"], dtype=float)
+        peaks = np.asarray([max(value for _, value in curve) for curve in row["curves"]])
+        drops = peaks - finals
+        fractions = ["—", "—"]
+        if oracle is not None:
+            fractions = [f"{finals.mean() / oracle:.2f}", f"{peaks.max() / oracle:.2f}"]
+        cells = [row["method"], row["contexts"], str(len(finals))]
+        cells.append(f"{finals.mean():.2f} ± {finals.std():.2f} m")
+        cells += [", ".join(f"{v:.2f}" for v in peaks), ", ".join(f"{v:.2f}" for v in drops)]
+        cells += [f"{drops.max():.2f} m", *fractions]
+        lines.append("| " + " | ".join(cells) + " |")
+    return [*lines, ""]

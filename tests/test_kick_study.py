@@ -17,6 +17,7 @@ pytest.importorskip("cma")
 
 from benchmarks import provenance
 from benchmarks.kick import oracle, report, run, selector_table, study
+from creps_gym.runner.errors import RunDirError
 from creps_gym.wrappers import BetaContexts
 
 pytestmark = pytest.mark.extras
@@ -53,6 +54,23 @@ def test_a_finished_run_is_read_back_and_the_seed_changes_it(precision_env, tmp_
     assert recomputed["values"] != [-1.0] * 10 and recomputed["setting"]["options"] == {"ridge": 1e-3}
     other = study.train_run(spec, precision_env, 1, 0, tmp_path / "trial1", checkpoint_every=1)
     assert other["history"]["batch"] != first["history"]["batch"]
+
+
+def test_study_files_are_read_bounded_and_a_linked_run_file_is_refused(
+    precision_env, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    spec = study.RunSpec("precision", "creps", samples=6, iterations=2)
+    study.train_run(spec, precision_env, 0, 0, tmp_path / "real", checkpoint_every=1)
+    linked = tmp_path / "linked" / "runs" / "precision"
+    linked.mkdir(parents=True)
+    (linked / "creps-trial0.json").symlink_to(tmp_path / "real" / "creps-trial0.json")
+    with pytest.raises(RunDirError, match="symbolic link"):  # the report does not follow it ...
+        report.collect(tmp_path / "linked", "full", run.MODES["full"], selectors=False)
+    with pytest.raises(RunDirError, match="symbolic link"):  # ... nor does a resumed run
+        study.train_run(spec, precision_env, 0, 0, linked, checkpoint_every=1)
+    monkeypatch.setattr(study, "MAX_JSON_BYTES", 100)  # a run document is larger than 100 bytes
+    with pytest.raises(RunDirError, match="expected at most 100 bytes"):
+        study.train_run(spec, precision_env, 0, 0, tmp_path / "real", checkpoint_every=1)
 
 
 def test_training_contexts_follow_the_spec_and_a_change_of_them_is_computed_again(

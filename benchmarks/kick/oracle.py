@@ -17,7 +17,6 @@ same record as before.
 
 from __future__ import annotations
 
-import json
 import time
 import zlib
 from pathlib import Path
@@ -33,6 +32,7 @@ from benchmarks.kick.study import (
     episode_metric,
     evaluate,
     grid_contexts,
+    read_json,
     write_json,
 )
 from benchmarks.provenance import provenance
@@ -48,7 +48,7 @@ SIGN = {"precision": -1.0, "flexibility": 1.0}  # better metric: smaller error, 
 def read_oracle(path: Path, experiment: str) -> dict[str, Any]:
     """An oracle record of ``experiment``; a record without ``starts`` (written by a single start that ran
     its whole budget) gets its one start listed, and one without ``env`` the legacy env it ran on."""
-    record = {"env": LEGACY_ENV_IDS[experiment], **json.loads(path.read_text())}
+    record = {"env": LEGACY_ENV_IDS[experiment], **read_json(path)}
     if "starts" not in record:
         start = {key: record[key] for key in ("population", "episodes", "value")}
         record["starts"] = [{**start, "stop": {}}]
@@ -123,7 +123,7 @@ def oracle_point(
     """
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"oracle-{index:02d}.json"
-    if path.exists() and not fresh and _reusable(json.loads(path.read_text()), experiment, episodes):
+    if path.exists() and not fresh and _reusable(read_json(path), experiment, episodes):
         return read_oracle(path, experiment)
     context = TARGETS[index : index + 1] if experiment == "precision" else grid_contexts()[index]
     population = recommended_samples(name, env.action_space.shape[0], 0)

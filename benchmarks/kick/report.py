@@ -28,7 +28,7 @@ import numpy as np
 from benchmarks.kick.oracle import read_oracle
 from benchmarks.kick.selector_table import comparison, comparison_section, selector_folders
 from benchmarks.kick.spread import COLUMNS, KEYS, LATE_BATCHES, final_spread, late_fall_rate, mean_and_std
-from benchmarks.kick.study import ENV_IDS, EVAL_EVERY, GRID_X, GRID_Y, TARGETS, stored_setting
+from benchmarks.kick.study import ENV_IDS, EVAL_EVERY, GRID_X, GRID_Y, TARGETS, read_json, stored_setting
 from benchmarks.provenance import group_by_record, provenance_text
 
 __all__ = ["collect", "render", "summary_text"]
@@ -60,7 +60,7 @@ def _runs(folder: Path, experiment: str) -> list[dict[str, Any]]:
     """The finished runs under ``folder`` on the experiment's current env (a file of another env is stale),
     except those being computed again under another setting (:func:`_superseded`)."""
     paths = [p for p in sorted(folder.glob("*-trial*.json")) if not p.name.endswith(".history.json")]
-    runs = [(p, json.loads(p.read_text())) for p in paths]
+    runs = [(p, read_json(p)) for p in paths]
     return [
         r
         for p, r in runs
@@ -74,7 +74,7 @@ def _superseded(path: Path, result: dict[str, Any], experiment: str) -> bool:
     history = path.with_name(path.name.removesuffix(".json") + ".history.json")
     if not history.exists():
         return False
-    return stored_setting(json.loads(history.read_text()), experiment) != stored_setting(result, experiment)
+    return stored_setting(read_json(history), experiment) != stored_setting(result, experiment)
 
 
 def collect(out: Path, mode: str, budgets: dict[str, Any], selectors: bool = True) -> dict[str, Any]:
@@ -133,8 +133,8 @@ def _in_progress(out: Path) -> dict[str, int]:
         stem = history.name.removesuffix(".history.json")
         result = history.parent / f"{stem}.json"
         experiment = history.parent.name
-        if not result.exists() or _superseded(result, json.loads(result.read_text()), experiment):
-            progress[f"{experiment}/{stem}"] = len(json.loads(history.read_text())["batch"])
+        if not result.exists() or _superseded(result, read_json(result), experiment):
+            progress[f"{experiment}/{stem}"] = len(read_json(history)["batch"])
     return progress
 
 
@@ -366,7 +366,7 @@ def render(out: Path, mode: str, budgets: dict[str, Any]) -> str:
     tmp = out / "results.json.tmp"
     tmp.write_text(json.dumps(document, indent=1) + "\n")
     os.replace(tmp, out / "results.json")
-    text = summary_text(json.loads((out / "results.json").read_text()))
+    text = summary_text(read_json(out / "results.json"))
     (out / "summary.md").write_text(text)
     plot(document, out)
     for folder in selector_folders(out):

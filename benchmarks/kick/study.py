@@ -35,6 +35,7 @@ from benchmarks.provenance import provenance
 from creps_gym.envs.base import initial_distribution
 from creps_gym.optimizers.features import RBFFeatures
 from creps_gym.optimizers.registry import make_optimizer, optimizer_class
+from creps_gym.runner.files import json_document, read_run_file
 from creps_gym.selectors import make_selector
 from creps_gym.wrappers import BetaContexts, OffsetParams
 
@@ -56,6 +57,7 @@ __all__ = [
     "grid_contexts",
     "make_env",
     "mean_policy_metric",
+    "read_json",
     "stored_setting",
     "train_run",
     "write_json",
@@ -66,6 +68,8 @@ GRID_X, GRID_Y = np.linspace(0.15, 0.30, 4), np.linspace(-0.15, 0.15, 7)  # flex
 ENV_IDS = {"precision": "creps_gym/KickPrecision-v1", "flexibility": "creps_gym/KickFlexibility-v2"}
 #: The env of each experiment in run and oracle files that do not name theirs (written before they did).
 LEGACY_ENV_IDS = {"precision": "creps_gym/KickPrecision-v0", "flexibility": "creps_gym/KickFlexibility-v1"}
+#: Largest study file read (bytes): a full run's document or history is well under 1 MiB.
+MAX_JSON_BYTES = 64 * 2**20
 #: The packages a kick run's provenance names besides numpy, scipy and gymnasium.
 PACKAGES = ("mujoco", "cma")
 EVAL_EVERY = 50  # iterations between evaluations of the mean policy (the learning curves)
@@ -178,6 +182,13 @@ def mean_policy_metric(env: OffsetParams, experiment: str, opt: Any) -> list[flo
     return episode_metric(experiment, contexts, info).tolist()
 
 
+def read_json(path: Path) -> Any:
+    """The JSON document of a study file, read as a run folder's file is: a symbolic link or another
+    non-regular file is refused, and so is a file over :data:`MAX_JSON_BYTES` (``RunDirError``, a
+    ``ValueError`` naming it)."""
+    return json_document(read_run_file(path, MAX_JSON_BYTES), str(path))
+
+
 def load_run(stem: Path) -> Any:
     """The optimiser of the run ``<folder>/<name>-trial<k>``, restored from its checkpoint ``<stem>.npz``."""
     return optimizer_class(stem.name.rsplit("-trial", 1)[0]).load(stem.with_suffix(".npz"))
@@ -237,12 +248,12 @@ def train_run(
     setting = {"env": ENV_IDS[spec.experiment], "contexts": spec.contexts, "features": spec.features,
                "options": spec.options, "samples": spec.samples}  # fmt: skip
     if result_path.exists() and not fresh:
-        done = json.loads(result_path.read_text())
+        done = read_json(result_path)
         if done["budget_iterations"] == spec.iterations and stored_setting(done, spec.experiment) == setting:
             return done
     base_seed = [seed, spec.key, trial]
-    history = json.loads(history_path.read_text()) if ckpt.exists() and not fresh else {}
-    states = json.loads(selector_path.read_text()) if selector and selector_path.exists() else {}
+    history = read_json(history_path) if ckpt.exists() and not fresh else {}
+    states = read_json(selector_path) if selector and selector_path.exists() else {}
     opt = load_run(stem) if stored_setting(history, spec.experiment) == setting else None
     if opt is not None and selector is not None and str(opt.iteration) not in states:
         opt = None  # no selector state at the checkpoint: start over

@@ -68,12 +68,26 @@ def test_the_doc_example_runs():
 
 
 @EXTRAS  # bit for bit only on the stack that computed it (the full environment), not the lowest versions
-@pytest.mark.parametrize("key", ["steep-sphere/c-cma-es/bandit/1", "reacher/creps-cma-old/progress/0"])
+@pytest.mark.parametrize(
+    "key",
+    [
+        "steep-sphere/c-cma-es/bandit/1",
+        "reacher/creps-cma-old/progress/0",
+        "steep-rosenbrock/c-cma-es-cm0.5/bandit/0",
+    ],
+)
 def test_a_committed_quick_run_is_what_the_code_computes(key):
     committed = json.loads((RESULTS / "quick.json").read_text())["runs"][key]
     task, optimizer, selector, trial = key.split("/")
     computed = run.one_run(task, optimizer, selector, int(trial), "quick")
     assert {**computed, "seconds": 0} == {**committed, "seconds": 0}
+
+
+def test_the_damped_c_cma_es_is_c_cma_es_with_c_m_one_half():
+    assert run.OPTIMIZERS["c-cma-es-cm0.5"] == ("c-cma-es", {"c_m": 0.5})
+    runs = json.loads((RESULTS / "quick.json").read_text())["runs"]
+    for key in ("steep-rosenbrock/{}/bandit/0", "steep-sphere/{}/uniform/1"):  # same seed, other c_m
+        assert runs[key.format("c-cma-es-cm0.5")]["loss"] != runs[key.format("c-cma-es")]["loss"]
 
 
 def test_the_kick_figures_quoted_in_the_contexts_doc_are_the_kick_summarys():

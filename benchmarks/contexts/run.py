@@ -40,7 +40,14 @@ from benchmarks.contexts.tasks import SteepFunction
 RESULTS = Path(__file__).resolve().parent / "results"
 DOC = Path(__file__).resolve().parents[2] / "docs" / "contexts.md"
 SELECTORS = ("uniform", "arcsine", "bandit", "progress")
-OPTIMIZERS = ("c-cma-es", "creps-cma-old")
+#: The study's optimisers: label -> (registry name, options). ``c-cma-es-cm0.5`` moves C-CMA-ES's mean half
+#: way to each new fit (Eq. C3'): under a selector's moving draws a full step chases the batch's contexts
+#: and the step size grows (docs/contexts.md, "A selector can break an optimiser").
+OPTIMIZERS: dict[str, tuple[str, dict[str, Any]]] = {
+    "c-cma-es": ("c-cma-es", {}),
+    "c-cma-es-cm0.5": ("c-cma-es", {"c_m": 0.5}),
+    "creps-cma-old": ("creps-cma-old", {}),
+}
 #: Per mode: trials, and per task (iterations, samples or None for the optimiser's recommended batch,
 #: evaluate every).
 MODES: dict[str, dict[str, Any]] = {
@@ -60,14 +67,16 @@ def make_task(task: str) -> tuple[Any, dict[str, Any]]:
 
 
 def one_run(task: str, optimizer: str, selector: str, trial: int, mode: str) -> dict[str, Any]:
-    """Train one run; its learning curve (episodes, loss) at every evaluation."""
+    """Train one run (``optimizer`` a label of :data:`OPTIMIZERS`); its learning curve (episodes, loss) at
+    every evaluation."""
     from creps_gym.runner import run
 
     iterations, samples, every = MODES[mode][task]
     env, options = make_task(task)
+    name, optimizer_options = OPTIMIZERS[optimizer]
     start = time.perf_counter()
-    history = run(optimizer, env, iterations, samples, trial, eval_every=every, eval_contexts=EVAL_CONTEXTS,
-                  context_selector=selector, **options)  # fmt: skip
+    history = run(name, env, iterations, samples, trial, eval_every=every, eval_contexts=EVAL_CONTEXTS,
+                  context_selector=selector, optimizer_options=optimizer_options, **options)  # fmt: skip
     evaluated = [r for r in history.records if r.iteration % every == 0 or r is history.records[-1]]
     regret = history.meta["metric"] == "regret"
     loss = [r.eval_regret if regret else -r.eval_return for r in evaluated]

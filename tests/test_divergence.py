@@ -90,7 +90,12 @@ def test_restart_is_refused_with_a_pending_ask_and_without_restarts_left():
     with pytest.raises(RuntimeError, match="restart\\(\\): expected no pending ask"):
         optimizer.restart()
     optimizer.tell(contexts, params, -np.sum(params**2, axis=1))
+    assert optimizer.diagnostics["step_size"] != optimizer.config.initial_step_size
     assert optimizer.restart() and optimizer.restarts_done == 1 and optimizer.diagnostics["restarts"] == 1.0
+    diagnostics = optimizer.diagnostics  # they describe the new search, not the abandoned one
+    assert diagnostics["step_size"] == optimizer.step_size == optimizer.config.initial_step_size
+    assert diagnostics["path_sigma_ratio"] == 0.0
+    assert diagnostics["search_scale"] == pytest.approx(optimizer.step_size)  # C = I again
     assert np.array_equal(optimizer.coefficients, optimizer.config.initial_mean)
     before = optimizer.state_dict()
     assert not optimizer.restart() and optimizer.restarts_done == 1  # none left: nothing changes

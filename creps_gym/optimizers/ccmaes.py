@@ -158,6 +158,8 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         self.restarts_done += 1
         for stale in ("cond_cov", "max_std", "search_scale"):  # they described the abandoned distribution
             self._diagnostics.pop(stale, None)
+        if self._diagnostics:  # the new search's σ and (empty) path, not the abandoned search's
+            self._diagnostics.update(step_size=self.step_size, path_sigma_ratio=0.0)
 
     def restart(self) -> bool:
         """Restart now, as the stop criteria would (C10, C11), if a restart is left; returns whether it did.

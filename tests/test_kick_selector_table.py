@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
@@ -156,3 +157,28 @@ def test_the_flexibility_targets_table_gives_each_trials_peak_its_drop_and_the_o
         "| c-cma-es | bandit | 3 | 6.00 ± 0.82 m | 6.50, 7.00, 8.00 | 1.50, 0.00, 2.00 | 2.00 m "
         "| 0.60 | 0.80 |" in table
     )
+
+
+def test_bandit_cells_sums_the_discounted_counts_and_rewards_per_x_row(tmp_path: Path, capsys) -> None:
+    from benchmarks.kick import bandit_cells
+
+    counts = [1.0, 1.0, 0.0, 2.0] + [1.0] * 4 + [2.0] * 4 + [0.0] * 4  # row-major (x_B, y_B) cells
+    sums = [0.5, 0.5, 0.0, 1.0] + [0.1] * 4 + [0.4] * 4 + [0.0] * 4
+    shares, rewards = bandit_cells.row_shares({"counts": counts, "sums": sums})
+    assert shares.tolist() == pytest.approx([4 / 16, 4 / 16, 8 / 16, 0.0])
+    assert rewards[:3].tolist() == pytest.approx([0.5, 0.1, 0.2]) and np.isnan(rewards[3])
+    with pytest.raises(ValueError, match="expected positive episode counts"):
+        bandit_cells.row_shares({"counts": [0.0] * 16, "sums": [0.0] * 16})
+    runs = tmp_path / "runs" / "flexibility"
+    runs.mkdir(parents=True)
+    state = {"counts": counts, "sums": sums}
+    (runs / "c-cma-es-trial0.selector.json").write_text(json.dumps({"690": state, "700": state}))
+    (runs / "c-cma-es-trial0.json").write_text("{}")  # finished
+    (runs / "c-cma-es-trial1.selector.json").write_text(json.dumps({"10": state}))  # in progress: left out
+    assert bandit_cells.main(["--folder", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "c-cma-es-trial0 at iteration 700: shares 0.25, 0.25, 0.50, 0.00; mean reward 0.5, 0.1, 0.2, nan"
+        in out
+    )
+    assert "trial1" not in out

@@ -5,7 +5,9 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import sys
 from dataclasses import fields
+from pathlib import Path
 
 import pytest
 from helpers import EXTRAS, SPHERE, cli_command
@@ -29,7 +31,10 @@ def run_args(out, *extra, seed=0):
 
 
 def test_console_script_is_installed():
-    script = shutil.which("creps-gym")
+    # The script of the interpreter running the tests (a venv's), else the one on PATH: another Python's
+    # script on PATH may belong to a stale install.
+    beside = Path(sys.executable).with_name("creps-gym")
+    script = str(beside) if beside.is_file() else shutil.which("creps-gym")
     if script is None:
         pytest.skip("creps-gym is not on PATH (package not installed with pip)")
     result = subprocess.run([script, "--help"], capture_output=True, text=True, timeout=60, check=False)

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.kick.oracle import read_oracle
-from benchmarks.kick.selector_table import comparison, comparison_section, selector_folders
+from benchmarks.kick.selector_table import comparison, comparison_section, oracle_mean, selector_folders
 from benchmarks.kick.spread import COLUMNS, KEYS, LATE_BATCHES, final_spread, late_fall_rate, mean_and_std
 from benchmarks.kick.study import ENV_IDS, EVAL_EVERY, GRID_X, GRID_Y, TARGETS, read_json, stored_setting
 from benchmarks.provenance import group_by_record, provenance_text
@@ -145,7 +145,7 @@ def _spread(values: list[float]) -> str:
 
 def _method_rows(experiment: str, document: dict[str, Any]) -> list[str]:
     per_trial, _ = METRIC[experiment]
-    oracle = document["flexibility"].get("oracle")
+    oracle = oracle_mean(document["flexibility"].get("oracle"))
     rows = []
     for name, entry in document[experiment].items():
         if name == "oracle":
@@ -159,10 +159,9 @@ def _method_rows(experiment: str, document: dict[str, Any]) -> list[str]:
         cells = [name, contexts, budget, str(len(values)), _spread(values), trials, iterations]
         cells.append(", ".join(stopped))
         if experiment == "flexibility":
-            complete = oracle is not None and len(oracle["position_distances"]) == len(GRID_X) * len(GRID_Y)
-            ratio = np.mean(values) / np.mean(oracle["position_distances"]) if complete else float("nan")
+            ratio = "— (oracle incomplete)" if oracle is None else f"{np.mean(values) / oracle:.2f}"
             at_far = np.asarray(entry["position_distances"])[:, -len(GRID_Y) :]
-            cells += [f"{ratio:.2f}" if complete else "— (oracle incomplete)", f"{np.mean(at_far > 0.5):.0%}"]
+            cells += [ratio, f"{np.mean(at_far > 0.5):.0%}"]
         cells += [mean_and_std(entry.get(key, [None] * len(values))) for key in KEYS]
         rows.append("| " + " | ".join(cells) + " |")
     return rows

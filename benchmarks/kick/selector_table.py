@@ -36,6 +36,7 @@ __all__ = [
     "comparison_section",
     "episodes_to_reach",
     "episodes_to_stay",
+    "oracle_mean",
     "peak_table",
     "selector_folders",
 ]
@@ -116,11 +117,11 @@ def comparison(documents: dict[str, dict[str, Any]], metrics: dict[str, tuple[st
                 if row["method"] in methods]  # fmt: skip
         rows.sort(key=lambda r: (r["method"], order.get(r["contexts"], len(LAWS)), names.index(r["folder"])))
         data[experiment] = {"reference": TRAINING[experiment], "rows": rows, "in_progress": in_progress}
-    data["flexibility"]["oracle_mean"] = _oracle_mean(documents[names[0]]["flexibility"].get("oracle"))
+    data["flexibility"]["oracle_mean"] = oracle_mean(documents[names[0]]["flexibility"].get("oracle"))
     return data
 
 
-def _oracle_mean(oracle: dict[str, Any] | None) -> float | None:
+def oracle_mean(oracle: dict[str, Any] | None) -> float | None:
     """The per-position oracle's forward distance averaged over the grid, or None until it has every
     position."""
     distances = [] if oracle is None else oracle["position_distances"]

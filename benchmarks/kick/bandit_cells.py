@@ -51,13 +51,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     header = ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in itertools.pairwise(edges))
     print(f"x_B rows (m): {header}")
     for path in runs:
-        result = path.with_name(path.name.replace(".selector.json", ".json"))
-        if not result.exists():
+        name = path.name.removesuffix(".selector.json")
+        if not path.with_name(f"{name}.json").exists():
             continue  # in progress
         states = read_json(path)
         last = max(states, key=int)
         shares, rewards = row_shares(states[last])
-        name = path.name.removesuffix(".selector.json")
         print(f"{name} at iteration {last}: shares {', '.join(f'{s:.2f}' for s in shares)}; "
               f"mean reward {', '.join(f'{r:.3g}' for r in rewards)}")  # fmt: skip
     return 0

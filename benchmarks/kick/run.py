@@ -27,6 +27,11 @@ different ``--only`` can run side by side.
 learning selector of :mod:`creps_gym.selectors` (``bandit``, ``progress``); its runs go to
 ``results/<mode>-<NAME>`` unless ``--out`` says otherwise, e.g.
 ``python benchmarks/kick/run.py --full --only precision --methods creps-cma-old --contexts bandit``.
+
+``--features NAME`` gives every selected method other mean features (``affine``, ``quadratic`` or ``rbf``,
+:meth:`~benchmarks.kick.study.RunSpec.mean_features`); its runs go to ``results/<mode>-features-<NAME>``
+(``results/<mode>-<contexts>-features-<NAME>`` with ``--contexts``), e.g.
+``python benchmarks/kick/run.py --full --only flexibility --methods c-cma-es --features quadratic``.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ if not __package__:
 from benchmarks.kick.oracle import oracle_point
 from benchmarks.kick.report import render
 from benchmarks.kick.study import (
+    FEATURES,
     SELECTED_CONTEXTS,
     TRAINING,
     TRAINING_CONTEXTS,
@@ -113,15 +119,26 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "--contexts", choices=[*TRAINING_CONTEXTS, *SELECTED_CONTEXTS], default=None,
         help="training contexts of every experiment (default: TRAINING's); runs go to results/<mode>-<NAME>",
     )  # fmt: skip
+    parser.add_argument(
+        "--features", choices=FEATURES, default=None,
+        help="mean features of every method (default: METHODS'); runs go to results/<mode>-features-<NAME>",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     args.mode = "full" if args.full else "quick"
     if args.out is None:
-        args.out = RESULTS / (args.mode if args.contexts is None else f"{args.mode}-{args.contexts}")
+        args.out = RESULTS / results_folder(args.mode, args.contexts, args.features)
     if args.trials is not None and args.trials < 1:
         parser.error(f"--trials: expected an int >= 1, got {args.trials}")
     if args.trial_indices is not None and min(args.trial_indices) < 0:
         parser.error(f"--trial-indices: expected ints >= 0, got {args.trial_indices}")
     return args
+
+
+def results_folder(mode: str, contexts: str | None, features: str | None) -> str:
+    """The default folder name of a run: ``<mode>``, then ``-<contexts>`` and ``-features-<features>`` for
+    training contexts and mean features other than the study's (the names ``selector_table`` looks for)."""
+    name = mode if contexts is None else f"{mode}-{contexts}"
+    return name if features is None else f"{name}-features-{features}"
 
 
 def run_specs(args: argparse.Namespace) -> list[tuple[RunSpec, int]]:
@@ -133,8 +150,8 @@ def run_specs(args: argparse.Namespace) -> list[tuple[RunSpec, int]]:
         iterations, trials = MODES[args.mode][experiment]
         for name, features, options in methods:
             if args.methods is None or name in args.methods:
-                spec = RunSpec(experiment, name, SAMPLES[experiment], iterations, features, options,
-                               args.contexts or TRAINING[experiment])  # fmt: skip
+                spec = RunSpec(experiment, name, SAMPLES[experiment], iterations, args.features or features,
+                               options, args.contexts or TRAINING[experiment])  # fmt: skip
                 runs.append((spec, args.trials or trials))
     return runs
 

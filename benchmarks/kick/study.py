@@ -41,6 +41,7 @@ from creps_gym.wrappers import BetaContexts, OffsetParams
 
 __all__ = [
     "ENV_IDS",
+    "FEATURES",
     "GRID_X",
     "GRID_Y",
     "LEGACY_ENV_IDS",
@@ -86,6 +87,10 @@ SELECTED_CONTEXTS = ("bandit", "progress")
 TRAINING = {"precision": "arcsine", "flexibility": "uniform"}
 
 
+#: The mean features a run can use (``RunSpec.features``, ``run.py --features``).
+FEATURES = ("affine", "quadratic", "rbf")
+
+
 @dataclass(frozen=True)
 class RunSpec:
     """One optimiser on one experiment: registry name, mean features, options, budget, training contexts
@@ -103,6 +108,8 @@ class RunSpec:
         if self.contexts not in (*TRAINING_CONTEXTS, *SELECTED_CONTEXTS):
             expected = [*sorted(TRAINING_CONTEXTS), *SELECTED_CONTEXTS]
             raise ValueError(f"contexts: expected one of {expected}, got {self.contexts!r}")
+        if self.features not in FEATURES:
+            raise ValueError(f"features: expected one of {list(FEATURES)}, got {self.features!r}")
 
     @property
     def key(self) -> int:
@@ -110,9 +117,10 @@ class RunSpec:
         return zlib.crc32(f"{self.experiment}/{self.name}".encode())
 
     def mean_features(self) -> Any:
-        """Affine [1, s], or normalised RBFs: 5 centres over [3, 12] m (precision), 3 × 3 over the grid."""
-        if self.features == "affine":
-            return "affine"
+        """Affine [1, s], quadratic [1, s, s²] (element-wise squares), or normalised RBFs: 5 centres over
+        [3, 12] m (precision), 3 × 3 over the grid (flexibility)."""
+        if self.features in ("affine", "quadratic"):
+            return self.features
         if self.experiment == "precision":
             return RBFFeatures.grid([3.0], [12.0], 5)
         return RBFFeatures.grid([GRID_X[0], GRID_Y[0]], [GRID_X[-1], GRID_Y[-1]], 3)

@@ -18,16 +18,24 @@ pytestmark = pytest.mark.extras
 POINTS = {"precision": 10, "flexibility": 28}
 
 
-def _write_run(folder: Path, experiment: str, name: str, trial: int, contexts: str, curve: list[Any]) -> None:
+def _write_run(
+    folder: Path,
+    experiment: str,
+    name: str,
+    trial: int,
+    contexts: str,
+    curve: list[Any],
+    features: str = "affine",
+) -> None:
     """A finished run whose mean policy's metric is ``value`` at every point at each ``[iteration, value]``
     of ``curve``, the last one being its end."""
     samples, points = (20, 10) if experiment == "precision" else (100, 28)
     iterations, final = curve[-1]
     document = {
-        "experiment": experiment, "name": name, "features": "affine", "options": {}, "trial": trial,
+        "experiment": experiment, "name": name, "features": features, "options": {}, "trial": trial,
         "samples": samples, "budget_iterations": iterations, "iterations": iterations,
         "episodes": iterations * samples, "stopped": [],
-        "setting": {"env": study.ENV_IDS[experiment], "contexts": contexts},
+        "setting": {"env": study.ENV_IDS[experiment], "contexts": contexts, "features": features},
         "values": [final] * points,
         "history": {"batch": [], "evaluations": [[i, [v] * points] for i, v in curve]},
     }  # fmt: skip
@@ -56,7 +64,7 @@ def folders(tmp_path: Path) -> Path:
 def test_the_section_compares_every_contexts_folder_with_the_study_by_episodes_to_its_final_value(
     folders: Path,
 ) -> None:
-    assert selector_table.selector_folders(folders) == [folders.parent / "full-bandit"]
+    assert selector_table.comparison_folders(folders) == [folders.parent / "full-bandit"]
     document = report.collect(folders, "full", run.MODES["full"])
     data = document["selectors"]
     assert data["folders"] == ["full", "full-bandit"]
@@ -79,13 +87,13 @@ def test_the_section_compares_every_contexts_folder_with_the_study_by_episodes_t
     )
     # The arcsine mean curve reaches its own final value (0.60 m) at its end; trial 0 alone at 100.
     assert (
-        "| c-cma-es | arcsine | `results/full` | 2 | 0.60 ± 0.10 m | 0.50, 0.70 | 4,000 "
+        "| c-cma-es | arcsine | affine | `results/full` | 2 | 0.60 ± 0.10 m | 0.50, 0.70 | 4,000 "
         "| 2,000, not reached | 1.00 | 4,000 | 1.00 | — | — |" in lines
     )
     # The bandit's mean curve: 0.725 at 50, 0.50 at 100 (≤ 0.60): 2,000 episodes, half arcsine's 4,000;
     # 0.70 at 150, so it stays at or below 0.60 only from 200 on.
     assert (
-        "| c-cma-es | bandit | `results/full-bandit` | 2 | 0.55 ± 0.25 m | 0.30, 0.80 | 2,000 "
+        "| c-cma-es | bandit | affine | `results/full-bandit` | 2 | 0.55 ± 0.25 m | 0.30, 0.80 | 2,000 "
         "| 1,000, not reached | 0.50 | 4,000 | 1.00 | — | — |" in lines
     )
     assert any(
@@ -99,8 +107,8 @@ def test_the_section_compares_every_contexts_folder_with_the_study_by_episodes_t
     assert "Resolution: 50 iterations × 100 episodes = 5,000 episodes." in flexibility
     # A distance is reached from below: the bandit's 6.0 m at iteration 50 is past uniform's 5.00 m.
     assert (
-        "| c-cma-es | bandit | `results/full-bandit` | 1 | 6.50 ± 0.00 m | 6.50 | 5,000 | 5,000 | 0.50 "
-        "| 5,000 | 0.50 | — | — |" in flexibility
+        "| c-cma-es | bandit | affine | `results/full-bandit` | 1 | 6.50 ± 0.00 m | 6.50 | 5,000 | 5,000 "
+        "| 0.50 | 5,000 | 0.50 | — | — |" in flexibility
     )
     assert not any(line.startswith("*Uniform draws*") for line in flexibility)  # uniform is flexibility's own
 
@@ -124,17 +132,17 @@ def test_full_render_only_renders_the_section_when_a_contexts_folder_exists(fold
     assert document["selectors"]["folders"] == ["full", "full-bandit"]
     text = (folders / "summary.md").read_text()
     assert text == report.summary_text(document)
-    assert "## Training contexts: uniform, arcsine and the learning selectors (issue 32)" in text
+    assert f"## {selector_table.SECTION}" in text
     bandit = folders.parent / "full-bandit"  # rendered again from the same run files, on its own
     assert (bandit / "summary.md").read_text() == report.summary_text(
         json.loads((bandit / "results.json").read_text())
     )
     assert "- precision/c-cma-es-trial2: 30" in (bandit / "summary.md").read_text()
     assert "selectors" not in report.collect(folders.parent / "full-bandit", "full", run.MODES["full"])
-    for path in selector_table.selector_folders(folders):
+    for path in selector_table.comparison_folders(folders):
         path.rename(path.with_name("elsewhere"))
     assert run.main(["--full", "--render-only", "--out", str(folders)]) == 0
-    assert "Training contexts: uniform" not in (folders / "summary.md").read_text()  # none: no section
+    assert selector_table.SECTION not in (folders / "summary.md").read_text()  # none: no section
 
 
 def test_the_flexibility_targets_table_gives_each_trials_peak_its_drop_and_the_oracle_fractions(
@@ -145,16 +153,16 @@ def test_the_flexibility_targets_table_gives_each_trials_peak_its_drop_and_the_o
     lines = report.summary_text(document).splitlines()
     assert any(line.startswith("Flexibility targets") and "Oracle: incomplete" in line for line in lines)
     # uniform's curve 3.0, 5.0 peaks at its end; the bandit's 6.0, 6.5 too: no drop, no fraction.
-    assert "| c-cma-es | bandit | 1 | 6.50 ± 0.00 m | 6.50 | 0.00 | 0.00 m | — | — |" in lines
+    assert "| c-cma-es | bandit | affine | 1 | 6.50 ± 0.00 m | 6.50 | 0.00 | 0.00 m | — | — |" in lines
     rows = [
-        {"method": "c-cma-es", "contexts": "bandit", "finals": [5.0, 7.0, 6.0],
+        {"method": "c-cma-es", "contexts": "bandit", "features": "rbf", "finals": [5.0, 7.0, 6.0],
          "curves": [[[50, 6.5], [100, 5.0]], [[50, 4.0], [100, 7.0]], [[50, 8.0], [100, 6.0]]]},
     ]  # fmt: skip
     table = selector_table.peak_table({"rows": rows, "oracle_mean": 10.0})
     assert "Oracle: 10.00 m averaged over the grid." in table[0]
     # peaks 6.5, 7.0, 8.0; drops 1.5, 0.0, 2.0; final mean 6.0 (0.60 of 10 m), best peak 8.0 (0.80).
     assert (
-        "| c-cma-es | bandit | 3 | 6.00 ± 0.82 m | 6.50, 7.00, 8.00 | 1.50, 0.00, 2.00 | 2.00 m "
+        "| c-cma-es | bandit | rbf | 3 | 6.00 ± 0.82 m | 6.50, 7.00, 8.00 | 1.50, 0.00, 2.00 | 2.00 m "
         "| 0.60 | 0.80 |" in table
     )
 
@@ -182,3 +190,30 @@ def test_bandit_cells_sums_the_discounted_counts_and_rewards_per_x_row(tmp_path:
         in out
     )
     assert "trial1" not in out
+
+
+def test_features_folders_join_the_comparison_with_their_features_named(folders: Path) -> None:
+    quadratic, rbf = folders.parent / "full-features-quadratic", folders.parent / "full-bandit-features-rbf"
+    _write_run(quadratic, "flexibility", "c-cma-es", 0, "uniform", [[50, 4.0], [100, 7.0]], "quadratic")
+    _write_run(rbf, "flexibility", "c-cma-es", 0, "bandit", [[50, 2.0], [100, 4.0]], "rbf")
+    assert selector_table.comparison_folders(folders) == [folders.parent / "full-bandit", quadratic, rbf]
+    data = report.collect(folders, "full", run.MODES["full"])["selectors"]
+    assert data["folders"] == ["full", "full-bandit", "full-features-quadratic", "full-bandit-features-rbf"]
+    assert [(r["contexts"], r["features"], r["folder"]) for r in data["flexibility"]["rows"]] == [
+        ("uniform", "affine", "full"),  # the reference: the study's own folder comes first
+        ("uniform", "quadratic", "full-features-quadratic"),
+        ("bandit", "affine", "full-bandit"),
+        ("bandit", "rbf", "full-bandit-features-rbf"),
+    ]
+    lines = report.summary_text(report.collect(folders, "full", run.MODES["full"])).splitlines()
+    # The quadratic curve passes the affine reference's 5.00 m at iteration 100 (10,000 episodes, the
+    # reference's whole budget of 100 x 100); the RBF one never does.
+    assert (
+        "| c-cma-es | uniform | quadratic | `results/full-features-quadratic` | 1 | 7.00 ± 0.00 m | 7.00 "
+        "| 10,000 | 10,000 | 1.00 | 10,000 | 1.00 | — | — |" in lines
+    )
+    assert (
+        "| c-cma-es | bandit | rbf | `results/full-bandit-features-rbf` | 1 | 4.00 ± 0.00 m | 4.00 "
+        "| not reached | not reached | — | not reached | — | — | — |" in lines
+    )
+    assert "| c-cma-es | uniform | quadratic | 1 | 7.00 ± 0.00 m | 7.00 | 0.00 | 0.00 m | — | — |" in lines

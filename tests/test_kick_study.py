@@ -102,6 +102,29 @@ def test_training_contexts_follow_the_spec_and_a_change_of_them_is_computed_agai
     }
 
 
+def test_features_choose_the_mean_map_and_the_results_folder(precision_env, tmp_path: Path) -> None:
+    spec = study.RunSpec("precision", "c-cma-es", 6, 2, features="quadratic")
+    assert spec.mean_features() == "quadratic"
+    result = study.train_run(spec, precision_env, 0, 0, tmp_path, checkpoint_every=1)
+    assert result["setting"]["features"] == "quadratic"
+    assert study.load_run(tmp_path / "c-cma-es-trial0").config.mean_map.n_features == 3  # [1, s, s²]
+    with pytest.raises(ValueError, match=r"features: expected one of \['affine', 'quadratic', 'rbf'\]"):
+        study.RunSpec("precision", "c-cma-es", 6, 2, features="cubic")
+    argv = ["--full", "--only", "flexibility", "--methods", "c-cma-es", "--features", "quadratic"]
+    args = run.parse_args(argv)
+    ((spec_full, trials),) = run.run_specs(args)
+    assert (spec_full.features, spec_full.iterations, trials) == ("quadratic", 700, 3)
+    assert spec_full.options == run.FULL_BUDGET  # only the features change
+    assert args.out == run.RESULTS / "full-features-quadratic"
+    assert (
+        run.parse_args([*argv, "--contexts", "bandit"]).out == run.RESULTS / "full-bandit-features-quadratic"
+    )
+    default = [features for methods in run.METHODS.values() for _, features, _ in methods]
+    assert [s.features for s, _ in run.run_specs(run.parse_args(["--full"]))] == default  # METHODS' own
+    with pytest.raises(SystemExit):
+        run.parse_args(["--features", "cubic"])
+
+
 def test_the_oracle_learns_one_context_and_caches_it(precision_env, tmp_path: Path) -> None:
     result = oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path)
     assert result["context"] == [6.0] and result["episodes"] == 26 and result["population"] == 13
@@ -282,10 +305,10 @@ def test_the_committed_summary_is_rendered_from_the_committed_results(name: str,
     mode = document["mode"]
     assert (folder / "summary.md").read_text() == report.summary_text(document)
     # ... with the comparison of training contexts if run.py --contexts wrote a folder beside it (issue 32).
-    beside = [path.name for path in selector_table.selector_folders(folder)]
+    beside = [path.name for path in selector_table.comparison_folders(folder)]
     assert document.get("selectors", {}).get("folders", [name])[1:] == beside
     if beside:
-        section = "## Training contexts: uniform, arcsine and the learning selectors (issue 32)"
+        section = f"## {selector_table.SECTION}"
         assert section in (folder / "summary.md").read_text()
     # ... it says where every run and oracle was computed, or that it was before provenance was recorded.
     records = [group["record"] for group in document["provenance"] for _ in group["runs"]]

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.kick.oracle import read_oracle
-from benchmarks.kick.selector_table import comparison, comparison_section, oracle_mean, selector_folders
+from benchmarks.kick.selector_table import comparison, comparison_folders, comparison_section, oracle_mean
 from benchmarks.kick.spread import COLUMNS, KEYS, LATE_BATCHES, final_spread, late_fall_rate, mean_and_std
 from benchmarks.kick.study import ENV_IDS, EVAL_EVERY, GRID_X, GRID_Y, TARGETS, read_json, stored_setting
 from benchmarks.provenance import group_by_record, provenance_text
@@ -120,7 +120,7 @@ def collect(out: Path, mode: str, budgets: dict[str, Any], selectors: bool = Tru
             }
     document["in_progress"] = _in_progress(out)
     document["provenance"] = group_by_record(sources)
-    if selectors and (folders := selector_folders(out)):
+    if selectors and (folders := comparison_folders(out)):
         others = {folder.name: collect(folder, mode, budgets, selectors=False) for folder in folders}
         document["selectors"] = comparison({out.name: document, **others}, METRIC)
     return document
@@ -358,8 +358,9 @@ def _plot_heatmaps(plt: Any, document: dict[str, Any], out: Path) -> None:
 
 def render(out: Path, mode: str, budgets: dict[str, Any]) -> str:
     """Rebuild ``results.json`` from the finished runs, then ``summary.md`` and the figures from it; the
-    ``--contexts`` folders beside ``out`` (:func:`.selector_table.selector_folders`) are rendered again too,
-    so that their files and ``out``'s comparison come from the same run files. Returns ``out``'s summary."""
+    ``--contexts`` and ``--features`` folders beside ``out`` (:func:`.selector_table.comparison_folders`) are
+    rendered again too, so that their files and ``out``'s comparison come from the same run files. Returns
+    ``out``'s summary."""
     out.mkdir(parents=True, exist_ok=True)
     document = collect(out, mode, budgets)
     tmp = out / "results.json.tmp"
@@ -368,6 +369,6 @@ def render(out: Path, mode: str, budgets: dict[str, Any]) -> str:
     text = summary_text(read_json(out / "results.json"))
     (out / "summary.md").write_text(text)
     plot(document, out)
-    for folder in selector_folders(out):
+    for folder in comparison_folders(out):
         render(folder, mode, budgets)
     return text

@@ -1,23 +1,25 @@
-"""The kick study's comparison of training contexts (issue 32): the study's own folder ``results/<mode>`` and
-every ``results/<mode>-<contexts>`` folder that ``run.py --contexts NAME`` wrote, in one table per
-experiment of ``results/<mode>/summary.md``, drawn from the ``"selectors"`` entry of its ``results.json``::
+"""The kick study's comparison of training contexts and mean features (issue 32): the study's own folder
+``results/<mode>`` and every ``results/<mode>-<contexts>`` and ``results/<mode>[-<contexts>]-features-<NAME>``
+folder that ``run.py --contexts`` and ``--features`` wrote, in one table per experiment of
+``results/<mode>/summary.md``, drawn from the ``"selectors"`` entry of its ``results.json``::
 
     {"folders": ["full", "full-bandit"],
      "precision": {"reference": "arcsine",
                    "rows": [{"folder": "full-bandit", "method": "creps-cma-old", "contexts": "bandit",
-                             "samples": 20, "budget_iterations": 1000, "trials": [...], "finals": [...],
-                             "iterations": [...], "curves": [[[iteration, value], ...] per trial],
+                             "features": "rbf", "samples": 20, "budget_iterations": 1000,
+                             "trials": [...], "finals": [...], "iterations": [...],
+                             "curves": [[[iteration, value], ...] per trial],
                              "late_fall_rate": [...], "final_spread": [...]}, ...],
                    "in_progress": {"full-bandit": {"creps-cma-old-trial1": 340}}},
      "flexibility": {...}}
 
-A row is one method trained on one law of training contexts in one folder. ``finals`` is each trial's
-metric at its end (precision: the mean policy's error averaged over the 10 targets; flexibility: its forward
-distance averaged over the 28 ball positions) and ``curves`` each trial's metric every ``EVAL_EVERY``
-iterations (the run's history) and at its end; ``late_fall_rate`` and ``final_spread`` are each trial's
-:mod:`.spread` quantities (None where it has none). The *reference* is the study's own training law
-(``study.TRAINING``): every row says how many episodes it needed to reach the reference row's final value
-of the same method.
+A row is one method trained on one law of training contexts with one set of mean features in one folder.
+``finals`` is each trial's metric at its end (precision: the mean policy's error averaged over the 10
+targets; flexibility: its forward distance averaged over the 28 ball positions) and ``curves`` each trial's
+metric every ``EVAL_EVERY`` iterations (the run's history) and at its end; ``late_fall_rate`` and
+``final_spread`` are each trial's :mod:`.spread` quantities (None where it has none). The *reference* is
+the study's own training law (``study.TRAINING``) in the study's own folder: every row says how many
+episodes it needed to reach the reference row's final value of the same method.
 """
 
 from __future__ import annotations
@@ -28,17 +30,26 @@ from typing import Any
 import numpy as np
 
 from benchmarks.kick.spread import COLUMNS, KEYS, mean_and_std
-from benchmarks.kick.study import EVAL_EVERY, GRID_X, GRID_Y, SELECTED_CONTEXTS, TRAINING, TRAINING_CONTEXTS
+from benchmarks.kick.study import (
+    EVAL_EVERY,
+    FEATURES,
+    GRID_X,
+    GRID_Y,
+    SELECTED_CONTEXTS,
+    TRAINING,
+    TRAINING_CONTEXTS,
+)
 
 __all__ = [
     "LAWS",
+    "SECTION",
     "comparison",
+    "comparison_folders",
     "comparison_section",
     "episodes_to_reach",
     "episodes_to_stay",
     "oracle_mean",
     "peak_table",
-    "selector_folders",
 ]
 
 #: The laws of training contexts, in the tables' order (``run.py --contexts``).
@@ -50,6 +61,8 @@ HISTORY_ONLY = {
         '`bd108c5`, its `results/{mode}/summary.md` (README, "Where the precision error came from")'
     ),
 }
+#: The title of the summary's comparison section.
+SECTION = "Training contexts (uniform, arcsine, the learning selectors) and mean features (issue 32)"
 #: What each experiment's metric is, and which way is better.
 METRICS = {
     "precision": {"value": "error", "unit": "m", "lower_is_better": True, "contexts": "training targets"},
@@ -59,10 +72,17 @@ METRICS = {
 }  # fmt: skip
 
 
-def selector_folders(out: Path) -> list[Path]:
-    """The folders ``<out.name>-<law>`` beside ``out`` that exist (``run.py --contexts``), in ``LAWS`` order;
-    a symbolic link is not followed."""
-    candidates = [out.parent / f"{out.name}-{law}" for law in LAWS]
+def comparison_folders(out: Path) -> list[Path]:
+    """The folders beside ``out`` that exist: ``<out.name>-<law>`` (``run.py --contexts``) in ``LAWS`` order,
+    then ``<out.name>-features-<features>`` and ``<out.name>-<law>-features-<features>`` (``run.py
+    --features``) in ``FEATURES`` order; a symbolic link is not followed."""
+    names = [f"{out.name}-{law}" for law in LAWS]
+    for features in FEATURES:
+        names += [
+            f"{out.name}-features-{features}",
+            *(f"{out.name}-{law}-features-{features}" for law in LAWS),
+        ]
+    candidates = [out.parent / name for name in names]
     return [path for path in candidates if path.is_dir() and not path.is_symlink()]
 
 
@@ -74,7 +94,8 @@ def _rows(folder: str, entries: dict[str, Any], per_trial: str) -> list[dict[str
             continue
         for k, law in enumerate(entry["training_contexts"]):
             row = rows.setdefault((method, law), {
-                "folder": folder, "method": method, "contexts": law, "samples": entry["samples"],
+                "folder": folder, "method": method, "contexts": law, "features": entry["features"],
+                "samples": entry["samples"],
                 "budget_iterations": entry["budget_iterations"], "trials": [], "finals": [],
                 "iterations": [], "curves": [], "late_fall_rate": [], "final_spread": [],
             })  # fmt: skip
@@ -168,7 +189,7 @@ def _row(row: dict[str, Any], reference: dict[str, Any] | None, experiment: str)
     reference's final value (mean curve, per trial) and their ratio to the reference's budget episodes."""
     unit, lower = METRICS[experiment]["unit"], METRICS[experiment]["lower_is_better"]
     finals = np.asarray(row["finals"], dtype=float)
-    cells = [row["method"], row["contexts"], f"`results/{row['folder']}`", str(len(finals))]
+    cells = [row["method"], row["contexts"], row["features"], f"`results/{row['folder']}`", str(len(finals))]
     cells += [f"{finals.mean():.2f} ± {finals.std():.2f} {unit}", ", ".join(f"{v:.2f}" for v in finals)]
     spread = [mean_and_std(row.get(key, [None] * len(finals))) for key in KEYS]
     if reference is None:
@@ -207,12 +228,13 @@ def _experiment_table(experiment: str, data: dict[str, Any], mode: str) -> list[
         lines += [f"Reference ({reference_law}, the study's training law), final {what}: {targets}.", ""]
     if rows:
         header = (
-            f"| method | {METRICS[experiment]['contexts']} | source | trials | final {what} | per trial "
+            f"| method | {METRICS[experiment]['contexts']} | mean features | source | trials | final {what} "
+            "| per trial "
             f"| episodes to reach the {reference_law} final {what} (mean curve) | per trial "
             f"| × {reference_law}'s budget episodes | episodes from which the mean curve stays there "
             f"| × {reference_law}'s budget episodes | {COLUMNS} |"
         )
-        lines += [header, "|---" * 13 + "|"]
+        lines += [header, "|---" * 14 + "|"]
         lines += [_row(row, references.get(row["method"]), experiment) for row in rows]
         lines.append("")
     shown = {row["contexts"] for row in rows}
@@ -226,13 +248,15 @@ def _experiment_table(experiment: str, data: dict[str, Any], mode: str) -> list[
 
 
 def comparison_section(data: dict[str, Any], mode: str) -> list[str]:
-    """The summary's section "Training contexts: uniform, arcsine and the learning selectors"."""
+    """The summary's section :data:`SECTION`."""
     folders = ", ".join(f"`results/{name}`" for name in data["folders"])
-    lines = ["## Training contexts: uniform, arcsine and the learning selectors (issue 32)", ""]
+    lines = [f"## {SECTION}", ""]
     lines += [
-        f"The finished runs in {folders} of every method that a `--contexts` folder holds: one row per "
-        "method, law of training contexts (uniform, arcsine: fixed draws; bandit, progress: the learning "
-        "selectors of `creps_gym.selectors`) and folder. The final "
+        f"The finished runs in {folders} of every method that a `--contexts` or `--features` folder holds: "
+        "one row per method, law of training contexts (uniform, arcsine: fixed draws; bandit, progress: the "
+        "learning selectors of `creps_gym.selectors`), mean features (affine [1, s], quadratic [1, s, s²] "
+        "with element-wise squares, or normalised RBFs) and folder. The reference row of a method is its "
+        "row in the study's own folder. The final "
         "value is the mean policy's at the end of each run (± across trials, then per trial). *Episodes to "
         "reach*: the first evaluation at which the mean over the row's trials (*mean curve*), or each "
         "trial's own value (*per trial*), reaches the reference row's final value of the same method; "
@@ -265,9 +289,9 @@ def peak_table(data: dict[str, Any]) -> list[str]:
         "the largest value of a trial's curve (the evaluations every "
         f"{EVAL_EVERY} iterations and its end); *drop*: peak minus final. Oracle: {where}.",
         "",
-        "| method | training positions | trials | final (mean ± std) | peak per trial | drop per trial "
-        "| largest drop | final / oracle | best peak / oracle |",
-        "|---" * 9 + "|",
+        "| method | training positions | mean features | trials | final (mean ± std) | peak per trial "
+        "| drop per trial | largest drop | final / oracle | best peak / oracle |",
+        "|---" * 10 + "|",
     ]
     for row in data["rows"]:
         finals = np.asarray(row["finals"], dtype=float)
@@ -276,7 +300,7 @@ def peak_table(data: dict[str, Any]) -> list[str]:
         fractions = ["—", "—"]
         if oracle is not None:
             fractions = [f"{finals.mean() / oracle:.2f}", f"{peaks.max() / oracle:.2f}"]
-        cells = [row["method"], row["contexts"], str(len(finals))]
+        cells = [row["method"], row["contexts"], row["features"], str(len(finals))]
         cells.append(f"{finals.mean():.2f} ± {finals.std():.2f} m")
         cells += [", ".join(f"{v:.2f}" for v in peaks), ", ".join(f"{v:.2f}" for v in drops)]
         cells += [f"{drops.max():.2f} m", *fractions]

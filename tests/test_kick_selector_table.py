@@ -217,3 +217,17 @@ def test_features_folders_join_the_comparison_with_their_features_named(folders:
         "| not reached | not reached | — | not reached | — | — | — |" in lines
     )
     assert "| c-cma-es | uniform | quadratic | 1 | 7.00 ± 0.00 m | 7.00 | 0.00 | 0.00 m | — | — |" in lines
+
+
+def test_only_the_study_folders_row_is_a_reference(folders: Path) -> None:
+    # A features folder's uniform row is compared with the study's, never used as the reference itself.
+    (folders / "runs" / "flexibility" / "c-cma-es-trial0.json").unlink()
+    quadratic = folders.parent / "full-features-quadratic"
+    _write_run(quadratic, "flexibility", "c-cma-es", 0, "uniform", [[50, 4.0], [100, 7.0]], "quadratic")
+    lines = report.summary_text(report.collect(folders, "full", run.MODES["full"])).splitlines()
+    flexibility = lines[lines.index("### Flexibility") :]
+    assert not any(line.startswith("Reference (uniform") for line in flexibility)
+    assert (
+        "| c-cma-es | uniform | quadratic | `results/full-features-quadratic` | 1 | 7.00 ± 0.00 m | 7.00 "
+        "| — (no reference run) | — | — | — | — | — | — |" in flexibility
+    )

@@ -208,13 +208,14 @@ def _ratio(episodes: int | None, budget: int) -> str:
     return "—" if episodes is None else f"{episodes / budget:.2f}"
 
 
-def _experiment_table(experiment: str, data: dict[str, Any], mode: str) -> list[str]:
-    """The table of one experiment, its reference and its notes (in progress, history only)."""
+def _experiment_table(experiment: str, data: dict[str, Any], mode: str, study: str) -> list[str]:
+    """The table of one experiment, its reference (each method's row of the reference law in the ``study``
+    folder) and its notes (in progress, history only)."""
     rows, reference_law = data["rows"], data["reference"]
     what, unit = METRICS[experiment]["value"], METRICS[experiment]["unit"]
     references = {}
-    for row in rows:  # the study's own folder comes first: its row is the reference
-        if row["contexts"] == reference_law:
+    for row in rows:
+        if row["contexts"] == reference_law and row["folder"] == study:
             references.setdefault(row["method"], row)
     lines = [f"### {experiment.capitalize()}", ""]
     for samples in sorted({row["samples"] for row in rows}):
@@ -272,7 +273,7 @@ def comparison_section(data: dict[str, Any], mode: str) -> list[str]:
     ]
     for experiment in METRICS:
         if data[experiment]["rows"] or data[experiment]["in_progress"]:
-            lines += _experiment_table(experiment, data[experiment], mode)
+            lines += _experiment_table(experiment, data[experiment], mode, data["folders"][0])
     if data["flexibility"]["rows"]:
         lines += peak_table(data["flexibility"])
     return lines

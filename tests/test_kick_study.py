@@ -347,3 +347,18 @@ def test_a_learning_selector_trains_resumes_bit_identically_and_is_wired_to_the_
     ((spec_full, trials),) = run.run_specs(args)
     assert spec_full.contexts == selector and spec_full.iterations == 1000 and trials == 3
     assert args.out == run.RESULTS / f"full-{selector}"
+
+
+def test_the_row_table_averages_each_row_of_balls_over_trials_and_counts_the_positions_at_zero() -> None:
+    near_only = np.repeat([8.0, 6.0, 0.0, 0.0], 7)  # x-major: 7 positions per row of x_B
+    everywhere = np.repeat([10.0, 4.0, 2.0, 1.0], 7)
+    everywhere[-1] = 0.0  # one fall at x_B = 0.30 m
+    entries = {"c-cma-es": {"position_distances": [near_only.tolist(), everywhere.tolist()]}, "oracle": {}}
+    lines = report._row_table(entries)
+    assert (
+        lines[2]
+        == "| method | x_B = 0.15 m | x_B = 0.20 m | x_B = 0.25 m | x_B = 0.30 m | positions at 0 m |"
+    )
+    # rows: (8 + 10) / 2, (6 + 4) / 2, (0 + 2) / 2, (0 + 6/7) / 2; zeros: 14 and 1.
+    assert lines[4] == "| c-cma-es | 9.00 | 5.00 | 1.00 | 0.43 | 14, 1 |"
+    assert len(lines) == 6  # the oracle has no row

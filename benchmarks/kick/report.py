@@ -279,6 +279,7 @@ def _flexibility_section(document: dict[str, Any]) -> list[str]:
         f"| {COLUMNS} |"
     )
     lines += [header, "|---" * 12 + "|", *_method_rows("flexibility", document), ""]
+    lines += _row_table(document["flexibility"])
     title = "Mean policy's forward distance (m) while learning, mean over trials (— once a trial has stopped)"
     lines += _curve_table(document["flexibility"], title)
     oracle = document["flexibility"].get("oracle")
@@ -292,6 +293,24 @@ def _flexibility_section(document: dict[str, Any]) -> list[str]:
             "",
         ]
     return lines
+
+
+def _row_table(entries: dict[str, Any]) -> list[str]:
+    """Per method, the final mean policy's forward distance per row of balls (x_B), mean over trials, and
+    per trial how many of the 28 positions end at 0 m (a fall, or a kick that misses the ball)."""
+    header = " | ".join(f"x_B = {x:.2f} m" for x in GRID_X)
+    title = (
+        "Final mean policy per row of balls (forward distance, mean over trials; positions at 0 m: a fall or "
+        "a miss, per trial):"
+    )
+    lines = [title, "", f"| method | {header} | positions at 0 m |", "|---" * 6 + "|"]
+    for name, entry in entries.items():
+        if name != "oracle":
+            distances = np.asarray(entry["position_distances"]).reshape(-1, len(GRID_X), len(GRID_Y))
+            rows = [f"{v:.2f}" for v in distances.mean(axis=(0, 2))]
+            zeros = ", ".join(str(int(n)) for n in (distances == 0).sum(axis=(1, 2)))
+            lines.append(f"| {name} | " + " | ".join(rows) + f" | {zeros} |")
+    return [*lines, ""]
 
 
 def plot(document: dict[str, Any], out: Path) -> None:

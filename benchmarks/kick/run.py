@@ -56,6 +56,7 @@ from benchmarks.kick.study import (
     RunSpec,
     evaluation_contexts,
     make_env,
+    results_folder,
     train_run,
 )
 from benchmarks.study_tools import NO_STAGNATION
@@ -132,13 +133,6 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     if args.trial_indices is not None and min(args.trial_indices) < 0:
         parser.error(f"--trial-indices: expected ints >= 0, got {args.trial_indices}")
     return args
-
-
-def results_folder(mode: str, contexts: str | None, features: str | None) -> str:
-    """The default folder name of a run: ``<mode>``, then ``-<contexts>`` and ``-features-<features>`` for
-    training contexts and mean features other than the study's (the names ``selector_table`` looks for)."""
-    name = mode if contexts is None else f"{mode}-{contexts}"
-    return name if features is None else f"{name}-features-{features}"
 
 
 def run_specs(args: argparse.Namespace) -> list[tuple[RunSpec, int]]:

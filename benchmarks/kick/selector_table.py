@@ -38,6 +38,7 @@ from benchmarks.kick.study import (
     SELECTED_CONTEXTS,
     TRAINING,
     TRAINING_CONTEXTS,
+    results_folder,
 )
 
 __all__ = [
@@ -76,12 +77,9 @@ def comparison_folders(out: Path) -> list[Path]:
     """The folders beside ``out`` that exist: ``<out.name>-<law>`` (``run.py --contexts``) in ``LAWS`` order,
     then ``<out.name>-features-<features>`` and ``<out.name>-<law>-features-<features>`` (``run.py
     --features``) in ``FEATURES`` order; a symbolic link is not followed."""
-    names = [f"{out.name}-{law}" for law in LAWS]
+    names = [results_folder(out.name, law, None) for law in LAWS]
     for features in FEATURES:
-        names += [
-            f"{out.name}-features-{features}",
-            *(f"{out.name}-{law}-features-{features}" for law in LAWS),
-        ]
+        names += [results_folder(out.name, law, features) for law in (None, *LAWS)]
     candidates = [out.parent / name for name in names]
     return [path for path in candidates if path.is_dir() and not path.is_symlink()]
 

@@ -59,6 +59,7 @@ __all__ = [
     "make_env",
     "mean_policy_metric",
     "read_json",
+    "results_folder",
     "stored_setting",
     "train_run",
     "write_json",
@@ -124,6 +125,13 @@ class RunSpec:
         if self.experiment == "precision":
             return RBFFeatures.grid([3.0], [12.0], 5)
         return RBFFeatures.grid([GRID_X[0], GRID_Y[0]], [GRID_X[-1], GRID_Y[-1]], 3)
+
+
+def results_folder(mode: str, contexts: str | None, features: str | None) -> str:
+    """The name of a results folder: ``<mode>``, then ``-<contexts>`` and ``-features-<features>`` for
+    training contexts and mean features other than the study's (``run.py --contexts``, ``--features``)."""
+    name = mode if contexts is None else f"{mode}-{contexts}"
+    return name if features is None else f"{name}-features-{features}"
 
 
 def make_env(experiment: str, threads: int) -> OffsetParams:

@@ -167,6 +167,33 @@ def test_the_flexibility_targets_table_gives_each_trials_peak_its_drop_and_the_o
     )
 
 
+def test_a_selector_is_measured_against_uniform_draws_with_its_own_mean_features() -> None:
+    def row(contexts: str, features: str, folder: str, finals: list[float], curves: list) -> dict:
+        return {"method": "creps-cma-old", "contexts": contexts, "features": features, "folder": folder,
+                "samples": 100, "budget_iterations": 700, "finals": finals, "curves": curves}  # fmt: skip
+
+    rows = [
+        row("uniform", "rbf", "full", [4.0], [[[50, 2.0], [700, 4.0]]]),
+        row("uniform", "quadratic", "full-features-quadratic", [7.0, 8.0], [[[700, 7.0]], [[700, 8.0]]]),
+        # mean curve 6.0, 7.5, 7.0, 8.0: first reaches 7.5 m at iteration 100, stays from iteration 200 on.
+        row("bandit", "quadratic", "full-bandit-features-quadratic", [8.5, 7.5], [
+            [[50, 6.0], [100, 8.0], [150, 7.0], [200, 8.0]], [[50, 6.0], [100, 7.0], [150, 7.0], [200, 8.0]],
+        ]),
+        row("bandit", "affine", "full-bandit", [5.0], [[[50, 5.0]]]),  # no uniform affine row: left out
+    ]  # fmt: skip
+    table = selector_table.same_features_table("flexibility", {"rows": rows})
+    body = [line for line in table if line.startswith("| creps-cma-old")]
+    assert body == [
+        "| creps-cma-old | bandit | quadratic | `results/full-bandit-features-quadratic` "
+        "| 7.50 m (`results/full-features-quadratic`) | 8.00 m | 10,000 | 0.14 | 20,000 | 0.29 |"
+    ]
+    rows[2]["curves"] = [[[50, 6.0], [700, 7.0]], [[50, 6.0], [700, 7.0]]]  # never reaches 7.5 m
+    table = selector_table.same_features_table("flexibility", {"rows": rows})
+    body = [line for line in table if "bandit" in line]
+    assert body[0].endswith("| not reached | — | not reached | — |")
+    assert selector_table.same_features_table("flexibility", {"rows": rows[:2]}) == []  # no selector row
+
+
 def test_bandit_cells_sums_the_discounted_counts_and_rewards_per_x_row(tmp_path: Path, capsys) -> None:
     from benchmarks.kick import bandit_cells
 

@@ -51,6 +51,7 @@ __all__ = [
     "episodes_to_stay",
     "oracle_mean",
     "peak_table",
+    "same_features_table",
 ]
 
 #: The laws of training contexts, in the tables' order (``run.py --contexts``).
@@ -272,9 +273,47 @@ def comparison_section(data: dict[str, Any], mode: str) -> list[str]:
     for experiment in METRICS:
         if data[experiment]["rows"] or data[experiment]["in_progress"]:
             lines += _experiment_table(experiment, data[experiment], mode, data["folders"][0])
+            lines += same_features_table(experiment, data[experiment])
     if data["flexibility"]["rows"]:
         lines += peak_table(data["flexibility"])
     return lines
+
+
+def same_features_table(experiment: str, data: dict[str, Any]) -> list[str]:
+    """Each selector's row (a law of training contexts other than uniform) against uniform draws of the same
+    method with the same mean features, in whichever folder they are: the episodes its mean curve needed to
+    reach that uniform row's final value, and their ratio to that row's budget (issue 32's target compares
+    a selector with uniform training); empty when no selector row has such a uniform row."""
+    unit, lower = METRICS[experiment]["unit"], METRICS[experiment]["lower_is_better"]
+    uniform = {}
+    for row in data["rows"]:
+        if row["contexts"] == "uniform":
+            uniform.setdefault((row["method"], row["features"]), row)
+    pairs = [(row, uniform[(row["method"], row["features"])]) for row in data["rows"]
+             if row["contexts"] != "uniform" and (row["method"], row["features"]) in uniform]  # fmt: skip
+    if not pairs:
+        return []
+    lines = [
+        f"{experiment.capitalize()}: each selector against uniform draws with the same mean features (the "
+        "episodes its mean curve needed to reach the uniform row's final value; × that row's budget "
+        "episodes).",
+        "",
+        "| method | contexts | mean features | source | uniform final (source) | selector final "
+        "| episodes to reach (mean curve) | × uniform's budget | episodes from which it stays "
+        "| × uniform's budget |",
+        "|---" * 10 + "|",
+    ]
+    for row, reference in pairs:
+        target, curve = float(np.mean(reference["finals"])), _mean_curve(row["curves"])
+        budget = reference["budget_iterations"] * reference["samples"]
+        reach = episodes_to_reach(curve, target, row["samples"], lower)
+        stay = episodes_to_stay(curve, target, row["samples"], lower)
+        cells = [row["method"], row["contexts"], row["features"], f"`results/{row['folder']}`"]
+        final = float(np.mean(row["finals"]))
+        cells += [f"{target:.2f} {unit} (`results/{reference['folder']}`)", f"{final:.2f} {unit}"]
+        cells += [_episodes(reach), _ratio(reach, budget), _episodes(stay), _ratio(stay, budget)]
+        lines.append("| " + " | ".join(cells) + " |")
+    return [*lines, ""]
 
 
 def peak_table(data: dict[str, Any]) -> list[str]:

@@ -98,3 +98,33 @@ def test_the_kick_figures_quoted_in_the_contexts_doc_are_the_kick_summarys():
     quoted = re.findall(r"\d+\.\d+ ± \d+\.\d+", kick)
     assert len(quoted) >= 8
     assert [figure for figure in quoted if figure not in summary] == []
+
+
+def test_the_difficulty_probe_measures_cells_and_its_committed_table_and_doc_figures_are_its_own():
+    from benchmarks.contexts import difficulty_probe as probe
+
+    contexts = probe.grid(np.zeros(2), np.full(2, 2.0), 4)  # cell centres 0.25, 0.75, 1.25, 1.75
+    assert contexts.shape == (16, 2) and np.allclose(contexts[:4, 1], [0.25, 0.75, 1.25, 1.75])
+    losses = np.where((contexts[:, 0] < 1) & (contexts[:, 1] < 1), 4.0, 1.0)  # one hard quadrant
+    per_cell = probe.cell_losses(contexts, losses, np.zeros(2), np.full(2, 2.0), 2)
+    assert per_cell.tolist() == [4.0, 1.0, 1.0, 1.0]
+    assert probe.unevenness(per_cell) == {"worst_over_median": 4.0, "worst_quarter_share": 4.0 / 7.0}
+    assert probe.unevenness(np.ones(8))["worst_quarter_share"] == 0.25  # even: a quarter's share
+    with pytest.raises(ValueError, match="per_cell"):
+        probe.unevenness(np.array([1.0, -1.0]))
+    with pytest.raises(ValueError, match="empty cells"):
+        probe.cell_losses(contexts[:1], losses[:1], np.zeros(2), np.full(2, 2.0), 2)
+    document = json.loads(probe.PATH.read_text())
+    assert probe.TABLE.read_text() == probe.render(document)
+    assert {"versions", "cpu"} <= set(document) and len(document["trials"]) >= 3
+    assert document["runs"]["steep-sphere/c-cma-es/0"] == probe.one_probe("steep-sphere", "c-cma-es", 0)
+    doc = run.DOC.read_text(encoding="utf-8")
+    start = doc.index("**Where uniform training leaves its loss**")
+    paragraph = doc[start : doc.index("\n- **", start)]
+    table = probe.TABLE.read_text()
+    assert [x for x in re.findall(r"\d\.\d\d", paragraph) if x not in table] == []
+    worst = {key: tuple(r["worst_cell"]) for key, r in document["runs"].items()}
+    steep_end = sum(cell == (3,) for key, cell in worst.items() if key.startswith("steep-"))
+    reacher = [cell for key, cell in worst.items() if key.startswith("reacher/")]
+    assert f"in {steep_end} of 20 runs" in paragraph
+    assert f"((0, 0) in {reacher.count((0, 0))} of 10 runs, (3, 3) in {reacher.count((3, 3))})" in paragraph

@@ -112,6 +112,8 @@ def test_the_difficulty_probe_measures_cells_and_its_committed_table_and_doc_fig
     assert probe.unevenness(np.ones(8))["worst_quarter_share"] == 0.25  # even: a quarter's share
     with pytest.raises(ValueError, match="per_cell"):
         probe.unevenness(np.array([1.0, -1.0]))
+    with pytest.raises(ValueError, match="positive median"):
+        probe.unevenness(np.array([0.0, 0.0, 1.0]))
     with pytest.raises(ValueError, match="empty cells"):
         probe.cell_losses(contexts[:1], losses[:1], np.zeros(2), np.full(2, 2.0), 2)
     document = json.loads(probe.PATH.read_text())

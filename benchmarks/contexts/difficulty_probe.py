@@ -68,8 +68,9 @@ def unevenness(per_cell: np.ndarray) -> dict[str, float]:
     total = ordered.sum()
     share = float(ordered[:quarter].sum() / total) if total > 0 else quarter / ordered.size
     median = float(np.median(ordered))
-    return {"worst_over_median": float(ordered[0] / median) if median > 0 else float("inf"),
-            "worst_quarter_share": share}  # fmt: skip
+    if median <= 0:
+        raise ValueError(f"per_cell: expected a positive median loss (else no ratio), got {median!r}")
+    return {"worst_over_median": float(ordered[0] / median), "worst_quarter_share": share}
 
 
 def one_probe(task: str, optimizer: str, trial: int) -> dict[str, Any]:

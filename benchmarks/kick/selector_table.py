@@ -193,14 +193,23 @@ def _row(row: dict[str, Any], reference: dict[str, Any] | None, experiment: str)
     spread = [mean_and_std(row.get(key, [None] * len(finals))) for key in KEYS]
     if reference is None:
         return "| " + " | ".join([*cells, "— (no reference run)", *["—"] * 4, *spread]) + " |"
-    target, mean_curve = float(np.mean(reference["finals"])), _mean_curve(row["curves"])
-    reach = episodes_to_reach(mean_curve, target, row["samples"], lower)
-    stay = episodes_to_stay(mean_curve, target, row["samples"], lower)
+    target = float(np.mean(reference["finals"]))
+    reach, stay, budget = _reach_and_stay(row, reference, lower)
     per_trial = [episodes_to_reach(curve, target, row["samples"], lower) for curve in row["curves"]]
-    budget = reference["budget_iterations"] * reference["samples"]
     cells += [_episodes(reach), ", ".join(_episodes(e) for e in per_trial), _ratio(reach, budget)]
     cells += [_episodes(stay), _ratio(stay, budget), *spread]
     return "| " + " | ".join(cells) + " |"
+
+
+def _reach_and_stay(
+    row: dict[str, Any], reference: dict[str, Any], lower_is_better: bool
+) -> tuple[int | None, int | None, int]:
+    """The episodes at which ``row``'s mean curve first reaches ``reference``'s final value (mean over its
+    trials), those from which it stays there, and the reference's budget episodes (iterations × N)."""
+    target, curve = float(np.mean(reference["finals"])), _mean_curve(row["curves"])
+    reach = episodes_to_reach(curve, target, row["samples"], lower_is_better)
+    stay = episodes_to_stay(curve, target, row["samples"], lower_is_better)
+    return reach, stay, reference["budget_iterations"] * reference["samples"]
 
 
 def _ratio(episodes: int | None, budget: int) -> str:
@@ -304,12 +313,9 @@ def same_features_table(experiment: str, data: dict[str, Any]) -> list[str]:
         "|---" * 10 + "|",
     ]
     for row, reference in pairs:
-        target, curve = float(np.mean(reference["finals"])), _mean_curve(row["curves"])
-        budget = reference["budget_iterations"] * reference["samples"]
-        reach = episodes_to_reach(curve, target, row["samples"], lower)
-        stay = episodes_to_stay(curve, target, row["samples"], lower)
+        reach, stay, budget = _reach_and_stay(row, reference, lower)
+        target, final = float(np.mean(reference["finals"])), float(np.mean(row["finals"]))
         cells = [row["method"], row["contexts"], row["features"], f"`results/{row['folder']}`"]
-        final = float(np.mean(row["finals"]))
         cells += [f"{target:.2f} {unit} (`results/{reference['folder']}`)", f"{final:.2f} {unit}"]
         cells += [_episodes(reach), _ratio(reach, budget), _episodes(stay), _ratio(stay, budget)]
         lines.append("| " + " | ".join(cells) + " |")

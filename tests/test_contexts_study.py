@@ -125,6 +125,9 @@ def test_the_difficulty_probe_measures_cells_and_its_committed_table_and_doc_fig
     paragraph = doc[start : doc.index("\n- **", start)]
     table = probe.TABLE.read_text()
     assert [x for x in re.findall(r"\d\.\d\d", paragraph) if x not in table] == []
+    readme = (ROOT / "benchmarks" / "README.md").read_text(encoding="utf-8")
+    quoted = readme[readme.index("difficulty_probe.py") : readme.index("medians over 5 trials")]
+    assert [x for x in re.findall(r"\d\.\d\d", quoted) if x not in table] == []
     worst = {key: tuple(r["worst_cell"]) for key, r in document["runs"].items()}
     steep_end = sum(cell == (3,) for key, cell in worst.items() if key.startswith("steep-"))
     reacher = [cell for key, cell in worst.items() if key.startswith("reacher/")]

@@ -119,7 +119,13 @@ def test_the_difficulty_probe_measures_cells_and_its_committed_table_and_doc_fig
     document = json.loads(probe.PATH.read_text())
     assert probe.TABLE.read_text() == probe.render(document)
     assert {"versions", "cpu"} <= set(document) and len(document["trials"]) >= 3
-    assert document["runs"]["steep-sphere/c-cma-es/0"] == probe.one_probe("steep-sphere", "c-cma-es", 0)
+    # One committed run computed again: bit-identical on the same stack; CI's lowest numpy differs in the
+    # last bits, hence the relative tolerance.
+    committed = document["runs"]["steep-sphere/c-cma-es/0"]
+    again = probe.one_probe("steep-sphere", "c-cma-es", 0)
+    assert again["worst_cell"] == committed["worst_cell"]
+    for key in ("per_cell", "worst_over_median", "worst_quarter_share"):
+        assert again[key] == pytest.approx(committed[key], rel=1e-9, abs=0.0)
     doc = run.DOC.read_text(encoding="utf-8")
     start = doc.index("**Where uniform training leaves its loss**")
     paragraph = doc[start : doc.index("\n- **", start)]

@@ -31,6 +31,7 @@ if not __package__:  # run by path: the repository root first on sys.path (see b
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
 from benchmarks.contexts.run import EVAL_CONTEXTS, MODES, RESULTS, machine, make_task, save
+from creps_gym.selectors import cell_index
 
 OPTIMIZERS = ("c-cma-es", "creps-cma-old")
 TASKS = ("reacher", "steep-sphere", "steep-rosenbrock")
@@ -47,9 +48,9 @@ def grid(low: np.ndarray, high: np.ndarray, points: int) -> np.ndarray:
 
 def cell_losses(contexts: np.ndarray, losses: np.ndarray, low: np.ndarray, high: np.ndarray,
                 cells: int) -> np.ndarray:  # fmt: skip
-    """Mean loss per cell of a ``cells``-per-dimension partition of the box, shape (cells ** d,)."""
-    index = np.clip(((contexts - low) / (high - low) * cells).astype(int), 0, cells - 1)
-    flat = np.ravel_multi_index(index.T, (cells,) * contexts.shape[1])
+    """Mean loss per cell of a ``cells``-per-dimension partition of the box (the bandit's cells, row-major),
+    shape (cells ** d,)."""
+    flat = cell_index(contexts, low, high, (cells,) * contexts.shape[1])
     sums = np.bincount(flat, weights=losses, minlength=cells ** contexts.shape[1])
     counts = np.bincount(flat, minlength=cells ** contexts.shape[1])
     if np.any(counts == 0):

@@ -9,14 +9,56 @@ Gymnasium nor numpy, and ``creps-gym --help`` starts fast). The subpackages and 
 are imported on first use.
 """
 
-from __future__ import annotations
-
-import copy
-import importlib
-import importlib.abc
-import importlib.util
 import sys
-from typing import Any
+
+
+def _module_run_by_dash_m(argv: list) -> str | None:
+    """The target of ``python [options] -m TARGET`` in the interpreter's own command line, or None where it
+    cannot be read (``-X``/``-W`` take a value; short flags may be joined, as in ``-Bm``)."""
+    args = iter(argv[1:])
+    for arg in args:
+        if not arg.startswith("-") or arg.startswith("--") or arg == "-":
+            return None
+        for index, flag in enumerate(arg[1:], start=2):
+            if flag in "WX":
+                if index == len(arg):
+                    next(args, None)
+                break
+            if flag == "c":
+                return None
+            if flag == "m":
+                return arg[index:] or next(args, None)
+    return None
+
+
+def _drop_cwd_when_run_as_module() -> None:
+    """``python -m creps_gym.cli`` (the form the docs use) puts the current directory first on ``sys.path``
+    and runs this file before any other code of the package: drop that entry here, before any import can
+    search it, so that no file in the working directory (a run folder, say: a ``json.py``, ``copy.py`` or
+    ``argparse.py``) ever runs. ``--import MODULE`` looks there last (:mod:`creps_gym.cli`).
+
+    ``sys.argv[0]`` is ``"-m"`` only while ``-m`` locates its target, that is while it imports the target's
+    packages. The entry stays where the target is read from ``sys.orig_argv`` and lies outside this package
+    (another package that imports this one). The current directory comes from the built-in ``posix``/``nt``
+    module, which no file can shadow (``os`` is not loaded yet under ``python -S``).
+    """
+    if sys.argv[:1] != ["-m"] or getattr(sys.flags, "safe_path", False) or not sys.path:
+        return
+    target = _module_run_by_dash_m(list(getattr(sys, "orig_argv", [])))
+    if target is not None and target != __name__ and not target.startswith(__name__ + "."):
+        return
+    builtin = __import__("posix" if "posix" in sys.builtin_module_names else "nt")
+    if sys.path[0] in ("", builtin.getcwd()):
+        del sys.path[0]
+
+
+_drop_cwd_when_run_as_module()
+
+import copy  # noqa: E402  (after the sys.path guard above)
+import importlib  # noqa: E402
+import importlib.abc  # noqa: E402
+import importlib.util  # noqa: E402
+from typing import Any  # noqa: E402
 
 __all__ = ["Policy", "__version__", "load_policy", "registered_ids"]
 

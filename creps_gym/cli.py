@@ -229,7 +229,7 @@ _COMMANDS = {"run": _cmd_run, "resume": _cmd_resume, "policy": _cmd_policy, "eva
 def _drop_cwd_from_path() -> None:
     """``python -m creps_gym.cli`` puts the current directory first on ``sys.path``: drop it, so that no
     file there (or in a run directory the user works in) shadows a module; ``--import`` looks there last."""
-    if not sys.flags.safe_path and sys.path and sys.path[0] in ("", os.getcwd()):
+    if not getattr(sys.flags, "safe_path", False) and sys.path and sys.path[0] in ("", os.getcwd()):
         del sys.path[0]
 
 

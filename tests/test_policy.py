@@ -3,6 +3,7 @@ bit, hostile files are refused, and loading needs neither MuJoCo nor Ray."""
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import os
@@ -16,7 +17,7 @@ from helpers import marked
 
 from creps_gym.optimizers import CCMAES, Policy, RBFFeatures
 from creps_gym.optimizers.policy_io import JSON_ENTRY, MAX_POLICY_BYTES
-from creps_gym.optimizers.registry import make_optimizer, optimizer_names
+from creps_gym.optimizers.registry import make_optimizer, optimizer_class, optimizer_names
 
 
 def _trained(name: str, p: int = 4, z: int = 2, iterations: int = 3):
@@ -231,3 +232,51 @@ def test_creps_gym_exposes_policy_and_load_policy_lazily():
     assert creps_gym.Policy is Policy and callable(creps_gym.load_policy)
     with pytest.raises(AttributeError):
         creps_gym.no_such_name  # noqa: B018
+
+
+def _kept_best(name: str):
+    """A C-CMA-ES-family optimiser whose search converged, then restarted: its recommendation is the kept
+    best (C10), not the restarted search's initial mean. None for optimisers without ``keep_best``."""
+    config_class = getattr(optimizer_class(name), "config_class", None)
+    if config_class is None or "keep_best" not in {field.name for field in dataclasses.fields(config_class)}:
+        return None
+    optimizer = make_optimizer(name, 2, 1, 0, initial_mean=3.0, tolx=1e-6)
+    rng = np.random.default_rng(0)
+    while optimizer.restarts_done == 0:
+        contexts = rng.uniform(0.0, 1.0, (16, 1))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -((params - contexts) ** 2).sum(axis=1))
+        assert optimizer.iteration < 600, "no restart"
+    return optimizer
+
+
+def _same_policy(optimizer, contexts) -> None:
+    policy = optimizer.mean_policy()
+    assert policy(contexts).tobytes() == optimizer.recommend(contexts).tobytes()
+    if hasattr(optimizer, "recommended_coefficients"):  # the adapters' constant policy has one row
+        assert policy.coefficients.tobytes() == optimizer.recommended_coefficients().tobytes()
+
+
+@pytest.mark.parametrize("name", marked(optimizer_names()))
+def test_the_mean_policy_is_recommend_after_a_restart_a_resume_and_a_kept_best(name, tmp_path):
+    """Issue 42, item 1: ``mean_policy()`` (what ``policy.npz`` holds) ignored C-CMA-ES's kept best while
+    ``recommend`` applied it, so the "final" policy of a restarted run was the restarted search's."""
+    contexts = np.random.default_rng(2).uniform(-1, 1, (9, 2))
+    optimizer = _trained(name, iterations=4)
+    _same_policy(optimizer, contexts)
+    optimizer.restart()  # a forced restart (the runner's divergence rule); False and no change without one
+    _same_policy(optimizer, contexts)
+    restored = type(optimizer).load(optimizer.save(tmp_path / "resumed.npz"))
+    _same_policy(restored, contexts)
+    assert restored.recommend(contexts).tobytes() == optimizer.recommend(contexts).tobytes()
+    kept = _kept_best(name)
+    if kept is not None:
+        tests = np.linspace(0.0, 1.0, 5)[:, None]
+        assert kept.recommended_coefficients() is kept.best_coefficients  # the kept best is in force
+        assert not np.array_equal(kept.best_coefficients, kept.coefficients)
+        _same_policy(kept, tests)
+        assert ((kept.mean_policy()(tests) - tests) ** 2).sum(axis=1).max() < 1e-2  # the converged one
+        _same_policy(type(kept).load(kept.save(tmp_path / "kept.npz")), tests)
+    for each in (optimizer, restored):
+        if getattr(each, "close", None):
+            each.close()

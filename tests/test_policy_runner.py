@@ -53,6 +53,21 @@ def test_the_best_policy_survives_a_restart_and_reproduces_its_evaluation(tmp_pa
     assert History.from_json(tmp_path / "run" / RunDir.HISTORY_JSON).equals(history)
 
 
+def test_the_final_policy_is_the_recommendation_after_a_restart_that_kept_the_best(tmp_path):
+    """Issue 42, item 1: with ``keep_best`` (the default) a restarted c-cma-es recommends the best search's
+    policy, and the run's evaluation measures that; ``policy.npz`` held the restarted search's mean instead
+    (evaluated −0.58 where the run recorded −2e−6 on these options)."""
+    options = {"env_kwargs": {"dim": 2}, "optimizer_options": {"tolx": 1e-3}, "eval_every": 5}
+    history = run("c-cma-es", SPHERE, 85, None, 0, run_dir=tmp_path / "run", **options)
+    assert history.column("diag.restarts")[-1] >= 1  # the search restarted; the kept best is in force
+    last = history.records[-1]
+    final = creps_gym.load_policy(tmp_path / "run", "final")
+    assert final.source["iteration"] == 85
+    value = evaluate_on_env(final, gym.make(SPHERE, dim=2), 16, split_seed(0)[2])
+    assert value == (last.eval_return, last.eval_regret)  # bit for bit
+    assert last.eval_regret < 1e-4
+
+
 class _Crash(Exception):
     pass
 

@@ -240,18 +240,13 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         if self.config.keep_best and score > self.best_score:
             self.best_coefficients, self.best_score = self.policy.coefficients.copy(), score
 
-    def recommend(self, contexts: Any) -> Array:
-        """The mean policy Aᵀϕ(s) for contexts (n, z), shape (n, p): the running search's, or with
-        ``keep_best`` the best one a restart left (C10) while the running search scores below it."""
+    def recommended_coefficients(self) -> Array:
+        """The coefficients, shape (k, p), of the mean policy that ``recommend`` and ``mean_policy`` give:
+        the running search's, or with ``keep_best`` the best one a restart left (C10) while the running
+        search scores below it."""
         if self.best_coefficients is None or self._search_score() >= self.best_score:
-            return super().recommend(contexts)
-        kept = self.policy.copy()
-        kept.coefficients = self.best_coefficients.copy()
-        running, self.policy = self.policy, kept
-        try:
-            return super().recommend(contexts)
-        finally:
-            self.policy = running
+            return self.policy.coefficients
+        return self.best_coefficients  # Eq. (C10)
 
     def _eigen(self) -> tuple[Array, Array]:
         """``eigh`` of C, computed once per update: the diagnostics, the stop criteria and the next update's

@@ -337,20 +337,27 @@ class PolicyAccess:
         """σ (1 unless the optimiser adapts it)."""
         return self.policy.step_size
 
+    def recommended_coefficients(self) -> Array:
+        """The coefficients A, shape (k, p), of the mean policy that ``recommend`` and ``mean_policy`` both
+        give: the running search's here; an optimiser that recommends another policy (C-CMA-ES's kept best,
+        Eq. (C10)) overrides this one method, so the two can never disagree."""
+        return self.policy.coefficients
+
     def recommend(self, contexts: Any) -> Array:
         """The mean policy Aᵀϕ(s) for contexts (n, z): shape (n, p); ``ValueError`` where it is not finite."""
         checked = self._check_contexts(contexts, "contexts")  # type: ignore[attr-defined]
         with np.errstate(over="ignore", invalid="ignore"):
-            mean = self.policy.mean(checked)
+            mean = self.policy.mean_map(checked) @ self.recommended_coefficients()
         if not np.isfinite(mean).all():
             raise overflowing_contexts(checked, "the mean policy")
         return mean
 
     def mean_policy(self) -> Policy:
-        """The current mean policy Aᵀϕ(s) as a :class:`~creps_gym.optimizers.policy_file.Policy`: a copy,
-        independent of the optimiser, that gives ``recommend``'s parameters bit for bit."""
+        """The mean policy Aᵀϕ(s) that ``recommend`` gives, as a
+        :class:`~creps_gym.optimizers.policy_file.Policy`: a copy, independent of the optimiser, that gives
+        ``recommend``'s parameters bit for bit (the kept best of a restarted C-CMA-ES included)."""
         source = {"optimizer": self.kind, "iteration": self.iteration}  # type: ignore[attr-defined]
-        return Policy(self.policy.mean_map, self.policy.coefficients, source=source)
+        return Policy(self.policy.mean_map, self.recommended_coefficients(), source=source)
 
     def _sample(self, contexts: Array) -> Array:
         return self.policy.sample(contexts, self.rng)

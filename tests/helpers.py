@@ -32,6 +32,54 @@ def cli_command(*args: Any) -> list[str]:
     return [sys.executable, "-m", "creps_gym.cli", *map(str, args)]
 
 
+def cli_in_process(*args: Any, cwd: Any = None, env: dict[str, str] | None = None, timeout: float = 0):
+    """``creps-gym args`` run in this process through :func:`creps_gym.cli.main`, as a
+    :class:`subprocess.CompletedProcess` (``returncode``, ``stdout``, ``stderr``), in ``cwd`` and with ``env``
+    added to the environment, both restored afterwards, as are ``sys.path`` and the modules it imported from
+    outside the interpreter's own paths (an ``--import`` module of a test folder).
+
+    A test of library behaviour through the command line uses it: it costs no interpreter start. Tests of the
+    process boundary (the console script, signals, start-up imports, ``-m`` and the working directory's
+    path entry, environment variables read at import time) use :func:`cli_command` in a subprocess.
+    ``timeout`` is accepted for the subprocess helpers' signature and ignored (pytest-timeout bounds a test).
+    """
+    import contextlib
+    import io
+    import os
+    import subprocess
+
+    from creps_gym.cli import main
+
+    argv = [str(arg) for arg in args]
+    stdout, stderr = io.StringIO(), io.StringIO()
+    saved_path, saved_modules, saved_cwd = list(sys.path), set(sys.modules), os.getcwd()
+    saved_env = {key: os.environ.get(key) for key in (env or {})}
+    try:
+        os.environ.update(env or {})
+        if cwd is not None:
+            os.chdir(cwd)
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+            try:
+                code = main(argv)
+            except SystemExit as exc:  # argparse: --help (0) and usage errors (2)
+                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    finally:
+        os.chdir(saved_cwd)
+        sys.path[:] = saved_path
+        for name in set(sys.modules) - saved_modules:  # a test folder's module must not outlive its test
+            if str(getattr(sys.modules[name], "__file__", None) or "").startswith(_TEMPORARY):
+                del sys.modules[name]
+        for key, value in saved_env.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+    return subprocess.CompletedProcess(["creps-gym", *argv], code, stdout.getvalue(), stderr.getvalue())
+
+
+_TEMPORARY = str(Path(__import__("tempfile").gettempdir()).resolve())
+
+
 # -- the `extras` marker: tests that need an optional extra; CI's lowest-versions environment runs the others
 EXTRAS = pytest.mark.extras
 _EXTRA_ENV_MODULES = ("creps_gym.envs.kick", "creps_gym.wrappers")  # MuJoCo, Gymnasium(-Robotics) MuJoCo envs

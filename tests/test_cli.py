@@ -1,4 +1,5 @@
-"""The ``creps-gym`` command line, each command through a real subprocess."""
+"""The ``creps-gym`` command line: each command in process (``cli_in_process``), and through a real
+subprocess where the test is about the process (the console script, signals, the environment)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from dataclasses import fields
 from pathlib import Path
 
 import pytest
-from helpers import EXTRAS, SPHERE, cli_command
+from helpers import EXTRAS, SPHERE, cli_command, cli_in_process
 
 import creps_gym
 from creps_gym.cli import main
@@ -18,11 +19,7 @@ from creps_gym.optimizers import CREPSCMAConfig, optimizer_names
 from creps_gym.runner import History, RunDir
 
 
-def cli(*args, cwd=None, timeout=120):
-    return subprocess.run(
-        cli_command(*args),
-        capture_output=True, text=True, cwd=cwd, timeout=timeout, check=False,
-    )  # fmt: skip
+cli = cli_in_process  # the commands' behaviour; a process only where the test is about one
 
 
 def run_args(out, *extra, seed=0):

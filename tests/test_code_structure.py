@@ -1,4 +1,6 @@
-"""The package's shape (DEVELOPERS.md, "Style"): modules of at most 400 lines, and no import cycles.
+"""The package's shape (DEVELOPERS.md, "Architecture" and "Style"): the dependency rule, no import cycles,
+modules of at most 400 lines and functions of at most 60, each rule checked once over the whole package and
+every breach listed in one failure message.
 
 The import graph is read from the source with :mod:`ast`: every ``import`` statement of a module, at any
 depth (a function's deferred import runs as surely as a top-level one, only later), except those under
@@ -8,9 +10,8 @@ depth (a function's deferred import runs as surely as a top-level one, only late
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
-
-import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "creps_gym"
 MAX_LINES = 400
@@ -127,10 +128,154 @@ def test_the_package_has_no_import_cycle_below_its_subpackages() -> None:
         assert find_cycle(graph, package) is None, package
 
 
-MODULES = sorted(str(path.relative_to(PACKAGE)) for path in PACKAGE.rglob("*.py"))
+MAX_FUNCTION_LINES = 60
+#: The third-party libraries the core may import at a module's top level.
+CORE_LIBRARIES = {"numpy", "scipy", "gymnasium"}
+#: Where MuJoCo may be imported: the MuJoCo envs (the kick, the registered Gymnasium(-Robotics) examples)
+#: and the OpenGL backend chooser they call first.
+MUJOCO_HOMES = ("creps_gym.envs.kick", "creps_gym.envs.opengl", "creps_gym.wrappers.examples")
 
 
-@pytest.mark.parametrize("module", MODULES)
-def test_every_module_has_at_most_400_lines(module: str) -> None:
-    lines = len((PACKAGE / module).read_text(encoding="utf-8").splitlines())
-    assert lines <= MAX_LINES, f"creps_gym/{module}: {lines} lines, expected at most {MAX_LINES}"
+def external_imports(source: str) -> list[tuple[str, bool]]:
+    """(top-level module name, deferred) of every absolute import of ``source`` outside ``creps_gym``;
+    deferred: inside a function, so it runs only when that function is called."""
+    found: list[tuple[str, bool]] = []
+
+    def visit(node: ast.AST, deferred: bool) -> None:
+        if _type_checking_only(node):
+            return
+        if isinstance(node, ast.Import):
+            found.extend((alias.name.split(".")[0], deferred) for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            found.append((node.module.split(".")[0], deferred))
+        inner = deferred or isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
+        for child in ast.iter_child_nodes(node):
+            visit(child, inner)
+
+    visit(ast.parse(source), False)
+    return [(name, deferred) for name, deferred in found if name != "creps_gym"]
+
+
+#: The optional libraries (import name: distribution in ``pyproject.toml``'s extras): imported only where
+#: they are needed, inside the function that needs them, never at a module's top level of the core.
+OPTIONAL_LIBRARIES = {
+    "cma": "cma",
+    "nevergrad": "nevergrad",
+    "optuna": "optuna",
+    "sklearn": "scikit-learn",
+    "matplotlib": "matplotlib",
+    "tqdm": "tqdm",
+    "imageio": "imageio",
+    "mujoco": "mujoco",
+    "gymnasium_robotics": "gymnasium-robotics",
+    "ray": "ray",
+    "torch": "torch",
+    "botorch": "botorch",
+}
+
+
+def _modules() -> dict[str, Path]:
+    return {module_name(path): path for path in sorted(PACKAGE.rglob("*.py"))}
+
+
+def _within(name: str, *packages: str) -> bool:
+    return any(name == package or name.startswith(package + ".") for package in packages)
+
+
+def _library_breach(module: str, library: str, deferred: bool) -> str | None:
+    """Why ``module`` may not import the third-party ``library`` (None: it may)."""
+    core = {"numpy", "scipy"} if _within(module, "creps_gym.optimizers") else CORE_LIBRARIES
+    if library in core:
+        return None
+    if library == "mujoco":
+        return None if _within(module, *MUJOCO_HOMES) else f"imports mujoco (only {', '.join(MUJOCO_HOMES)})"
+    if library not in OPTIONAL_LIBRARIES:
+        return f"imports {library}, which is neither a core dependency nor an optional extra"
+    return None if deferred else f"imports the optional {library} at its top level (import it where used)"
+
+
+def dependency_breaches() -> list[str]:
+    """Every import that breaks DEVELOPERS.md's dependency rule, as ``module: what``."""
+    graph, breaches, stdlib = import_graph(), [], set(sys.stdlib_module_names)
+    for name, path in _modules().items():
+        for library, deferred in external_imports(path.read_text(encoding="utf-8")):
+            if library not in stdlib and (why := _library_breach(name, library, deferred)):
+                breaches.append(f"{name}: {why}")
+        if _within(name, "creps_gym.optimizers"):
+            allowed = ("creps_gym.optimizers", "creps_gym._validation")
+            others = sorted(m for m in graph[name] if not _within(m, *allowed))
+            breaches += [f"{name}: imports {m} (optimizers: only numpy, scipy, _validation)" for m in others]
+        if _within(name, "creps_gym.envs", "creps_gym.wrappers", "creps_gym.movement", "creps_gym.selectors"):
+            joined = sorted(m for m in graph[name] if _within(m, "creps_gym.optimizers", "creps_gym.runner"))
+            breaches += [f"{name}: imports {m} (only the runner joins envs and optimizers)" for m in joined]
+    return breaches
+
+
+def test_the_dependency_rule_holds() -> None:
+    """Optimisers import only numpy, scipy and ``_validation`` (an optional library only where used);
+    envs, wrappers, movement and selectors never import the optimisers or the runner; MuJoCo only in the
+    MuJoCo envs; every optional library the package imports is declared in ``pyproject.toml``."""
+    breaches = dependency_breaches()
+    assert not breaches, "the dependency rule is broken:\n" + "\n".join(breaches)
+    declared = (PACKAGE.parent / "pyproject.toml").read_text(encoding="utf-8")
+    used = {
+        lib for path in _modules().values() for lib, _ in external_imports(path.read_text(encoding="utf-8"))
+    }
+    missing = sorted(OPTIONAL_LIBRARIES[lib] for lib in used & set(OPTIONAL_LIBRARIES))
+    missing = [distribution for distribution in missing if f'"{distribution}' not in declared]
+    assert not missing, f"optional libraries imported but not declared in pyproject.toml: {missing}"
+
+
+def test_the_dependency_rule_names_each_kind_of_breach() -> None:
+    source = "import numpy\nimport ray\ndef f():\n    import cma\n    import requests\n"
+    assert external_imports(source) == [("numpy", False), ("ray", False), ("cma", True), ("requests", True)]
+    assert _library_breach("creps_gym.optimizers.x", "gymnasium", False) is not None
+    assert _library_breach("creps_gym.envs.x", "gymnasium", False) is None
+    assert "top level" in _library_breach("creps_gym.optimizers.x", "cma", False)
+    assert _library_breach("creps_gym.optimizers.adapters.x", "cma", True) is None
+    assert "mujoco" in _library_breach("creps_gym.runner.x", "mujoco", True)
+    assert _library_breach("creps_gym.envs.kick.env", "mujoco", False) is None
+    assert "neither" in _library_breach("creps_gym.envs.x", "requests", True)
+
+
+def function_lengths(source: str) -> list[tuple[str, int]]:
+    """(qualified name, lines without its docstring) of every function of ``source``."""
+    found: list[tuple[str, int]] = []
+
+    def visit(node: ast.AST, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = child.end_lineno - child.lineno + 1
+                first = child.body[0]
+                if isinstance(first, ast.Expr) and isinstance(getattr(first, "value", None), ast.Constant):
+                    lines -= first.end_lineno - first.lineno + 1
+                found.append((f"{prefix}{child.name}", lines))
+                visit(child, f"{prefix}{child.name}.")
+            elif isinstance(child, ast.ClassDef):
+                visit(child, f"{prefix}{child.name}.")
+            else:
+                visit(child, prefix)
+
+    visit(ast.parse(source), "")
+    return found
+
+
+def test_modules_and_functions_are_small() -> None:
+    """Every module of at most 400 lines and every function of at most 60 (its docstring not counted),
+    all breaches in one message."""
+    breaches = []
+    for path in _modules().values():
+        source, where = path.read_text(encoding="utf-8"), path.relative_to(PACKAGE.parent)
+        if (lines := len(source.splitlines())) > MAX_LINES:
+            breaches.append(f"{where}: {lines} lines (a module: at most {MAX_LINES})")
+        for function, length in function_lengths(source):
+            if length > MAX_FUNCTION_LINES:
+                breaches.append(
+                    f"{where}: {function}: {length} lines (a function: at most {MAX_FUNCTION_LINES})"
+                )
+    assert not breaches, "too large:\n" + "\n".join(breaches)
+
+
+def test_the_function_length_counts_code_not_the_docstring() -> None:
+    source = 'class A:\n    def f(self):\n        """Doc.\n\n        More."""\n        return 1\n'
+    assert function_lengths(source) == [("A.f", 2)]

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import SPHERE, cli_command
+from helpers import SPHERE, cli_command, cli_in_process
 
 from creps_gym.cli import main
 from creps_gym.runner import History, RunDir, RunDirError, RunDirWarning, load_history, resume, run
@@ -52,8 +52,7 @@ def uninterrupted(seed: int = 0, **changes) -> History:
     return run("creps-cma-old", SPHERE, seed=seed, **{**SETTINGS, **changes})
 
 
-def cli(*args, cwd=None, timeout=120):
-    return subprocess.run(cli_command(*args), capture_output=True, text=True, cwd=cwd, timeout=timeout)
+cli = cli_in_process  # the commands' behaviour; processes below only where a test needs one
 
 
 def wait_for(ready, process: subprocess.Popen, what: str, timeout: float = 60.0) -> None:

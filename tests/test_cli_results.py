@@ -4,12 +4,11 @@ and ``creps-gym list``'s exact boxes."""
 from __future__ import annotations
 
 import csv
-import subprocess
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from helpers import EXTRAS, SPHERE, cli_command
+from helpers import EXTRAS, SPHERE, cli_in_process
 
 from creps_gym.cli import main
 from creps_gym.listing import available_env_rows, box_text
@@ -61,12 +60,7 @@ def test_labels_are_given_per_run_directory_or_per_group(runs, tmp_path, capsys)
         ids = {(row["algorithm_id"], row["run_id"]) for row in csv.DictReader(file)}
     assert ids == {("N=8", "0"), ("N=8", "1"), ("N=12", "0"), ("N=12", "1")}
     labels = ["--label", "a", "--label", "b", "--label", "c"]
-    result = subprocess.run(
-        cli_command("plot", *paths, "-o", tmp_path / "x.png", *labels),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    result = cli_in_process("plot", *paths, "-o", tmp_path / "x.png", *labels)
     assert result.returncode == 2 and not (tmp_path / "x.png").exists()
     assert "argument --label: expected one per run directory (4) or one per setting group (2), got 3" in (
         result.stderr
@@ -118,7 +112,7 @@ def test_list_prints_non_cubic_boxes_per_dimension():
     assert box([-5.0] * 15, [5.0] * 15) == "[-5, 5]^15"
     assert box([-5.0, -5.0, -5.990589492661148, -5.0], [5.0] * 4) == "[-5, 5]^2×[-5.99059, 5]×[-5, 5]"
     pytest.importorskip("mujoco")  # without it `list` marks the kick as not available
-    listed = subprocess.run(cli_command("list"), capture_output=True, text=True, timeout=60).stdout
+    listed = cli_in_process("list").stdout
     kick = next(line for line in listed.splitlines() if "creps_gym/KickFlexibility-v2 " in line)
     assert [cell.strip() for cell in kick.split("  ") if cell.strip()][1] == "[0.15, 0.3]×[-0.15, 0.15]"
 

@@ -11,7 +11,7 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
-from helpers import EXTRAS, SPHERE, cli_command
+from helpers import EXTRAS, SPHERE, cli_in_process
 
 import creps_gym
 from creps_gym.optimizers import Policy
@@ -143,8 +143,7 @@ def cli_run(tmp_path_factory):
     return path
 
 
-def _cli(*args, **kwargs):
-    return subprocess.run(cli_command(*args), capture_output=True, text=True, timeout=180, **kwargs)
+_cli = cli_in_process  # the commands' behaviour, in this process
 
 
 def test_policy_prints_the_parameters_for_each_context(cli_run, tmp_path):

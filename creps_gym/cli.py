@@ -39,7 +39,7 @@ from typing import Any
 
 from creps_gym.cli_parsers import add_import, add_progress, add_run
 from creps_gym.cli_results import RESULT_COMMANDS, add_result_commands
-from creps_gym.cli_types import UsageError
+from creps_gym.cli_types import UsageError, import_user_modules
 
 __all__ = ["EXIT_CODES", "build_parser", "main"]
 
@@ -53,26 +53,35 @@ def _import_modules(args: argparse.Namespace) -> None:
     The current directory is searched for an ``--import`` module, after every other path entry (so it
     never shadows an installed module); nothing is ever imported from a run directory.
     """
-    from creps_gym.listing import did_you_mean
-    from creps_gym.runner.trust import import_modules, registered_env_id
+    from creps_gym.runner.trust import registered_env_id
 
-    if args.imports and os.getcwd() not in sys.path:
-        sys.path.append(os.getcwd())
-    checks = [("--import", lambda: import_modules(args.imports))]
+    import_user_modules(args.imports)
     if getattr(args, "env", None) is not None:
-        checks.append(("--env", lambda: registered_env_id(args.env, import_module=True)))
-    if getattr(args, "optimizer", None) is not None:
-        checks.append(("--optimizer", lambda: _registered_optimizer(args.optimizer)))
-    for flag, check in checks:
         try:
-            check()
+            registered_env_id(args.env, import_module=True)
         except ValueError as exc:
-            hint = ""
-            if flag == "--env":  # a mistyped id: suggest the registered ones it resembles
-                import creps_gym
+            unknown = str(exc).startswith("expected one of")  # else: its module cannot be imported
+            raise UsageError(f"argument --env: {_unknown_env(args.env) if unknown else exc}") from None
+    if getattr(args, "optimizer", None) is not None:
+        try:
+            _registered_optimizer(args.optimizer)
+        except ValueError as exc:
+            raise UsageError(f"argument --optimizer: {exc}") from None
 
-                hint = did_you_mean(args.env, creps_gym.registered_ids())
-            raise UsageError(f"argument {flag}: {exc}{hint}") from None
+
+def _unknown_env(env_id: str) -> str:
+    """The hint first (a short line), then the registered ids, wrapped."""
+    import textwrap
+
+    import creps_gym
+    from creps_gym.listing import did_you_mean
+
+    ids = creps_gym.registered_ids()
+    listing = textwrap.fill(", ".join(ids), width=100, initial_indent="  ", subsequent_indent="  ")
+    return (
+        f"unknown env id {env_id!r}{did_you_mean(env_id, ids)}\n"
+        f"expected one of these ids (`creps-gym list` describes them) or module:Env-v0:\n{listing}"
+    )
 
 
 def _registered_optimizer(name: str) -> None:

@@ -53,7 +53,8 @@ def add_run(commands: Any) -> None:
         ("--out", str, "new run directory"),
     ]
     for flag, parse, text in required:
-        run.add_argument(flag, required=True, type=parse, help=text)
+        aliases = ("--optimiser",) if flag == "--optimizer" else ()  # the spelling of the docs' prose
+        run.add_argument(flag, *aliases, dest=flag[2:], required=True, type=parse, help=text)
     run.add_argument(
         "--samples",
         type=integer(2),

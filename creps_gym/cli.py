@@ -250,7 +250,8 @@ def _failure(exc: Exception, prog: str) -> int | None:
     from creps_gym.runner.session import RunDirError
 
     if isinstance(exc, (FileExistsError, FileNotFoundError, NotADirectoryError, RunDirError)):
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        message = str(exc).replace("creps-gym COMMAND", prog)  # the trust checks' advice, for this command
+        print(f"{prog}: error: {message}", file=sys.stderr)
         return EXIT_CODES["run_dir"]
     if isinstance(exc, ImportError):
         print(f"{prog}: error: missing optional dependency: {exc}", file=sys.stderr)

@@ -242,6 +242,13 @@ def _drop_cwd_from_path() -> None:
         del sys.path[0]
 
 
+def _command_line_terms(message: str, prog: str) -> str:
+    """A run directory's message in the command line's terms (the runner's are Python's)."""
+    message = message.replace("creps-gym COMMAND", prog)  # the trust checks' advice, for this command
+    message = message.replace("continue it with `resume`", "continue it with `creps-gym resume`")
+    return message.replace("pass overwrite=True", "pass --overwrite")
+
+
 def _failure(exc: Exception, prog: str) -> int | None:
     """Print ``exc`` and return its exit code, or None for an exception that is a bug (a traceback)."""
     from gymnasium.error import Error as GymnasiumError
@@ -250,8 +257,7 @@ def _failure(exc: Exception, prog: str) -> int | None:
     from creps_gym.runner.session import RunDirError
 
     if isinstance(exc, (FileExistsError, FileNotFoundError, NotADirectoryError, RunDirError)):
-        message = str(exc).replace("creps-gym COMMAND", prog)  # the trust checks' advice, for this command
-        print(f"{prog}: error: {message}", file=sys.stderr)
+        print(f"{prog}: error: {_command_line_terms(str(exc), prog)}", file=sys.stderr)
         return EXIT_CODES["run_dir"]
     if isinstance(exc, ImportError):
         print(f"{prog}: error: missing optional dependency: {exc}", file=sys.stderr)

@@ -78,6 +78,8 @@ def _load(args: argparse.Namespace) -> Any:
         return load_policy(args.run, args.which)
     except RunDirError:
         raise
+    except FileNotFoundError as exc:  # no such folder or file, or a run folder without that policy
+        raise FileNotFoundError(f"RUN: {str(exc).removeprefix('path: ')}") from None
     except ValueError as exc:
         raise RunDirError(f"RUN: {exc}") from None
 

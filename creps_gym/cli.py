@@ -22,7 +22,8 @@ Exit codes
     An optional dependency is missing (e.g. ``pip install creps-gym[plot]`` for ``plot``).
 130
     Interrupted (Ctrl-C): the run completes its iteration and checkpoints first, so ``creps-gym resume
-    DIR`` loses nothing (a second Ctrl-C stops at once).
+    DIR`` loses nothing (a second Ctrl-C stops at once). A Ctrl-C after the last iteration is not an
+    interruption: the run has finished, its result files and plot are written, and the exit code is 0.
 """
 
 from __future__ import annotations
@@ -158,7 +159,7 @@ def _as_usage_error(exc: Exception, args: argparse.Namespace) -> UsageError:
 
 
 def _finish(runner: Any, args: argparse.Namespace) -> int:
-    from creps_gym.runner.rundir import RunDir
+    from creps_gym.runner.session import DeferredInterrupt
 
     history = runner.run()
     last = history.records[-1] if history.records else None
@@ -170,15 +171,23 @@ def _finish(runner: Any, args: argparse.Namespace) -> int:
             f"stop: {history.stop_reason}; run directory {runner.run_dir.path}"
         )
     if not args.no_plot and history.records:
-        try:
-            from creps_gym.runner.plots import figure_bytes, plot_run_dirs
-
-            figure = plot_run_dirs([runner.run_dir.path])
-            runner.run_dir.write_file(RunDir.PLOT, figure_bytes(figure))  # never through a link
-            print(f"plot: {runner.run_dir.file(RunDir.PLOT)}")
-        except ImportError as exc:
-            print(f"creps-gym: no plot written ({exc})", file=sys.stderr)
+        # The run has finished: a first Ctrl-C now still gets its plot written, and exit code 0.
+        with DeferredInterrupt(message=DeferredInterrupt.FINISHING):
+            _write_plot(runner.run_dir)
     return 0
+
+
+def _write_plot(run_dir: Any) -> None:
+    from creps_gym.runner.rundir import RunDir
+
+    try:
+        from creps_gym.runner.plots import figure_bytes, plot_run_dirs
+
+        figure = plot_run_dirs([run_dir.path])
+        run_dir.write_file(RunDir.PLOT, figure_bytes(figure))  # never through a link
+        print(f"plot: {run_dir.file(RunDir.PLOT)}")
+    except ImportError as exc:
+        print(f"creps-gym: no plot written ({exc})", file=sys.stderr)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:

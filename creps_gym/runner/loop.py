@@ -329,16 +329,18 @@ class Runner:
         """Iterate until a stop condition holds; log, checkpoint and call the callbacks on the way.
 
         With a run directory: holds its lock; a finished run only gets its missing or damaged result files
-        rewritten; the first Ctrl-C completes the iteration and checkpoints before ``KeyboardInterrupt``.
+        rewritten; the first Ctrl-C completes the iteration and checkpoints before ``KeyboardInterrupt``
+        (after the last iteration, it lets the result files be written and the run return).
         """
         if self.run_dir is not None:
             self.run_dir.lock.acquire()
         try:
             finished = self.history.stop_reason is not None
-            if not finished:
-                with DeferredInterrupt(enabled=self.run_dir is not None) as interrupt:
+            with DeferredInterrupt(enabled=self.run_dir is not None) as interrupt:
+                if not finished:
                     self._iterate(interrupt)
-            self._finish(completing=finished)
+                interrupt.message = DeferredInterrupt.FINISHING  # the last iteration is checkpointed
+                self._finish(completing=finished)
         finally:
             if self.run_dir is not None:
                 self.run_dir.lock.release()

@@ -281,6 +281,14 @@ def _failure(exc: Exception, prog: str) -> int | None:
     return None
 
 
+def _plain_warning(text: str) -> str:
+    """A warning without terminal escapes (Gymnasium colours its own) or Gymnasium's ``WARN:`` prefix."""
+    import re
+
+    text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", text).strip()
+    return text.removeprefix("WARN: ")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``creps-gym`` console script; returns the exit code (see the module docstring)."""
     if hasattr(signal, "SIGXFSZ"):  # `ulimit -f`: a write past it fails with EFBIG (named, exit 3)
@@ -289,8 +297,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)  # exits with code 2 on usage errors
     prog = f"creps-gym {args.command}"
 
+    shown: set[str] = set()
+
     def show_warning(message: Any, category: type, *_: Any, **__: Any) -> None:
-        print(f"{prog}: warning: {message}", file=sys.stderr)
+        text = _plain_warning(str(message))
+        if text not in shown:  # e.g. a deprecated id's warning, once per env the run makes
+            shown.add(text)
+            print(f"{prog}: warning: {text}", file=sys.stderr)
 
     try:
         with warnings.catch_warnings():

@@ -38,15 +38,9 @@ from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import finite_mean, test_contexts
 from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
-from creps_gym.runner import checks
+from creps_gym.runner import build, checks
 from creps_gym.runner.backends import Backend, EnvSource, EpisodeError, retry
-from creps_gym.runner.build import (
-    build_backend,
-    build_optimizer,
-    default_initial_distribution,
-    make_env,
-    split_seed,
-)
+from creps_gym.runner.build import build_backend, build_optimizer, default_initial_distribution, split_seed
 from creps_gym.runner.callbacks import as_callback
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
@@ -109,7 +103,7 @@ class Runner:
             raise TypeError("env: expected an env id in the config or an env object (exactly one)")
         if (config.optimizer is None) == (optimizer is None) and optimizer_class is None:
             raise TypeError("optimizer: expected a registry name or an optimiser object (exactly one)")
-        self.env = env if env is not None else make_env(config.env, config.env_kwargs)
+        self.env = env if env is not None else build.make_env(config.env, config.env_kwargs)
         checks.check_box_spaces(self.env)
         self.env_rng, optimizer_seed, eval_seed = split_seed(config.seed)
         self.n_context_dims = int(np.prod(self.env.observation_space.shape))

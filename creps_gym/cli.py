@@ -162,17 +162,17 @@ def _finish(runner: Any, args: argparse.Namespace) -> int:
     from creps_gym.runner.session import DeferredInterrupt
 
     history = runner.run()
-    last = history.records[-1] if history.records else None
-    if last is not None:
-        value = last.eval_regret if not math.isnan(last.eval_regret) else last.eval_return
-        metric = history.meta.get("metric", "return")
-        print(
-            f"iterations {last.iteration}, episodes {last.episodes}, {metric} {value:.6g}, "
-            f"stop: {history.stop_reason}; run directory {runner.run_dir.path}"
-        )
-    if not args.no_plot and history.records:
-        # The run has finished: a first Ctrl-C now still gets its plot written, and exit code 0.
-        with DeferredInterrupt(message=DeferredInterrupt.FINISHING):
+    # The run has finished: a first Ctrl-C from here on still gets its summary and plot, and exit code 0.
+    with DeferredInterrupt(message=DeferredInterrupt.FINISHING):
+        last = history.records[-1] if history.records else None
+        if last is not None:
+            value = last.eval_regret if not math.isnan(last.eval_regret) else last.eval_return
+            metric = history.meta.get("metric", "return")
+            print(
+                f"iterations {last.iteration}, episodes {last.episodes}, {metric} {value:.6g}, "
+                f"stop: {history.stop_reason}; run directory {runner.run_dir.path}"
+            )
+        if not args.no_plot and history.records:
             _write_plot(runner.run_dir)
     return 0
 

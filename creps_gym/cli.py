@@ -22,7 +22,8 @@ Exit codes
     An optional dependency is missing (e.g. ``pip install creps-gym[plot]`` for ``plot``).
 130
     Interrupted (Ctrl-C): the run completes its iteration and checkpoints first, so ``creps-gym resume
-    DIR`` loses nothing (a second Ctrl-C stops at once).
+    DIR`` loses nothing (a second Ctrl-C stops at once). A Ctrl-C after the last iteration is not an
+    interruption: the run has finished, its result files and plot are written, and the exit code is 0.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from typing import Any
 
 from creps_gym.cli_parsers import add_import, add_progress, add_run
 from creps_gym.cli_results import RESULT_COMMANDS, add_result_commands
-from creps_gym.cli_types import UsageError
+from creps_gym.cli_types import UsageError, import_user_modules
 
 __all__ = ["EXIT_CODES", "build_parser", "main"]
 
@@ -53,26 +54,35 @@ def _import_modules(args: argparse.Namespace) -> None:
     The current directory is searched for an ``--import`` module, after every other path entry (so it
     never shadows an installed module); nothing is ever imported from a run directory.
     """
-    from creps_gym.listing import did_you_mean
-    from creps_gym.runner.trust import import_modules, registered_env_id
+    from creps_gym.runner.trust import registered_env_id
 
-    if args.imports and os.getcwd() not in sys.path:
-        sys.path.append(os.getcwd())
-    checks = [("--import", lambda: import_modules(args.imports))]
+    import_user_modules(args.imports)
     if getattr(args, "env", None) is not None:
-        checks.append(("--env", lambda: registered_env_id(args.env, import_module=True)))
-    if getattr(args, "optimizer", None) is not None:
-        checks.append(("--optimizer", lambda: _registered_optimizer(args.optimizer)))
-    for flag, check in checks:
         try:
-            check()
+            registered_env_id(args.env, import_module=True)
         except ValueError as exc:
-            hint = ""
-            if flag == "--env":  # a mistyped id: suggest the registered ones it resembles
-                import creps_gym
+            unknown = str(exc).startswith("expected one of")  # else: its module cannot be imported
+            raise UsageError(f"argument --env: {_unknown_env(args.env) if unknown else exc}") from None
+    if getattr(args, "optimizer", None) is not None:
+        try:
+            _registered_optimizer(args.optimizer)
+        except ValueError as exc:
+            raise UsageError(f"argument --optimizer: {exc}") from None
 
-                hint = did_you_mean(args.env, creps_gym.registered_ids())
-            raise UsageError(f"argument {flag}: {exc}{hint}") from None
+
+def _unknown_env(env_id: str) -> str:
+    """The hint first (a short line), then the registered ids, wrapped."""
+    import textwrap
+
+    import creps_gym
+    from creps_gym.listing import did_you_mean
+
+    ids = creps_gym.registered_ids()
+    listing = textwrap.fill(", ".join(ids), width=100, initial_indent="  ", subsequent_indent="  ")
+    return (
+        f"unknown env id {env_id!r}{did_you_mean(env_id, ids)}\n"
+        f"expected one of these ids (`creps-gym list` describes them) or module:Env-v0:\n{listing}"
+    )
 
 
 def _registered_optimizer(name: str) -> None:
@@ -149,27 +159,35 @@ def _as_usage_error(exc: Exception, args: argparse.Namespace) -> UsageError:
 
 
 def _finish(runner: Any, args: argparse.Namespace) -> int:
-    from creps_gym.runner.rundir import RunDir
+    from creps_gym.runner.session import DeferredInterrupt
 
     history = runner.run()
-    last = history.records[-1] if history.records else None
-    if last is not None:
-        value = last.eval_regret if not math.isnan(last.eval_regret) else last.eval_return
-        metric = history.meta.get("metric", "return")
-        print(
-            f"iterations {last.iteration}, episodes {last.episodes}, {metric} {value:.6g}, "
-            f"stop: {history.stop_reason}; run directory {runner.run_dir.path}"
-        )
-    if not args.no_plot and history.records:
-        try:
-            from creps_gym.runner.plots import figure_bytes, plot_run_dirs
-
-            figure = plot_run_dirs([runner.run_dir.path])
-            runner.run_dir.write_file(RunDir.PLOT, figure_bytes(figure))  # never through a link
-            print(f"plot: {runner.run_dir.file(RunDir.PLOT)}")
-        except ImportError as exc:
-            print(f"creps-gym: no plot written ({exc})", file=sys.stderr)
+    # The run has finished: a first Ctrl-C from here on still gets its summary and plot, and exit code 0.
+    with DeferredInterrupt(message=DeferredInterrupt.FINISHING):
+        last = history.records[-1] if history.records else None
+        if last is not None:
+            value = last.eval_regret if not math.isnan(last.eval_regret) else last.eval_return
+            metric = history.meta.get("metric", "return")
+            print(
+                f"iterations {last.iteration}, episodes {last.episodes}, {metric} {value:.6g}, "
+                f"stop: {history.stop_reason}; run directory {runner.run_dir.path}"
+            )
+        if not args.no_plot and history.records:
+            _write_plot(runner.run_dir)
     return 0
+
+
+def _write_plot(run_dir: Any) -> None:
+    from creps_gym.runner.rundir import RunDir
+
+    try:
+        from creps_gym.runner.plots import figure_bytes, plot_run_dirs
+
+        figure = plot_run_dirs([run_dir.path])
+        run_dir.write_file(RunDir.PLOT, figure_bytes(figure))  # never through a link
+        print(f"plot: {run_dir.file(RunDir.PLOT)}")
+    except ImportError as exc:
+        print(f"creps-gym: no plot written ({exc})", file=sys.stderr)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -233,6 +251,13 @@ def _drop_cwd_from_path() -> None:
         del sys.path[0]
 
 
+def _command_line_terms(message: str, prog: str) -> str:
+    """A run directory's message in the command line's terms (the runner's are Python's)."""
+    message = message.replace("creps-gym COMMAND", prog)  # the trust checks' advice, for this command
+    message = message.replace("continue it with `resume`", "continue it with `creps-gym resume`")
+    return message.replace("pass overwrite=True", "pass --overwrite")
+
+
 def _failure(exc: Exception, prog: str) -> int | None:
     """Print ``exc`` and return its exit code, or None for an exception that is a bug (a traceback)."""
     from gymnasium.error import Error as GymnasiumError
@@ -241,7 +266,7 @@ def _failure(exc: Exception, prog: str) -> int | None:
     from creps_gym.runner.session import RunDirError
 
     if isinstance(exc, (FileExistsError, FileNotFoundError, NotADirectoryError, RunDirError)):
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {_command_line_terms(str(exc), prog)}", file=sys.stderr)
         return EXIT_CODES["run_dir"]
     if isinstance(exc, ImportError):
         print(f"{prog}: error: missing optional dependency: {exc}", file=sys.stderr)
@@ -256,6 +281,14 @@ def _failure(exc: Exception, prog: str) -> int | None:
     return None
 
 
+def _plain_warning(text: str) -> str:
+    """A warning without terminal escapes (Gymnasium colours its own) or Gymnasium's ``WARN:`` prefix."""
+    import re
+
+    text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", text).strip()
+    return text.removeprefix("WARN: ")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``creps-gym`` console script; returns the exit code (see the module docstring)."""
     if hasattr(signal, "SIGXFSZ"):  # `ulimit -f`: a write past it fails with EFBIG (named, exit 3)
@@ -264,8 +297,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)  # exits with code 2 on usage errors
     prog = f"creps-gym {args.command}"
 
+    shown: set[str] = set()
+
     def show_warning(message: Any, category: type, *_: Any, **__: Any) -> None:
-        print(f"{prog}: warning: {message}", file=sys.stderr)
+        text = _plain_warning(str(message))
+        if text not in shown:  # e.g. a deprecated id's warning, once per env the run makes
+            shown.add(text)
+            print(f"{prog}: warning: {text}", file=sys.stderr)
 
     try:
         with warnings.catch_warnings():

@@ -18,7 +18,11 @@ from creps_gym.cli_types import (
     selector_name,
 )
 
-__all__ = ["add_import", "add_progress", "add_run"]
+__all__ = ["OPT_EXAMPLE", "add_import", "add_progress", "add_run"]
+
+#: The ``--opt`` example of ``run --help``: an option of the README's optimiser, c-cma-es (tested).
+OPT_EXAMPLE = "restarts=0"
+_WORKERS_DEFAULT = "vector: one per sample for a native vector env, else one per CPU; Ray: the cluster's CPUs"
 
 
 def add_progress(parser: argparse.ArgumentParser) -> None:
@@ -53,7 +57,8 @@ def add_run(commands: Any) -> None:
         ("--out", str, "new run directory"),
     ]
     for flag, parse, text in required:
-        run.add_argument(flag, required=True, type=parse, help=text)
+        aliases = ("--optimiser",) if flag == "--optimizer" else ()  # the spelling of the docs' prose
+        run.add_argument(flag, *aliases, dest=flag[2:], required=True, type=parse, help=text)
     run.add_argument(
         "--samples",
         type=integer(2),
@@ -62,7 +67,10 @@ def add_run(commands: Any) -> None:
     )
     run.add_argument("--overwrite", action="store_true", help="replace a run already in --out (deletes it)")
     run.add_argument(
-        "--backend", default=run_defaults["backend"], choices=BACKENDS, help="where episodes run"
+        "--backend",
+        default=run_defaults["backend"],
+        choices=BACKENDS,
+        help=f"where episodes run (default: {run_defaults['backend']})",
     )
     run.add_argument(
         "--ray-address",
@@ -75,29 +83,36 @@ def add_run(commands: Any) -> None:
         "--vector-mode",
         default=run_defaults["vector_mode"],
         choices=VECTOR_MODES,
-        help="vector backend flavour",
+        help=f"vector backend flavour (default: {run_defaults['vector_mode']})",
     )
-    optional = [
-        ("--workers", integer(1), "vector sub-envs or Ray tasks per iteration"),
-        ("--retries", integer(0), "re-runs of a failed episode"),
-        ("--eval-every", integer(1), "evaluate the mean policy every N iterations"),
-        ("--eval-contexts", integer(1), "number of test contexts"),
-        ("--checkpoint-every", integer(1), "checkpoint every N iterations"),
-        ("--max-episodes", integer(2), "episode budget"),
-        ("--target-regret", positive_float, "stop once the mean regret is at most this"),
-        ("--max-time", positive_float, "stop after this many seconds"),
+    optional = [  # flag, type, help, what the default None means
+        ("--workers", integer(1), "vector sub-envs or Ray tasks per iteration", _WORKERS_DEFAULT),
+        ("--retries", integer(0), "re-runs of a failed episode", None),
+        ("--eval-every", integer(1), "evaluate the mean policy every N iterations", None),
+        ("--eval-contexts", integer(1), "number of test contexts", None),
+        ("--checkpoint-every", integer(1), "checkpoint every N iterations", None),
+        ("--max-episodes", integer(2), "episode budget", "no limit"),
+        ("--target-regret", positive_float, "stop once the mean regret is at most this", "no target"),
+        ("--max-time", positive_float, "stop after this many seconds", "no limit"),
         (
             "--divergence",
             positive_or_none,
             "stop once 10 evaluations in a row are worse than the first by "
             "this factor of its size ('none': never)",
+            None,
         ),
-        ("--initial-mean", initial_mean, "a number, p comma-separated numbers, or 'uniform' in the box"),
-        ("--initial-std", numbers, "initial standard deviation(s); default: the env-declared one"),
+        (
+            "--initial-mean",
+            initial_mean,
+            "a number, p comma-separated numbers, or 'uniform' in the box",
+            "the env-declared mean",
+        ),
+        ("--initial-std", numbers, "initial standard deviation(s)", "the env-declared one"),
     ]
-    for flag, parse, text in optional:
+    for flag, parse, text, if_none in optional:
         default = run_defaults[flag[2:].replace("-", "_")]
-        run.add_argument(flag, type=parse, default=default, help=f"{text} (default {default})")
+        shown = if_none if default is None else default
+        run.add_argument(flag, type=parse, default=default, help=f"{text} (default: {shown})")
     run.add_argument(
         "--context-selector",
         type=selector_name,
@@ -107,7 +122,10 @@ def add_run(commands: Any) -> None:
         "docs/contexts.md); default: the env's own draws",
     )
     flags = (
-        ("--opt", "optimiser option, e.g. --opt epsilon=1.0"),
+        (
+            "--opt",
+            f"optimiser option, e.g. --opt {OPT_EXAMPLE} for c-cma-es (a wrong KEY lists the valid ones)",
+        ),
         ("--env-kwarg", "e.g. dim=5"),
         ("--selector-opt", "context selector option, e.g. --selector-opt cells=4"),
     )

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from creps_gym.cli_parsers import add_import
-from creps_gym.cli_types import UsageError, integer
+from creps_gym.cli_types import UsageError, import_user_modules, integer
 
 __all__ = ["COMMANDS", "add_commands"]
 
@@ -72,16 +72,14 @@ def _load(args: argparse.Namespace) -> Any:
     """The policy asked for (a damaged or foreign file is a run-folder error, exit 3)."""
     from creps_gym.runner.policy_store import load_policy
     from creps_gym.runner.session import RunDirError
-    from creps_gym.runner.trust import import_modules
 
-    try:
-        import_modules(args.imports)
-    except ValueError as exc:
-        raise UsageError(f"argument --import: {exc}") from None
+    import_user_modules(args.imports)  # the current directory is searched too, as for `run`
     try:
         return load_policy(args.run, args.which)
     except RunDirError:
         raise
+    except FileNotFoundError as exc:  # no such folder or file, or a run folder without that policy
+        raise FileNotFoundError(f"RUN: {str(exc).removeprefix('path: ')}") from None
     except ValueError as exc:
         raise RunDirError(f"RUN: {exc}") from None
 

@@ -51,12 +51,12 @@ def add_result_commands(commands: Any, add_import: Any) -> None:
 
 def _cmd_list(_: argparse.Namespace, usage_error: type[Exception]) -> int:
     from creps_gym.cli_table import ENVS, OPTIMIZERS
-    from creps_gym.listing import OPTIMIZER_HEADER, available_env_rows, table
+    from creps_gym.listing import OPTIMIZER_HEADER, available_env_rows, env_listing, table_wrapped
 
-    print("Environments:")
-    print(table(available_env_rows(ENVS)))
+    print("Environments: id, context space, parameter space θ, initial search distribution by default")
+    print(env_listing(available_env_rows(ENVS)))
     print("Optimizers:")
-    print(table([OPTIMIZER_HEADER, *OPTIMIZERS]))
+    print(table_wrapped([OPTIMIZER_HEADER, *OPTIMIZERS]))
     return 0
 
 

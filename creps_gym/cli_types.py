@@ -9,10 +9,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import sys
+from collections.abc import Sequence
 from typing import Any
 
 __all__ = [
     "UsageError",
+    "import_user_modules",
     "initial_mean",
     "integer",
     "key_value",
@@ -25,6 +29,22 @@ __all__ = [
 
 class UsageError(Exception):
     """A bad command line (exit code 2); here so that every command module raises the same class."""
+
+
+def import_user_modules(modules: Sequence[str]) -> None:
+    """Import the ``--import`` modules of any command, searching the current directory for them too.
+
+    The current directory goes last on ``sys.path`` (so a file there never shadows an installed module),
+    and only when ``--import`` names a module; nothing is ever imported from a run directory.
+    """
+    from creps_gym.runner.trust import import_modules
+
+    if modules and os.getcwd() not in sys.path:
+        sys.path.append(os.getcwd())
+    try:
+        import_modules(modules)
+    except ValueError as exc:
+        raise UsageError(f"argument --import: {exc}") from None
 
 
 def integer(minimum: int):

@@ -20,10 +20,13 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 __all__ = [
+    "LIST_WIDTH",
     "OPTIONAL_MODULES",
     "available_env_rows",
     "box_text",
+    "deprecated_ids",
     "did_you_mean",
+    "env_listing",
     "env_rows",
     "initial_hint",
     "live_table",
@@ -36,6 +39,8 @@ _ROLE = re.compile(r":[a-z]+:`~?(?:[\w.]*\.)?([^`]+)`")  # :class:`~a.b.C` -> C
 #: Optional modules an env may need, and the extra that installs them.
 OPTIONAL_MODULES = {"mujoco": "mujoco", "gymnasium_robotics": "mujoco"}
 ENV_HEADER = ["id", "context", "parameters θ", "initial (default)", "description"]
+#: The width ``creps-gym list`` keeps to (a longer cell wraps).
+LIST_WIDTH = 100
 OPTIMIZER_HEADER = ["name", "description"]
 
 
@@ -120,6 +125,62 @@ def table(rows: Sequence[Sequence[str]], indent: str = "  ") -> str:
         "  ".join([*(cell.ljust(w) for cell, w in zip(row, widths, strict=False)), row[-1]]) for row in rows
     ]
     return "\n".join(indent + line.rstrip() for line in lines)
+
+
+def table_wrapped(rows: Sequence[Sequence[str]], width: int = LIST_WIDTH, indent: str = "  ") -> str:
+    """:func:`table` whose last column wraps at ``width``, continued under its own start."""
+    import textwrap
+
+    widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]) - 1)]
+    start = len(indent) + sum(w + 2 for w in widths)
+    lines = []
+    for row in rows:
+        head = indent + "".join(cell.ljust(w + 2) for cell, w in zip(row, widths, strict=False))
+        wrapped = textwrap.wrap(row[-1], max(width - start, 20)) or [""]
+        lines += [(head if k == 0 else " " * start) + text for k, text in enumerate(wrapped)]
+    return "\n".join(line.rstrip() for line in lines)
+
+
+def deprecated_ids(env_ids: Iterable[str]) -> dict[str, str]:
+    """Each id with a newer version among ``env_ids`` (Gymnasium warns that it is out of date): its newest."""
+    newest: dict[str, tuple[int, str]] = {}
+    versions = {}
+    for env_id in env_ids:
+        match = re.fullmatch(r"(.+)-v(\d+)", env_id)
+        if match is not None:
+            versions[env_id] = (match.group(1), int(match.group(2)))
+            name, version = versions[env_id]
+            newest[name] = max(newest.get(name, (version, env_id)), (version, env_id))
+    return {
+        env_id: newest[name][1] for env_id, (name, version) in versions.items() if newest[name][0] > version
+    }
+
+
+def env_listing(rows: Sequence[Sequence[str]], width: int = LIST_WIDTH) -> str:
+    """Table rows of :func:`available_env_rows` (header first) as one block per env, within ``width``.
+
+    The first line has the id, the context space, the parameter space and the default initial distribution
+    (each wrapped to a line of its own where they do not fit); the description follows, indented, after
+    ``(deprecated: use NEWER)`` for an id with a newer version.
+    """
+    import textwrap
+
+    deprecated = deprecated_ids(row[0] for row in rows[1:])
+    lines = []
+    for env_id, context, params, initial, description in rows[1:]:
+        parts = [f"context {context}", f"θ {params}", f"initial {initial}"] if context != "?" else []
+        line = "  " + env_id
+        for part in parts:
+            if len(line) + 2 + len(part) > width:
+                lines.append(line)
+                line = "      " + part
+            else:
+                line += "  " + part
+        lines.append(line)
+        if env_id in deprecated:
+            description = f"(deprecated: use {deprecated[env_id]}) {description}"
+        lines += textwrap.wrap(description, width, initial_indent=" " * 6, subsequent_indent=" " * 6)
+    return "\n".join(lines)
 
 
 def did_you_mean(text: str, choices: Sequence[str]) -> str:

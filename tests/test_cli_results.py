@@ -114,7 +114,9 @@ def test_list_prints_non_cubic_boxes_per_dimension():
     pytest.importorskip("mujoco")  # without it `list` marks the kick as not available
     listed = cli_in_process("list").stdout
     kick = next(line for line in listed.splitlines() if "creps_gym/KickFlexibility-v2 " in line)
-    assert [cell.strip() for cell in kick.split("  ") if cell.strip()][1] == "[0.15, 0.3]×[-0.15, 0.15]"
+    assert [cell.strip() for cell in kick.split("  ") if cell.strip()][
+        1
+    ] == "context [0.15, 0.3]×[-0.15, 0.15]"
 
 
 def test_list_marks_envs_whose_optional_modules_are_missing(monkeypatch):

@@ -9,24 +9,30 @@ second attempt aborts the interpreter (exit code 134, a C++ ``__cxa_guard_acquir
   subprocess (a backend that crashes cannot take this process down), and sets ``MUJOCO_GL`` to the first
   that creates a context. Child processes (vector envs, Ray workers) inherit the choice. An explicit
   ``MUJOCO_GL`` is never changed.
+* :func:`import_mujoco` is how the MuJoCo envs import ``mujoco``: after :func:`choose_gl_backend`, and
+  with a short ``RuntimeError`` of this module's own, naming ``MUJOCO_GL``, when ``MUJOCO_GL=osmesa`` or
+  ``egl`` names a library that is not installed (mujoco's import fails deep inside PyOpenGL otherwise).
 * :func:`check_rendering` runs before every render that would create a GL context. It raises the same
   ``RuntimeError`` every time when rendering cannot work: headless with GLFW (``MUJOCO_GL`` unset with no
   working backend, or set to ``glfw``), or after a first attempt failed in this process.
 
-This module imports neither mujoco nor OpenGL.
+This module imports neither mujoco nor OpenGL at import time.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
+from types import ModuleType
 
 __all__ = [
     "GL_HELP",
     "check_rendering",
     "choose_gl_backend",
     "headless",
+    "import_mujoco",
     "is_gl_error",
     "probe_backend",
     "record_failure",
@@ -34,6 +40,8 @@ __all__ = [
 
 #: Backends tried, in order, on a headless machine.
 HEADLESS_BACKENDS = ("egl", "osmesa")
+#: The Debian packages of each headless backend's library.
+_PACKAGES = {"egl": "libegl1 libegl-mesa0 libgbm1 libgl1-mesa-dri", "osmesa": "libosmesa6"}
 #: What the probe subprocess runs: create, activate and free a 1x1 context.
 PROBE = "import mujoco; c = mujoco.GLContext(1, 1); c.make_current(); c.free()"
 #: The backends that need a display (mujoco's names for GLFW).
@@ -78,6 +86,44 @@ def choose_gl_backend() -> str | None:
         if _probed["choice"] is not None:
             os.environ["MUJOCO_GL"] = _probed["choice"]
     return _probed["choice"]
+
+
+def import_mujoco(required: bool = True) -> ModuleType | None:
+    """``mujoco``, imported after :func:`choose_gl_backend` (None if not installed and not ``required``).
+
+    Raises
+    ------
+    RuntimeError
+        ``MUJOCO_GL`` names a backend (``osmesa``, ``egl``) whose library cannot be loaded: mujoco selects
+        it on import, so it cannot be imported at all (the message names the cause).
+    ImportError
+        mujoco is not installed (``pip install creps-gym[mujoco]``).
+    """
+    choose_gl_backend()  # MuJoCo reads MUJOCO_GL once, when it is imported
+    if not required and "mujoco" not in sys.modules and importlib.util.find_spec("mujoco") is None:
+        return None
+    try:
+        import mujoco
+    except Exception as exc:  # e.g. PyOpenGL's AttributeError for a missing libOSMesa
+        error = _backend_error(exc)
+        if error is None:  # mujoco not installed (the extra is missing), or not a backend failure
+            raise
+        raise error from None  # short: the cause is in the message, not a 40-line traceback before it
+    return mujoco
+
+
+def _backend_error(exc: Exception) -> RuntimeError | None:
+    backend = os.environ.get("MUJOCO_GL", "")
+    if backend.lower().strip() not in HEADLESS_BACKENDS:
+        return None  # not a backend library this module can name
+    if isinstance(exc, ImportError) and exc.name == "mujoco":
+        return None
+    packages = _PACKAGES[backend.lower().strip()]
+    return RuntimeError(
+        f"MUJOCO_GL={backend}: mujoco cannot be imported, the {backend} library does not load "
+        f"({type(exc).__name__}: {exc}); install it (Debian: {packages}) or unset MUJOCO_GL (then the "
+        "first backend that works is chosen)"
+    )
 
 
 def check_rendering() -> None:

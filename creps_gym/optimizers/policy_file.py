@@ -278,12 +278,19 @@ class Policy:
         Raises
         ------
         ValueError
-            Not a policy file: unknown, missing or oversized entries, wrong dtypes or shapes, a bad field.
+            Not a policy file: a folder (a run folder's policies load with
+            :func:`creps_gym.load_policy`), unknown, missing or oversized entries, wrong dtypes or shapes,
+            a bad field.
         FileNotFoundError
             No such file.
         """
         from creps_gym.optimizers.policy_io import read_policy_file
 
+        if os.path.isdir(path):
+            raise ValueError(
+                f"path: expected a policy file, got the folder {path}; the policies of a run folder load "
+                f"with creps_gym.load_policy({os.fspath(path)!r}) (which='best' or 'final')"
+            )
         document, arrays = read_policy_file(path)
         try:
             return cls.from_dict(document, arrays)

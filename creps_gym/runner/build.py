@@ -6,7 +6,9 @@ instead and builds only the backend.
 
 from __future__ import annotations
 
+import inspect
 import math
+import re
 from typing import Any
 
 import gymnasium as gym
@@ -23,12 +25,56 @@ __all__ = [
     "build_backend",
     "build_optimizer",
     "default_initial_distribution",
+    "make_env",
     "per_parameter",
     "split_seed",
     "uniform_mean",
 ]
 
 Array = NDArray[np.float64]
+
+
+def make_env(env_id: str, kwargs: dict[str, Any]) -> gym.Env:
+    """``gymnasium.make(env_id, **kwargs)``, with the env's own message for a bad keyword argument.
+
+    An unknown keyword raises ``TypeError`` naming the keywords the env takes (and the closest ones); an
+    error the env raises about one of ``kwargs`` (``dim: expected ...``) loses Gymnasium's suffix ("was
+    raised from the environment creator ... with kwargs (...)"), which repeats every default.
+    """
+    try:
+        return gym.make(env_id, **kwargs)
+    except TypeError as exc:
+        message, suffix, _ = str(exc).partition(" was raised from the environment creator")
+        if not suffix:
+            raise
+        unknown = re.search(r"(\w+)\.__init__\(\) got an unexpected keyword argument '(\w+)'", message)
+        if unknown is not None and unknown.group(2) in kwargs:
+            raise TypeError(_unknown_keyword(env_id, unknown.group(2), unknown.group(1))) from None
+        if message.partition(":")[0] in kwargs:  # e.g. "dim: expected an integer >= 2, got str 'abc'"
+            raise TypeError(message) from None
+        raise
+
+
+def _unknown_keyword(env_id: str, key: str, refused_by: str) -> str:
+    """The message for an unknown env keyword: the keywords of the creator and of the class (in its
+    MRO) that refused ``key``, with the closest ones."""
+    from creps_gym.listing import did_you_mean
+
+    creator = gym.spec(env_id).entry_point
+    if isinstance(creator, str):
+        creator = gym.envs.registration.load_env_creator(creator)
+    callables = [creator]
+    callables += [cls.__init__ for cls in getattr(creator, "__mro__", ()) if cls.__name__ == refused_by]
+    plain = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    valid: set[str] = set(gym.spec(env_id).kwargs)
+    for function in callables:
+        try:
+            parameters = inspect.signature(function).parameters.values()
+        except (TypeError, ValueError):  # no signature to read
+            continue
+        valid |= {p.name for p in parameters if p.kind in plain}
+    names = sorted(valid - {"self", "render_mode"})
+    return f"env_kwargs: expected keywords of {env_id} from {names}, got {key!r}{did_you_mean(key, names)}"
 
 
 def split_seed(seed: int) -> tuple[np.random.Generator, int, int]:

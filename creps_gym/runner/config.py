@@ -12,7 +12,7 @@ import numpy as np
 
 from creps_gym._validation import check_positive_int
 
-__all__ = ["BACKENDS", "CONTEXT_DRAWS", "VECTOR_MODES", "RunConfig", "check_ray_address"]
+__all__ = ["BACKENDS", "CONTEXT_DRAWS", "RUN_OWNED_OPTIONS", "VECTOR_MODES", "RunConfig", "check_ray_address"]
 
 BACKENDS = ("auto", "serial", "vector", "ray")
 CONTEXT_DRAWS = ("batch", "reset")
@@ -69,6 +69,24 @@ def _vector_or_scalar(value: Any, name: str, positive: bool) -> Any:
             kind = "positive finite numbers with a finite variance > 0" if positive else "finite numbers"
             raise ValueError(f"{name}: expected a number or a list of {kind}, got {value!r}")
     return [float(v) for v in items] if isinstance(value, (list, tuple)) else float(value)
+
+
+#: Optimiser keywords that the run sets itself, and the run option (and flag) to use instead.
+RUN_OWNED_OPTIONS = {
+    "initial_mean": "--initial-mean (initial_mean= in Python)",
+    "initial_cov": "--initial-std (initial_std= in Python; initial_cov = initial_std²)",
+    "seed": "--seed (seed= in Python; the optimiser's seed is derived from it)",
+}
+
+
+def _check_run_owned_options(options: Mapping[str, Any]) -> None:
+    """Refuse an optimiser option that the run passes itself (a raw "multiple values" TypeError else)."""
+    for key, advice in RUN_OWNED_OPTIONS.items():
+        if key in options:
+            raise ValueError(
+                f"optimizer_options: expected no {key!r}, which the run sets: use {advice}; "
+                f"got {key}={options[key]!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -181,6 +199,7 @@ class RunConfig:
             if not isinstance(getattr(self, name), Mapping):
                 raise TypeError(f"{name}: expected a dict, got {type(getattr(self, name)).__name__}")
             object.__setattr__(self, name, dict(getattr(self, name)))
+        _check_run_owned_options(self.optimizer_options)
         if self.backend not in BACKENDS:
             raise ValueError(f"backend: expected one of {list(BACKENDS)}, got {self.backend!r}")
         if self.context_draws not in CONTEXT_DRAWS:

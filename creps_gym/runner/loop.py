@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import finite_mean, test_contexts
 from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
-from creps_gym.runner import checks
+from creps_gym.runner import build, checks
 from creps_gym.runner.backends import Backend, EnvSource, EpisodeError, retry
 from creps_gym.runner.build import build_backend, build_optimizer, default_initial_distribution, split_seed
 from creps_gym.runner.callbacks import as_callback
@@ -103,7 +103,7 @@ class Runner:
             raise TypeError("env: expected an env id in the config or an env object (exactly one)")
         if (config.optimizer is None) == (optimizer is None) and optimizer_class is None:
             raise TypeError("optimizer: expected a registry name or an optimiser object (exactly one)")
-        self.env = env if env is not None else gym.make(config.env, **config.env_kwargs)
+        self.env = env if env is not None else build.make_env(config.env, config.env_kwargs)
         checks.check_box_spaces(self.env)
         self.env_rng, optimizer_seed, eval_seed = split_seed(config.seed)
         self.n_context_dims = int(np.prod(self.env.observation_space.shape))
@@ -323,16 +323,18 @@ class Runner:
         """Iterate until a stop condition holds; log, checkpoint and call the callbacks on the way.
 
         With a run directory: holds its lock; a finished run only gets its missing or damaged result files
-        rewritten; the first Ctrl-C completes the iteration and checkpoints before ``KeyboardInterrupt``.
+        rewritten; the first Ctrl-C completes the iteration and checkpoints before ``KeyboardInterrupt``
+        (after the last iteration, it lets the result files be written and the run return).
         """
         if self.run_dir is not None:
             self.run_dir.lock.acquire()
         try:
             finished = self.history.stop_reason is not None
-            if not finished:
-                with DeferredInterrupt(enabled=self.run_dir is not None) as interrupt:
+            with DeferredInterrupt(enabled=self.run_dir is not None) as interrupt:
+                if not finished:
                     self._iterate(interrupt)
-            self._finish(completing=finished)
+                interrupt.message = DeferredInterrupt.FINISHING  # the last iteration is checkpointed
+                self._finish(completing=finished)
         finally:
             if self.run_dir is not None:
                 self.run_dir.lock.release()

@@ -159,6 +159,10 @@ def load_policy(path: str | os.PathLike[str], which: str = "best") -> Policy:
     if which not in WHICH:
         raise ValueError(f"which: expected one of {sorted(WHICH)}, got {which!r}")
     path = Path(path)
+    if not os.path.lexists(path):
+        raise FileNotFoundError(
+            f"path: expected a run folder or a policy file (.npz), got {path}, which does not exist"
+        )
     if not path.is_dir():
         return Policy.load(path)
     directory = RunDir.open(path)

@@ -169,7 +169,8 @@ class RunDir:
             if not overwrite:
                 raise FileExistsError(
                     f"out: expected a new or empty directory, got {self.path} which holds a run "
-                    "(continue it with `creps-gym resume`, pass --overwrite, or choose another directory)"
+                    "(continue it with `resume`, pass overwrite=True to replace it, or choose another "
+                    "directory)"
                 )
         elif foreign:
             raise FileExistsError(
@@ -180,7 +181,7 @@ class RunDir:
         elif entries and not overwrite:
             raise FileExistsError(
                 f"out: expected a new or empty directory, got {self.path} which holds {', '.join(entries)} "
-                f"but no {self.CONFIG} (the rest of a run); pass --overwrite to delete them, or choose "
+                f"but no {self.CONFIG} (the rest of a run); pass overwrite=True to delete them, or choose "
                 "another directory"
             )
 
@@ -191,7 +192,10 @@ class RunDir:
         try:
             os.stat(run_dir.path)
         except FileNotFoundError:
-            pass
+            raise FileNotFoundError(
+                f"run directory: expected a folder with {cls.CONFIG}, got {run_dir.path}, which does not "
+                "exist"
+            ) from None
         except OSError as exc:  # e.g. a name too long
             raise files.os_failure(run_dir.path, exc, "open it", "check the path") from None
         if not files.check_regular(run_dir.file(cls.CONFIG)):  # a link or a FIFO is refused

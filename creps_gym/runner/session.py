@@ -9,6 +9,9 @@ and must be deleted by hand once its process is gone.
 **Ctrl-C.** While a run with a directory iterates, the first SIGINT only sets a flag: the runner completes
 the current iteration, checkpoints and then raises ``KeyboardInterrupt`` (exit code 130), so ``resume``
 loses nothing. A second SIGINT interrupts at once (the iterations since the last checkpoint are redone).
+Once the last iteration is done the run has finished: a first SIGINT while its result files are written
+(and, from the command line, while its plot is drawn) is noted and the writing goes on; the run returns
+(exit code 0).
 """
 
 from __future__ import annotations
@@ -125,19 +128,21 @@ class DeferredInterrupt:
     It changes nothing outside the main thread or when SIGINT has a handler other than Python's default.
     """
 
-    def __init__(self, enabled: bool = True) -> None:
+    #: What the first SIGINT prints while the run iterates; :attr:`message` may change once it has finished.
+    ITERATING = "interrupted; finishing this iteration and checkpointing (Ctrl-C again stops at once)"
+    FINISHING = "interrupted after the last iteration: the run has finished; writing its results"
+
+    def __init__(self, enabled: bool = True, message: str = ITERATING) -> None:
         self.enabled = enabled
         self.requested = False
+        self.message = message
         self._previous: Any = None
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
-        print(
-            "creps-gym: interrupted; finishing this iteration and checkpointing (Ctrl-C again stops at once)",
-            file=sys.stderr,
-        )
+        print(f"creps-gym: {self.message}", file=sys.stderr)
 
     def __enter__(self) -> DeferredInterrupt:
         active = threading.current_thread() is threading.main_thread()

@@ -10,7 +10,8 @@ the configuration read back from ``config.json`` may only name
 * a registered optimiser name (the registry never imports a ``"module:Class"`` read from a file).
 
 Anything else raises :class:`~creps_gym.runner.session.RunDirError`. The user imports the module
-(``creps-gym resume --import MODULE``, or ``import MODULE`` before :func:`creps_gym.runner.resume`).
+(``creps-gym resume --import MODULE``, the same for every command, or ``import MODULE`` before
+:func:`creps_gym.runner.resume`).
 
 **Checkpoints.** A checkpoint records the :func:`config_fingerprint` of its run; :func:`check_checkpoint`
 refuses one written under another configuration, and runner state that no run can have written.
@@ -40,6 +41,7 @@ from creps_gym.selectors.registry import selector_names
 __all__ = [
     "CHECKPOINT_FORMAT",
     "FINGERPRINT_FIELDS_IF_SET",
+    "IMPORT_ADVICE",
     "check_checkpoint",
     "check_run_memory",
     "check_trusted",
@@ -66,6 +68,13 @@ FINGERPRINT_FIELDS_IF_SET = ("context_selector", "context_selector_options")
 DEFAULT_DIVERGENCE = RunConfig.divergence
 #: The fields format ``creps_gym.run/2`` fingerprinted (it had no ``context_draws``: always ``"reset"``).
 FINGERPRINT_FIELDS_2 = tuple(name for name in FINGERPRINT_FIELDS if name != "context_draws")
+
+
+#: What to do about a module a run directory names; the CLI puts its command in place of ``COMMAND``.
+IMPORT_ADVICE = (
+    "import the module yourself if you trust it (`creps-gym COMMAND --import MODULE`, or `import MODULE` "
+    "in Python first)"
+)
 
 
 def module_reference(text: str) -> str | None:
@@ -119,8 +128,7 @@ def check_trusted(config: RunConfig, source: str) -> None:
     def refuse(field: str, value: str, why: str) -> RunDirError:
         return RunDirError(
             f"{source}: {field}: expected {why}, got {value!r}; a run directory never makes the runner "
-            "import code: import the module yourself (`creps-gym resume --import MODULE`, or `import "
-            "MODULE` before `resume`) if you trust it"
+            f"import code: {IMPORT_ADVICE}"
         )
 
     if config.optimizer is not None and config.optimizer not in optimizer_names():

@@ -191,23 +191,33 @@ class FixedSelector:
 
     Parameters
     ----------
-    contexts : array_like, shape (m, z)
-        The set (inside the env's context box).
+    contexts : array_like, shape (n, z), or (n,) where z = 1
+        The set (inside the env's context box); its shape is checked against the env's z by :meth:`bind`.
     order : {"cycle", "random"}
     """
 
     name = "fixed"
 
     def __init__(self, contexts: Any, order: str = "cycle") -> None:
-        self.source = FixedSource(as_float_array(contexts, "contexts", (None, None)), order)
+        array = as_float_array(contexts, "contexts")
+        if array.ndim not in (1, 2):
+            raise ValueError(
+                f"contexts: expected shape (n, z), one row of z numbers per context, got {array.shape}"
+            )
+        self._given_shape = array.shape  # a flat list is one context per number: right only where z = 1
+        self.source = FixedSource(array if array.ndim == 2 else array[:, None], order)
 
     def bind(self, low: Array, high: Array, env_sampler: Any) -> None:
-        """Check the set against the env's context box."""
+        """Check the set against the env's context box (z = its length)."""
         low, high = finite_box(low, high, "context_selector 'fixed'")
-        contexts = self.source.contexts
-        if contexts.shape[1] != low.shape[0]:
-            raise ValueError(f"contexts: expected shape (m, {low.shape[0]}), got {contexts.shape}")
-        check_in_box(contexts, low, high, "contexts")
+        z = low.shape[0]
+        flat = len(self._given_shape) == 1
+        if (flat and z != 1) or (not flat and self._given_shape[1] != z):
+            raise ValueError(
+                f"contexts: expected shape (n, {z}), one row of {z} numbers per context, "
+                f"got {self._given_shape}"
+            )
+        check_in_box(self.source.contexts, low, high, "contexts")
 
     def select(self, rng: np.random.Generator, n: int) -> Array:
         """The next ``n`` contexts (n, z) of the cycle, or ``n`` drawn at random with ``rng``."""

@@ -40,6 +40,10 @@ SELECTORS: dict[str, type] = {
 }
 
 
+#: An example value of each required selector option, for the message that says it is missing.
+OPTION_EXAMPLES = {("fixed", "contexts"): "'contexts=[[0.5], [1.5]]': one list of z numbers per context"}
+
+
 def selector_names() -> list[str]:
     """The registered selector names."""
     return list(SELECTORS)
@@ -67,7 +71,15 @@ def check_options(name: Any, options: Any) -> dict[str, Any]:
         raise ValueError(f"context_selector: expected one of {selector_names()}, got {name!r}")
     if not isinstance(options, Mapping):
         raise TypeError(f"context_selector_options: expected a dict, got {type(options).__name__}")
-    accepted = [p for p in inspect.signature(SELECTORS[name]).parameters if p != "self"]
+    parameters = inspect.signature(SELECTORS[name]).parameters
+    accepted = [p for p in parameters if p != "self"]
+    missing = [p for p in accepted if parameters[p].default is inspect.Parameter.empty and p not in options]
+    if missing:
+        example = OPTION_EXAMPLES.get((name, missing[0]), f"{missing[0]}=VALUE")
+        raise ValueError(
+            f"context_selector_options: expected the option {missing[0]!r} of {name!r}, got none "
+            f"(e.g. --selector-opt {example})"
+        )
     for key, value in options.items():
         if key not in accepted:
             raise ValueError(

@@ -41,7 +41,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym.envs.opengl import check_rendering, choose_gl_backend, is_gl_error, record_failure
+from creps_gym.envs.opengl import check_rendering, import_mujoco, is_gl_error, record_failure
 from creps_gym.wrappers.episodic import EpisodicEnv, EpisodicVectorEnv
 
 __all__ = [
@@ -81,7 +81,7 @@ _REACHER: dict[str, Any] = {
 def _import_robotics_quietly() -> None:
     """Import Gymnasium-Robotics (registers its ids) without the Adroit notice it prints to stderr."""
     if "gymnasium_robotics" not in sys.modules:
-        choose_gl_backend()  # it imports mujoco, which reads MUJOCO_GL once
+        import_mujoco(required=False)  # it imports mujoco, which reads MUJOCO_GL once (a clear error)
         with contextlib.redirect_stderr(io.StringIO()):
             importlib.import_module("gymnasium_robotics")
 
@@ -97,7 +97,7 @@ class _RenderedEpisodicEnv(EpisodicEnv):
             raise ValueError(
                 f"render_mode: expected one of {self.metadata['render_modes']} or None, got {render_mode!r}"
             )
-        choose_gl_backend()  # before the inner env imports mujoco, which reads MUJOCO_GL once
+        import_mujoco(required=False)  # before the inner env imports mujoco, which reads MUJOCO_GL once
         kwargs = {**copy.deepcopy(self._defaults), **overrides}
         if render_mode is not None:  # the inner env renders the frames
             kwargs["env_kwargs"] = {**kwargs.get("env_kwargs", {}), "render_mode": render_mode}

@@ -13,9 +13,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from creps_gym.envs.opengl import check_rendering, choose_gl_backend, record_failure
+from creps_gym.envs.opengl import check_rendering, import_mujoco, record_failure
 
-choose_gl_backend()  # MuJoCo reads MUJOCO_GL once, when it is imported
+import_mujoco()  # chooses the GL backend first (MuJoCo reads MUJOCO_GL once); a clear error
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402

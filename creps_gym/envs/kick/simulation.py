@@ -21,9 +21,9 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 
-from creps_gym.envs.opengl import choose_gl_backend
+from creps_gym.envs.opengl import import_mujoco
 
-choose_gl_backend()  # MuJoCo reads MUJOCO_GL once, when it is imported
+import_mujoco()  # chooses the GL backend first (MuJoCo reads MUJOCO_GL once); a clear error
 import mujoco  # noqa: E402
 import mujoco.batch  # noqa: E402
 import numpy as np  # noqa: E402

@@ -11,13 +11,12 @@ from dataclasses import fields
 from pathlib import Path
 
 import pytest
-from helpers import EXTRAS, SPHERE, cli_command, cli_in_process
+from helpers import EXTRAS, SPHERE, cli_in_process
 
 import creps_gym
 from creps_gym.cli import main
 from creps_gym.optimizers import CREPSCMAConfig, optimizer_names
 from creps_gym.runner import History, RunDir
-
 
 cli = cli_in_process  # the commands' behaviour; a process only where the test is about one
 

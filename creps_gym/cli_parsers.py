@@ -23,6 +23,10 @@ __all__ = ["OPT_EXAMPLE", "add_import", "add_progress", "add_run"]
 #: The ``--opt`` example of ``run --help``: an option of the README's optimiser, c-cma-es (tested).
 OPT_EXAMPLE = "restarts=0"
 _WORKERS_DEFAULT = "vector: one per sample for a native vector env, else one per CPU; Ray: the cluster's CPUs"
+_DIVERGENCE_HELP = (
+    "stop once 10 evaluations in a row are worse than the first by this factor of its size ('none': never)"
+)
+_INITIAL_MEAN_HELP = "a number, p comma-separated numbers, or 'uniform' in the box"
 
 
 def add_progress(parser: argparse.ArgumentParser) -> None:
@@ -42,13 +46,21 @@ def add_progress(parser: argparse.ArgumentParser) -> None:
 
 
 def add_run(commands: Any) -> None:
-    from creps_gym.cli_table import BACKENDS, RUN_DEFAULTS, VECTOR_MODES
-
-    run_defaults = RUN_DEFAULTS  # RunConfig's (creps_gym.listing checks they agree): numpy stays unloaded
+    """The ``run`` command's parser: the required flags, where episodes run, budgets and evaluation, the
+    search's start and the optimiser's, env's and selector's options."""
+    from creps_gym.cli_table import RUN_DEFAULTS  # RunConfig's (listing checks they agree): no numpy
 
     run = commands.add_parser(
         "run", help="run an optimiser on an env", description="Run an optimiser on an env."
     )
+    _add_required(run)
+    _add_backend(run, RUN_DEFAULTS)
+    _add_budgets(run, RUN_DEFAULTS)
+    _add_options(run)
+    add_progress(run)
+
+
+def _add_required(run: argparse.ArgumentParser) -> None:
     required = [
         ("--env", str, "registered env id (see `creps-gym list`), or module:Env-v0"),
         ("--optimizer", str, "optimiser name (see `creps-gym list`; or one an --import module registers)"),
@@ -66,11 +78,16 @@ def add_run(commands: Any) -> None:
         help="episodes per iteration (>= 2; default: the optimiser's recommended batch size)",
     )
     run.add_argument("--overwrite", action="store_true", help="replace a run already in --out (deletes it)")
+
+
+def _add_backend(run: argparse.ArgumentParser, defaults: dict[str, Any]) -> None:
+    from creps_gym.cli_table import BACKENDS, VECTOR_MODES
+
     run.add_argument(
         "--backend",
-        default=run_defaults["backend"],
+        default=defaults["backend"],
         choices=BACKENDS,
-        help=f"where episodes run (default: {run_defaults['backend']})",
+        help=f"where episodes run (default: {defaults['backend']})",
     )
     run.add_argument(
         "--ray-address",
@@ -81,10 +98,13 @@ def add_run(commands: Any) -> None:
     )
     run.add_argument(
         "--vector-mode",
-        default=run_defaults["vector_mode"],
+        default=defaults["vector_mode"],
         choices=VECTOR_MODES,
-        help=f"vector backend flavour (default: {run_defaults['vector_mode']})",
+        help=f"vector backend flavour (default: {defaults['vector_mode']})",
     )
+
+
+def _add_budgets(run: argparse.ArgumentParser, defaults: dict[str, Any]) -> None:
     optional = [  # flag, type, help, what the default None means
         ("--workers", integer(1), "vector sub-envs or Ray tasks per iteration", _WORKERS_DEFAULT),
         ("--retries", integer(0), "re-runs of a failed episode", None),
@@ -94,25 +114,17 @@ def add_run(commands: Any) -> None:
         ("--max-episodes", integer(2), "episode budget", "no limit"),
         ("--target-regret", positive_float, "stop once the mean regret is at most this", "no target"),
         ("--max-time", positive_float, "stop after this many seconds", "no limit"),
-        (
-            "--divergence",
-            positive_or_none,
-            "stop once 10 evaluations in a row are worse than the first by "
-            "this factor of its size ('none': never)",
-            None,
-        ),
-        (
-            "--initial-mean",
-            initial_mean,
-            "a number, p comma-separated numbers, or 'uniform' in the box",
-            "the env-declared mean",
-        ),
+        ("--divergence", positive_or_none, _DIVERGENCE_HELP, None),
+        ("--initial-mean", initial_mean, _INITIAL_MEAN_HELP, "the env-declared mean"),
         ("--initial-std", numbers, "initial standard deviation(s)", "the env-declared one"),
     ]
     for flag, parse, text, if_none in optional:
-        default = run_defaults[flag[2:].replace("-", "_")]
+        default = defaults[flag[2:].replace("-", "_")]
         shown = if_none if default is None else default
         run.add_argument(flag, type=parse, default=default, help=f"{text} (default: {shown})")
+
+
+def _add_options(run: argparse.ArgumentParser) -> None:
     run.add_argument(
         "--context-selector",
         type=selector_name,
@@ -138,7 +150,6 @@ def add_run(commands: Any) -> None:
             metavar="KEY=VALUE",
             help=f"{text}; VALUE is JSON or a string (repeatable)",
         )
-    add_progress(run)
 
 
 def add_import(parser: argparse.ArgumentParser) -> None:

@@ -155,3 +155,26 @@ def test_mujoco_envs_give_a_frame_per_step_through_the_episode(env_id, kwargs):
     else:  # the start and one frame per inner step, at the inner env's rate
         assert int(count) == int(steps) + 1 and fps == "50"
     assert float(changed) > 0.001  # the motion changed the picture
+
+
+@EXTRAS
+@pytest.mark.parametrize("mode", ["rgb_array", "rgb_array_list"])
+def test_the_reacher_drawings_have_a_legend(mode, monkeypatch):
+    """Fig. 4b's marks are explained in the picture: the via-point (the context), the goal, the hand path."""
+    pytest.importorskip("matplotlib")
+    from creps_gym.envs.reacher import rendering
+
+    figures = []
+
+    def image(canvas):
+        figures.append(canvas.figure)
+        return np.zeros((1, 1, 3), dtype=np.uint8)
+
+    monkeypatch.setattr(rendering, "_image", image)
+    env = gym.make(REACHER, render_mode=mode)
+    env.reset(seed=0, options={"context": [1.0, 1.0]})
+    env.step(np.zeros(25))
+    env.render()
+    legend = figures[-1].axes[0].get_legend()
+    texts = {text.get_text() for text in legend.get_texts()}
+    assert {"via-point (context)", "goal", "hand path"} <= texts

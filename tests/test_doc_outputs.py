@@ -1,5 +1,6 @@
-"""Every run folder and output file that the README, the docs, the examples and the notebooks write is their
-own: running one snippet after another (or the example from the repository root) overwrites nothing."""
+"""Every run folder and output file that the README, the docs (benchmark READMEs too), the examples and the
+notebooks write is their own: running one snippet after another (or the example from the repository root)
+overwrites nothing."""
 
 from __future__ import annotations
 
@@ -11,12 +12,13 @@ ROOT = Path(__file__).resolve().parent.parent
 SOURCES = [
     ROOT / "README.md",
     *sorted((ROOT / "docs").rglob("*.md")),
+    *sorted((ROOT / "benchmarks").rglob("README.md")),
     *sorted((ROOT / "examples").glob("*.py")),
     ROOT / "notebooks" / "make_notebooks.py",
 ]
 # what writes a folder or a file: CLI options, the runner's run_dir, a save call, an example's default
 _WRITERS = [
-    r"(?:--out|-o|--save|--video)[ =]([^\s`\\\]|]+)",
+    r"(?:--out|-o|--save|--video|--cache)[ =]([^\s`\\\]|]+)",
     r"run_dir=[\"']([^\"']+)[\"']",
     r"\.save\([\"']([^\"']+)[\"']\)",
     r"default=Path\([\"']([^\"']+)[\"']\)",

@@ -4,7 +4,8 @@
 ``--context`` values given, else its coefficients; ``--save FILE`` writes it as a policy file.
 ``evaluate RUN`` runs it on fresh, seeded test contexts of the run's env and prints the mean return and
 regret as JSON (``--run-contexts``: the run's own test contexts, which reproduce its evaluation); ``--video
-FILE`` records one episode where the env renders (needs the ``video`` extra). Exit codes are the CLI's
+FILE`` records the episodes it evaluates, one test context unless ``--contexts`` says more, where the env
+renders (needs the ``video`` extra), saying on stderr what it renders. Exit codes are the CLI's
 (:mod:`creps_gym.cli`): 2 for a bad ``--context`` or option, 3 for a missing or damaged run folder or
 policy file, 4 for a missing extra, 1 when the env fails.
 """
@@ -58,14 +59,24 @@ def add_commands(commands: Any) -> None:
     )
     policy.add_argument("--extrapolate", action="store_true", help="accept contexts outside the context box")
     policy.add_argument("--save", metavar="FILE", help="also write the policy as a policy file (.npz)")
-    evaluate.add_argument("--contexts", type=integer(1), default=100, metavar="N", help="test contexts (100)")
+    evaluate.add_argument(
+        "--contexts",
+        type=integer(1),
+        default=None,
+        metavar="N",
+        help="test contexts (100; with --video 1: the video records each)",
+    )
     evaluate.add_argument("--seed", type=integer(0), default=0, help="seed of the test contexts (0)")
     evaluate.add_argument(
         "--run-contexts",
         action="store_true",
         help="use the run's own test contexts instead (reproduces the run's evaluation)",
     )
-    evaluate.add_argument("--video", metavar="FILE", help="record one episode (.mp4 or .gif; extra 'video')")
+    evaluate.add_argument(
+        "--video",
+        metavar="FILE",
+        help="record the evaluated episodes, the motion through each (.mp4 or .gif; extra 'video')",
+    )
 
 
 def _load(args: argparse.Namespace) -> Any:
@@ -153,7 +164,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     policy = _load(args)
     env_id, kwargs, config = _environment(args, policy)
-    n, seed = args.contexts, args.seed
+    n, seed = args.contexts if args.contexts is not None else (1 if args.video else 100), args.seed
     if args.run_contexts:
         if config is None:
             raise UsageError("argument --run-contexts: expected a run folder as RUN, got a policy file")
@@ -168,7 +179,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     out = {"env": env_id, "which": args.which, "source": policy.source, "contexts": n, "seed": seed}
     out.update(mean_return=mean_return, mean_regret=None if math.isnan(mean_regret) else mean_regret)
     if args.video:
-        out["video"] = _record(gym.make(env_id, render_mode=mode, **kwargs), policy, seed, args.video)
+        out["video"] = _record(gym.make(env_id, render_mode=mode, **kwargs), policy, n, seed, args.video)
     print(json.dumps(out, allow_nan=False))
     return 0
 
@@ -186,27 +197,18 @@ def _render_mode(env: Any, env_id: str) -> str:
     return mode
 
 
-def _record(env: Any, policy: Any, seed: int, path: str) -> str:
-    """Record one episode of ``env`` (context from ``env.reset(seed=seed)``) to ``path``; returns it."""
-    import imageio.v2 as imageio
-    import numpy as np
+def _record(env: Any, policy: Any, n: int, seed: int, path: str) -> str:
+    """Record the ``n`` episodes evaluated for ``seed`` (the same test contexts and reset seeds) of ``env``
+    to ``path``, each frame rendered as it is written, with progress on stderr; returns the path."""
+    from creps_gym.runner.policy_store import evaluation_draws
+    from creps_gym.runner.video import EpisodeVideo, write_video
 
-    fps = env.metadata.get("render_fps", 4)
     try:
-        context, info = env.reset(seed=seed)
-        context = np.asarray(info.get("context", context), dtype=np.float64).ravel()
-        env.step(policy(context, extrapolate=True))
-        frames = env.render()
-    finally:
+        _, contexts, seeds = evaluation_draws(env, n, seed)
+    except BaseException:
         env.close()
-    frames = list(frames) if isinstance(frames, list) else [frames]
-    frames = [np.asarray(f, dtype=np.uint8) for f in frames]
-    if path.lower().endswith(".gif"):
-        options: dict[str, Any] = {"duration": 1000.0 / fps, "loop": 0}
-    else:  # ffmpeg: even sizes suffice for yuv420p (no resizing to multiples of 16)
-        even = all(n % 2 == 0 for n in frames[0].shape[:2])
-        options = {"fps": fps, **({"macro_block_size": 1} if even else {})}
-    imageio.mimwrite(path, frames, **options)
+        raise
+    write_video(path, EpisodeVideo(env, policy, contexts, seeds, progress=sys.stderr))
     return path
 
 

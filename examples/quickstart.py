@@ -1,7 +1,8 @@
 """A short learning run: CREPS-CMA (old mean) on a contextual sphere, written as a plain ask/tell loop.
 
 Usage: ``python examples/quickstart.py [--iterations N] [--out DIR]``. Prints progress and writes the learning
-curve as CSV and PNG (the PNG needs the ``plot`` extra).
+curve as CSV and PNG (the PNG needs the ``plot`` extra) to ``DIR`` (default ``runs/example-quickstart``, a
+folder of its own: the README's main job writes ``runs/quickstart``).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from creps_gym.optimizers import CREPSCMA
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--iterations", type=int, default=300)
-    parser.add_argument("--out", type=Path, default=Path("runs/quickstart"))
+    parser.add_argument("--out", type=Path, default=Path("runs/example-quickstart"))
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     dim, context_dim, samples = 10, 1, 50

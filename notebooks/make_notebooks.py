@@ -194,7 +194,7 @@ env.close()"""
     new_code_cell(
         """try:
     import mujoco  # noqa: F401
-    kick = gym.make("creps_gym/KickPrecision-v0", render_mode="rgb_array")
+    kick = gym.make("creps_gym/KickPrecision-v1", render_mode="rgb_array")
 except ImportError as exc:
     kick = None
     print("MuJoCo is not installed (pip install creps-gym[mujoco]); skipping the kick:", exc)

@@ -109,6 +109,7 @@ def test_rgb_array_frames_show_the_start_and_the_end_of_the_episode(env_id):
 
 def test_render_mode_is_checked_before_anything_is_built():
     with pytest.raises(
-        ValueError, match=r"render_mode: expected one of \['rgb_array'\] or None, got 'human'"
+        ValueError,
+        match=r"render_mode: expected one of \['rgb_array', 'rgb_array_list'\] or None, got 'human'",
     ):
         ReacherTargetEnv(render_mode="human")  # gym.make would wrap it in HumanRendering

@@ -7,6 +7,7 @@ its cell sources and carry the outputs of a full-mode run (so the figures show o
 from __future__ import annotations
 
 import importlib.util
+import re
 from pathlib import Path
 
 import pytest
@@ -59,3 +60,24 @@ def test_notebook_runs_in_quick_mode(name: str) -> None:
     notebook = generator.build(generator.NOTEBOOKS[name.removesuffix(".ipynb")])
     generator.execute(notebook, quick=True, timeout=120)  # CellExecutionError, naming the cell, on failure
     _check_executed(notebook, name, quick=True)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_committed_outputs_hold_no_machine_path_or_warning(name: str) -> None:
+    outputs = _outputs(nbformat.read(NOTEBOOKS / name, as_version=4))
+    texts = [o.get("text", "") for o in outputs] + [o.get("data", {}).get("text/plain", "") for o in outputs]
+    text = "".join(texts)
+    assert not re.search(r"/root/|/home/|/Users/|/tmp/|site-packages|[A-Z]:\\", text), text
+    assert "Warning" not in text and "WARN" not in text and "\x1b[" not in text, text
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_notebooks_use_only_current_env_versions(name: str) -> None:
+    import gymnasium as gym
+
+    import creps_gym  # noqa: F401  (registers the ids)
+
+    source = "".join(c.source for c in _generator().NOTEBOOKS[name.removesuffix(".ipynb")])
+    for env_name, version in re.findall(r"creps_gym/(\w+)-v(\d+)", source):
+        newer = [i for i in gym.registry if re.fullmatch(rf"creps_gym/{env_name}-v(\d+)", i)]
+        assert max(int(i.rsplit("-v", 1)[1]) for i in newer) == int(version), (env_name, version, newer)

@@ -100,3 +100,13 @@ def test_versions_record_the_adapter_libraries_and_run_files_share_one_mode(runs
     assert len({stat.S_IMODE(p.stat().st_mode) for p in files}) == 1, {
         p.name: oct(p.stat().st_mode) for p in files
     }
+
+
+def test_a_run_without_regret_plots_its_evaluation_return_on_a_symlog_axis(tmp_path):
+    """The reacher's cost falls from 18 to 0.02: on a linear axis its curve is flat after the first drop."""
+    pytest.importorskip("matplotlib")
+    small = {"eval_every": 2, "eval_contexts": 4, "run_dir": tmp_path / "reacher"}
+    run("creps-cma-old", "creps_gym/PlanarReacher-v1", 6, 20, 0, **small)
+    left, right = plot_run_dirs([tmp_path / "reacher"]).get_axes()
+    assert left.get_yscale() == right.get_yscale() == "symlog"
+    assert right.get_ylabel() == "mean evaluation return (symlog)"

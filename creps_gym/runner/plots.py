@@ -3,9 +3,9 @@
 :func:`plot_histories` draws, for each group of runs (one optimiser over several seeds), the median and a
 quantile band over the runs of (left) the mean sample return on a symlog axis and (right) the evaluated
 regret of the recommended policy on a log axis with the target regret as a dashed line, or its evaluation
-return when the env has no regret. The x axis is the number of training episodes; the legend, below both
-panels (it never covers a curve: the figure grows with it), gives each group's size and stop reasons,
-and the title names the env and its dimensions. :func:`plot_run_dirs` does the same from run
+return (symlog axis) when the env has no regret. The x axis is the number of training episodes; the legend,
+below both panels (it never covers a curve: the figure grows with it), gives each group's size and stop
+reasons, and the title names the env and its dimensions. :func:`plot_run_dirs` does the same from run
 directories, one group per setting (:mod:`creps_gym.runner.groups`: everything fingerprinted but the
 seed), or as ``labels`` say. Runs of different envs are refused unless ``mix_envs=True``.
 """
@@ -146,8 +146,11 @@ def plot_histories(
         if target:
             line = right.axhline(target_regret, color="black", linestyle="--", linewidth=1)
             entries.append((line, f"target regret {target_regret:g}"))
-    else:
-        right.set_ylabel("mean evaluation return")
+    else:  # returns that span decades (a cost falling from 10 to 0.01) need a log-like axis, as on the left
+        _symlog(
+            right, np.concatenate([run.column("eval_return") for runs in groups.values() for run in runs])
+        )
+        right.set_ylabel("mean evaluation return (symlog)")
     for axis in (left, right):
         axis.grid(True, alpha=0.3)
     if entries:

@@ -35,7 +35,7 @@ from creps_gym.runner.contexts import ContextDraws
 from creps_gym.runner.history import History, encode_float
 from creps_gym.runner.rundir import RunDir
 
-__all__ = ["WHICH", "RunPolicies", "evaluate_contexts", "evaluate_on_env", "load_policy"]
+__all__ = ["WHICH", "RunPolicies", "evaluate_contexts", "evaluate_on_env", "evaluation_draws", "load_policy"]
 
 #: ``load_policy``'s choices: the run folder's file for each.
 WHICH = {"best": RunDir.BEST_POLICY, "final": RunDir.POLICY}
@@ -223,10 +223,19 @@ def evaluate_on_env(policy: Policy, env: gym.Env, n: int, seed: int, retries: in
     """Mean return and mean regret (NaN without one) of ``policy`` on ``n`` test contexts of ``env``, drawn
     as a run draws its test contexts from its evaluation seed (``seed`` here): with a run's evaluation seed
     and count, the numbers are the run's."""
+    model, contexts, seeds = evaluation_draws(env, n, seed, retries)
+    return evaluate_contexts(policy, env, model, contexts, seeds, retries)
+
+
+def evaluation_draws(
+    env: gym.Env, n: int, seed: int, retries: int = 0
+) -> tuple[Any, NDArray[np.float64], Any]:
+    """The creps_gym model behind ``env`` (or None), and the ``n`` test contexts (n, z) and reset seeds (n,)
+    that :func:`evaluate_on_env` evaluates for ``seed`` (a video of them shows the evaluated episodes)."""
     model = unwrapped_model(env)
     seeds = np.random.default_rng(seed).integers(0, 2**63 - 1, size=n)
     if model is not None:
         contexts = test_contexts(model, n, seed)
     else:
         contexts = ContextDraws(env, "reset", retries).reset_contexts(seeds, "evaluation")
-    return evaluate_contexts(policy, env, model, contexts, seeds, retries)
+    return model, contexts, seeds

@@ -38,9 +38,11 @@ import io
 import sys
 from typing import Any, ClassVar
 
+import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym.envs.frames import EpisodeFrames
 from creps_gym.envs.opengl import check_rendering, import_mujoco, is_gl_error, record_failure
 from creps_gym.wrappers.episodic import EpisodicEnv, EpisodicVectorEnv
 
@@ -87,9 +89,10 @@ def _import_robotics_quietly() -> None:
 
 
 class _RenderedEpisodicEnv(EpisodicEnv):
-    """An :class:`EpisodicEnv` with fixed defaults that renders the inner env (``rgb_array``)."""
+    """An :class:`EpisodicEnv` with fixed defaults that renders the inner env: ``rgb_array`` (one frame) and
+    ``rgb_array_list`` (the inner episode, a frame per inner step, at the inner env's ``render_fps``)."""
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array", "rgb_array_list"], "render_fps": 4}
     _defaults: ClassVar[dict[str, Any]]
 
     def __init__(self, render_mode: str | None = None, **overrides: Any) -> None:
@@ -100,21 +103,52 @@ class _RenderedEpisodicEnv(EpisodicEnv):
         import_mujoco(required=False)  # before the inner env imports mujoco, which reads MUJOCO_GL once
         kwargs = {**copy.deepcopy(self._defaults), **overrides}
         if render_mode is not None:  # the inner env renders the frames
-            kwargs["env_kwargs"] = {**kwargs.get("env_kwargs", {}), "render_mode": render_mode}
+            kwargs["env_kwargs"] = {**kwargs.get("env_kwargs", {}), "render_mode": "rgb_array"}
         super().__init__(**kwargs, render_mode=render_mode)
+        if render_mode is not None:  # keeps the inner states, whose frames are drawn when read
+            self.inner = _StateRecorder(self.inner)
+            fps = self.inner.metadata.get("render_fps", self.metadata["render_fps"])
+            self.metadata = {**self.metadata, "render_fps": fps}  # the inner steps' own rate
 
-    def render(self) -> NDArray[np.uint8] | None:
-        """The inner env's frame (uint8, (height, width, 3)): the start with the context set after
-        ``reset``, the last inner state after ``step``; None without a render mode."""
+    def render(self) -> NDArray[np.uint8] | list[NDArray[np.uint8]] | None:
+        """``rgb_array``: the inner env's frame (uint8, (height, width, 3)): the start with the context set
+        after ``reset``, the last inner state after ``step``; ``rgb_array_list``: the frames of
+        :meth:`episode_frames`; None without a render mode."""
         if self.render_mode is None:
             return None
+        if self.render_mode == "rgb_array_list":
+            return list(self.episode_frames())
+        if self._last_params is None:
+            return self._start_frame()
+        return self._inner_frame()
+
+    def episode_frames(self) -> EpisodeFrames:
+        """The last inner episode, a frame at its start and after every inner step, each drawn when read
+        (the start with the context set alone before the first step)."""
+        if self.render_mode is None:
+            raise RuntimeError("episode_frames(): expected an env made with a render_mode, got None")
+        if self._last_params is None:
+            return EpisodeFrames(1, lambda _: self._start_frame())
+        states = list(self.inner.states)
+        return EpisodeFrames(len(states), lambda i: self._state_frame(states[i]))
+
+    def _start_frame(self) -> NDArray[np.uint8]:
+        """The episode's start with its context (the goal marker moved to it)."""
         if self._context is None:
             raise RuntimeError("render() called before reset(): there is no context to show")
         check_rendering()  # one clear error, every time, where a GL context would fail or abort
-        if self._last_params is None:  # show the episode's start with its context
-            observation, _ = self.inner.reset(seed=self.start_seed, options=self.reset_options)
-            self.access.write(self.inner, self._context, observation)
-            _update_positions(self.inner)  # the goal marker moved to the context: place it before drawing
+        observation, _ = self.inner.reset(seed=self.start_seed, options=self.reset_options)
+        self.access.write(self.inner, self._context, observation)
+        _update_positions(self.inner)  # the goal marker moved to the context: place it before drawing
+        return self._inner_frame()
+
+    def _state_frame(self, qpos: NDArray[np.float64]) -> NDArray[np.uint8]:
+        _simulation(self.inner)[1].qpos[:] = qpos
+        _update_positions(self.inner)
+        return np.array(self._inner_frame(), dtype=np.uint8)  # a copy: a renderer may reuse its buffer
+
+    def _inner_frame(self) -> NDArray[np.uint8]:
+        check_rendering()
         try:
             return self.inner.render()
         except Exception as exc:  # the GL backends raise assorted error types
@@ -123,16 +157,41 @@ class _RenderedEpisodicEnv(EpisodicEnv):
             raise
 
 
-def _update_positions(env: Any) -> None:
-    """``mj_forward`` on the MuJoCo model behind ``env`` (a maze's ``point_env`` or the env itself), so
-    that sites moved by writing the context (the maze's goal marker) are drawn where they now are."""
+class _StateRecorder(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Keeps the inner MuJoCo positions (qpos) at the start of each inner episode (the context written)
+    and after every step, so that a rendering env draws its frames afterwards, each when read."""
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
+        self.states: list[NDArray[np.float64]] = []
+
+    def reset(self, **kwargs: Any) -> Any:
+        self.states = []
+        return self.env.reset(**kwargs)
+
+    def step(self, action: Any) -> Any:
+        data = _simulation(self.env)[1]
+        if not self.states:  # the start, after the context was written
+            self.states.append(data.qpos.copy())
+        result = self.env.step(action)
+        self.states.append(data.qpos.copy())
+        return result
+
+
+def _simulation(env: Any) -> tuple[Any, Any]:
+    """The MuJoCo model and data behind ``env`` (a maze's ``point_env``, or the env itself)."""
     inner = env.unwrapped
     simulation = getattr(inner, "point_env", inner)
-    model, data = getattr(simulation, "model", None), getattr(simulation, "data", None)
-    if model is not None and data is not None:
-        import mujoco
+    return simulation.model, simulation.data
 
-        mujoco.mj_forward(model, data)
+
+def _update_positions(env: Any) -> None:
+    """``mj_forward`` on the MuJoCo model behind ``env``, so that sites moved by writing the context (the
+    maze's goal marker) or bodies placed by setting ``qpos`` are drawn where they now are."""
+    import mujoco
+
+    mujoco.mj_forward(*_simulation(env))
 
 
 class PointMazeGoalEnv(_RenderedEpisodicEnv):
@@ -155,8 +214,10 @@ class PointMazeGoalEnv(_RenderedEpisodicEnv):
         After the single step (``terminated=True``); the inner episode always runs 100 steps (``info``
         has ``inner_length``, ``inner_terminated``, ``inner_truncated`` and the last ``inner_info``).
     Arguments
-        render_mode : {"rgb_array", None}
-            ``render()`` gives the inner MuJoCo frame (480 x 480).
+        render_mode : {"rgb_array", "rgb_array_list", None}
+            ``rgb_array``: ``render()`` gives the inner MuJoCo frame (480 x 480); ``rgb_array_list``: the
+            inner episode, a frame at its start and after each inner step, at the inner env's
+            ``render_fps`` (50: real time). ``episode_frames()`` draws the same frames, each when read.
         **overrides
             Any :class:`~creps_gym.wrappers.EpisodicEnv` argument (``max_inner_steps``, ``start_seed``,
             ``controller``, ...) replacing the defaults above.
@@ -190,8 +251,10 @@ class ReacherTargetEnv(_RenderedEpisodicEnv):
         After the single step (``terminated=True``); the inner episode runs 50 steps (``info`` has
         ``inner_length``, ``inner_terminated``, ``inner_truncated`` and the last ``inner_info``).
     Arguments
-        render_mode : {"rgb_array", None}
-            ``render()`` gives the inner MuJoCo frame (480 x 480).
+        render_mode : {"rgb_array", "rgb_array_list", None}
+            ``rgb_array``: ``render()`` gives the inner MuJoCo frame (480 x 480); ``rgb_array_list``: the
+            inner episode, a frame at its start and after each inner step, at the inner env's
+            ``render_fps`` (50: real time). ``episode_frames()`` draws the same frames, each when read.
         **overrides
             Any :class:`~creps_gym.wrappers.EpisodicEnv` argument replacing the defaults above.
     Version History

@@ -9,6 +9,7 @@ from numpy.typing import NDArray
 
 from creps_gym._validation import check_bool, check_positive_int, check_real, check_real_in_range
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
+from creps_gym.envs.frames import EpisodeFrames
 from creps_gym.envs.kick.model import (
     DURATION_RANGE,
     JOINT_HIGH,
@@ -199,21 +200,35 @@ class KickEnv(ContextualEpisodicEnv):
 
     def render(self) -> np.ndarray | list[np.ndarray] | None:
         """``rgb_array``: one (height, width, 3) uint8 frame at the end of the last kick's swing;
-        ``rgb_array_list``: the frames of the whole last episode at ``metadata["render_fps"]``."""
+        ``rgb_array_list``: the frames of the whole last episode at ``metadata["render_fps"]`` (a list of
+        :meth:`episode_frames`)."""
         if self.render_mode is None:
             from gymnasium import logger
 
             logger.warn("render() called without a render_mode: pass render_mode='rgb_array' to make().")
             return None
+        if self.render_mode == "rgb_array":
+            frames, index = self._episode_frames()
+            return self._frame_renderer()(frames[index], self._render_target(frames[0]))
+        return list(self.episode_frames())
+
+    def episode_frames(self) -> EpisodeFrames:
+        """The frames of the whole last episode (the settled robot before the first kick), one every
+        ``FRAME_STEPS`` simulation steps (``metadata["render_fps"]`` = 25 per simulated second), each rendered
+        when it is read: the simulation runs here, the rendering (about 0.1 s a frame in software) later.
+        In the ``rgb_array_list`` mode the frames have no shadows or reflections, which halves that."""
+        frames, _ = self._episode_frames()
+        target = self._render_target(frames[0])
+        draw = self._frame_renderer()
+        return EpisodeFrames(frames.shape[0], lambda i: draw(frames[i], target))
+
+    def _frame_renderer(self) -> Any:
         from creps_gym.envs.kick.rendering import KickRenderer
 
         if self._renderer is None:
-            self._renderer = KickRenderer(self.models.full, self.width, self.height)
-        frames, index = self._episode_frames()
-        target = self._render_target(frames[0])
-        if self.render_mode == "rgb_array":
-            return self._renderer.frame(frames[index], target)
-        return [self._renderer.frame(q, target) for q in frames]
+            video = self.render_mode == "rgb_array_list"  # hundreds of frames: no shadows or reflections
+            self._renderer = KickRenderer(self.models.full, self.width, self.height, shadows=not video)
+        return self._renderer.frame
 
     def _render_target(self, first_frame: Array) -> Array | None:
         """World (x, y) of the task's target for the current context (the ball's start plus

@@ -4,7 +4,8 @@ Headless machines need an OpenGL backend chosen *before* mujoco is imported: wit
 :func:`creps_gym.envs.opengl.choose_gl_backend` picks EGL (Debian packages ``libegl1 libegl-mesa0 libgbm1
 libgl1-mesa-dri``), else OSMesa (``libosmesa6``), whichever works; where none does, every render raises the
 same ``RuntimeError`` (the interpreter never aborts).
-Software rendering costs roughly 0.05-0.15 s per 480x360 frame.
+Software rendering costs roughly 0.05-0.15 s per 480x360 frame, about half that without shadows and
+reflections (the ``rgb_array_list`` frames of a video).
 """
 
 from __future__ import annotations
@@ -34,9 +35,13 @@ class KickRenderer:
         The full kick model.
     width, height : int
         Frame size in pixels (at most the model's offscreen buffer, 640x480).
+    shadows : bool
+        Draw shadows and reflections (True); without them a software-rendered frame takes about half the
+        time (measured 0.15 s against 0.07 s at 480x360 with EGL on llvmpipe), which a video's hundreds of
+        frames feel.
     """
 
-    def __init__(self, model: mujoco.MjModel, width: int, height: int) -> None:
+    def __init__(self, model: mujoco.MjModel, width: int, height: int, shadows: bool = True) -> None:
         max_w, max_h = int(model.vis.global_.offwidth), int(model.vis.global_.offheight)
         if width > max_w or height > max_h:
             raise ValueError(f"width, height: expected at most {max_w}x{max_h}, got {width}x{height}")
@@ -47,6 +52,9 @@ class KickRenderer:
             self._renderer = mujoco.Renderer(model, height=height, width=width)
         except Exception as exc:  # the GL backends raise assorted error types
             raise record_failure(exc) from exc
+        if not shadows:
+            for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION):
+                self._renderer.scene.flags[flag] = 0
         self.camera = mujoco.MjvCamera()
         self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
         self.camera.azimuth, self.camera.elevation = 60.0, -25.0  # behind the robot, on its right

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array, check_fits_in_memory, check_positive_int, check_real
 from creps_gym.envs.base import ContextualEpisodicEnv, ContextualEpisodicVectorEnv
+from creps_gym.envs.frames import EpisodeFrames
 from creps_gym.movement import DiscreteDMP, DMPConfig, DMPTrajectory
 
 __all__ = ["PlanarReacherEnv", "PlanarReacherVectorEnv", "end_effector", "forward_kinematics"]
@@ -26,6 +27,7 @@ LINK_LENGTH = 1.0
 N_STEPS = 100
 DT = 0.01
 VIA_STEP = 50
+VIDEO_STRIDE = 2  # steps per rgb_array_list frame: 25 frames/s show the 100 steps/s motion at half speed
 GOAL = np.array([5.0, 0.0])
 START_ANGLES = np.array([np.pi / 2, 0.0, 0.0, 0.0, 0.0])
 GOAL_ANGLES = np.zeros(N_LINKS)
@@ -120,9 +122,12 @@ class PlanarReacherEnv(ContextualEpisodicEnv):
     (v0 registers 15). ``n_basis`` changes the number of basis functions per joint (the
     parameter count is ``5 n_basis``); the paper and the documented numbers use 5.
     ``render_mode="rgb_array"`` draws the last motion as overlaid postures, darker nearer step 50, with the
-    via-point (red cross), the goal (blue star) and the hand's path, like the paper's Fig. 4b (needs
-    matplotlib, the ``plot`` extra). Before the first step it draws the start posture. There is no
-    ``"human"`` mode.
+    via-point (red cross), the goal (blue star), the hand's path and a legend, like the paper's Fig. 4b
+    (needs matplotlib, the ``plot`` extra). ``"rgb_array_list"`` draws the motion as it runs, for a video:
+    the arm at every second step (51 frames, the hand's path so far, the time), at
+    ``metadata["render_fps"]`` = 25, half the motion's speed (its 1 s lasts 2 s);
+    ``env.unwrapped.episode_frames()`` gives the same frames, each drawn when read. Before the first step
+    both draw the start posture. There is no ``"human"`` mode.
 
     ## Version History
     * v1: the declared start is the paper's, σ = 1 (``initial_std=1.0``); the dynamics and the return are
@@ -130,7 +135,7 @@ class PlanarReacherEnv(ContextualEpisodicEnv):
     * v0: initial version (declared start σ = 15).
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array", "rgb_array_list"], "render_fps": 25}
 
     def __init__(
         self,
@@ -188,19 +193,31 @@ class PlanarReacherEnv(ContextualEpisodicEnv):
         }
         return returns, info
 
-    def render(self) -> NDArray[np.uint8] | None:
-        """An RGB image (uint8, shape (480, 480, 3)) of the last motion, or None without a render mode."""
+    def render(self) -> NDArray[np.uint8] | list[NDArray[np.uint8]] | None:
+        """``rgb_array``: an RGB image (uint8, shape (480, 480, 3)) of the last motion; ``rgb_array_list``:
+        its frames (:meth:`episode_frames`); None without a render mode."""
         if self.render_mode is None:
             return None
-        if self._context is None:
-            raise RuntimeError("render() called before reset(): there is no via-point to draw")
+        if self.render_mode == "rgb_array_list":
+            return list(self.episode_frames())
         from creps_gym.envs.reacher.rendering import draw_motion
 
+        return draw_motion(self._postures(), self._context, GOAL, VIA_STEP)
+
+    def episode_frames(self) -> EpisodeFrames:
+        """The last motion as it runs, one frame every second step (each drawn when read; the start
+        posture alone before the first step)."""
+        from creps_gym.envs.reacher.rendering import motion_frames
+
+        return motion_frames(self._postures(), self._context, GOAL, VIA_STEP, DT, stride=VIDEO_STRIDE)
+
+    def _postures(self) -> Array:
+        """Joint positions (T, 6, 2) of the last motion, or (1, 6, 2) of the start before the first step."""
+        if self._context is None:
+            raise RuntimeError("render() called before reset(): there is no via-point to draw")
         if self._last_params is None:
-            postures = forward_kinematics(START_ANGLES)[None]
-        else:
-            postures = forward_kinematics(self.joint_trajectories(self._last_params[None]).positions[0])
-        return draw_motion(postures, self._context, GOAL, VIA_STEP)
+            return forward_kinematics(START_ANGLES)[None]
+        return forward_kinematics(self.joint_trajectories(self._last_params[None]).positions[0])
 
 
 class PlanarReacherVectorEnv(ContextualEpisodicVectorEnv):

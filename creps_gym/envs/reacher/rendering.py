@@ -1,6 +1,7 @@
 """Fig. 4b-style drawing of a planar-arm motion with matplotlib's Agg backend (the optional ``plot`` extra).
 
-matplotlib is imported only when an image is drawn, so the envs work without it.
+:func:`draw_motion` draws a whole motion in one image (overlaid postures), :func:`motion_frames` one frame
+per time step for a video. matplotlib is imported only when an image is drawn, so the envs work without it.
 """
 
 from __future__ import annotations
@@ -10,7 +11,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["draw_motion", "posture_shades"]
+from creps_gym.envs.frames import EpisodeFrames
+
+__all__ = ["draw_motion", "motion_frames", "posture_shades"]
 
 Array = NDArray[np.float64]
 SIZE_PIXELS = 480
@@ -69,18 +72,63 @@ def draw_motion(postures: Array, via_point: Array, goal: Array, via_step: int) -
     ndarray of uint8, shape (480, 480, 3)
         The RGB image.
     """
-    figure_class, canvas_class = _matplotlib()
-    fig = figure_class(figsize=(SIZE_PIXELS / DPI, SIZE_PIXELS / DPI), dpi=DPI)
-    canvas = canvas_class(fig)
-    ax = fig.add_axes((0.13, 0.1, 0.84, 0.86))
+    canvas, ax = _axes(postures)
     indices, grey = posture_shades(postures.shape[0], via_step)
     order = np.argsort(-grey)  # light postures first, the darkest on top
     for index, level in zip(indices[order], grey[order], strict=True):
         xy = postures[index]
         ax.plot(xy[:, 0], xy[:, 1], "-o", color=str(level), lw=1.5, ms=2.5)
-    ax.plot(postures[:, -1, 0], postures[:, -1, 1], "-", color="tab:green", lw=1.0)
-    ax.plot([via_point[0]], [via_point[1]], "x", color="red", ms=12, mew=3)
-    ax.plot([goal[0]], [goal[1]], "*", color="tab:blue", ms=14)
+    ax.plot(postures[:, -1, 0], postures[:, -1, 1], "-", color="tab:green", lw=1.0, label="hand path")
+    _markers(ax, via_point, goal)
+    return _image(canvas)
+
+
+def motion_frames(
+    postures: Array, via_point: Array, goal: Array, via_step: int, dt: float, stride: int = 2
+) -> EpisodeFrames:
+    """One frame per ``stride`` samples of a motion, each drawn when read: the arm at that time, the hand's
+    path so far, the via-point, the goal and the time.
+
+    Parameters
+    ----------
+    postures : ndarray, shape (T, joints + 1, 2)
+        Joint positions over time (base first).
+    via_point, goal : ndarray, shape (2,)
+    via_step : int
+        Sample index of the via-point time (the title says when it is reached).
+    dt : float
+        Seconds between samples.
+    stride : int
+        Samples per frame (the last sample always has a frame).
+
+    Returns
+    -------
+    EpisodeFrames
+        ``ceil((T - 1) / stride) + 1`` frames, each an ndarray of uint8, shape (480, 480, 3).
+    """
+    samples = np.unique(np.append(np.arange(0, postures.shape[0], stride), postures.shape[0] - 1))
+    canvas, ax = _axes(postures)
+    (path,) = ax.plot([], [], "-", color="tab:green", lw=1.0, label="hand path")
+    (arm,) = ax.plot([], [], "-o", color="black", lw=2.0, ms=3.5, label="arm")
+    _markers(ax, via_point, goal)
+
+    def draw(index: int) -> NDArray[np.uint8]:
+        k = int(samples[index])
+        arm.set_data(postures[k, :, 0], postures[k, :, 1])
+        path.set_data(postures[: k + 1, -1, 0], postures[: k + 1, -1, 1])
+        note = " (via-point time)" if k == via_step else ""
+        ax.set_title(f"t = {k * dt:.2f} s, step {k} of {postures.shape[0] - 1}{note}", fontsize=10)
+        return _image(canvas)
+
+    return EpisodeFrames(len(samples), draw)
+
+
+def _axes(postures: Array) -> tuple[Any, Any]:
+    """The Agg canvas of a 480x480 figure and square axes that hold every posture of the motion."""
+    figure_class, canvas_class = _matplotlib()
+    fig = figure_class(figsize=(SIZE_PIXELS / DPI, SIZE_PIXELS / DPI), dpi=DPI)
+    canvas = canvas_class(fig)
+    ax = fig.add_axes((0.13, 0.1, 0.84, 0.84))
     low = min(-1.5, float(postures.min()) - 0.2)
     high = max(5.5, float(postures.max()) + 0.2)
     ax.set_xlim(low, high)
@@ -89,6 +137,16 @@ def draw_motion(postures: Array, via_point: Array, goal: Array, via_step: int) -
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.grid(True, lw=0.3)
+    return canvas, ax
+
+
+def _markers(ax: Any, via_point: Array, goal: Array) -> None:
+    """The via-point (red cross), the goal (blue star) and the legend."""
+    ax.plot([via_point[0]], [via_point[1]], "x", color="red", ms=12, mew=3, label="via-point (context)")
+    ax.plot([goal[0]], [goal[1]], "*", color="tab:blue", ms=14, label="goal")
+    ax.legend(loc="upper right", fontsize="small", framealpha=0.9)
+
+
+def _image(canvas: Any) -> NDArray[np.uint8]:
     canvas.draw()
-    image = np.asarray(canvas.buffer_rgba())[:, :, :3].copy()
-    return image
+    return np.asarray(canvas.buffer_rgba())[:, :, :3].copy()

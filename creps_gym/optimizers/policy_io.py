@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from creps_gym.optimizers.state_files import replace_atomically
 
-__all__ = ["MAX_JSON_BYTES", "MAX_POLICY_BYTES", "read_policy_file", "write_policy_file"]
+__all__ = ["MAX_JSON_BYTES", "MAX_POLICY_BYTES", "policy_bytes", "read_policy_file", "write_policy_file"]
 
 MAX_POLICY_BYTES = 64 * 2**20
 MAX_JSON_BYTES = 8 * 2**20
@@ -30,13 +30,11 @@ JSON_ENTRY = "__policy__.json"
 ARRAY_ENTRIES = ("coefficients", "context_low", "context_high", "param_low", "param_high")
 
 
-def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]], path: Any) -> Path:
-    """Write ``arrays`` and the JSON ``document`` to ``path`` through a temporary file and a rename.
+def policy_bytes(document: dict[str, Any], arrays: dict[str, NDArray[Any]]) -> bytes:
+    """The bytes of a policy file: ``arrays`` and the JSON ``document``, stored uncompressed.
 
-    The temporary file is ``.NAME.PID.tmp`` in the same folder (a run folder's own temporaries look so).
-    The bytes depend on the policy only (the entries carry a fixed date), so equal policies give equal files.
+    They depend on the policy only (the entries carry a fixed date), so equal policies give equal files.
     """
-    path = Path(path)
     payload = json.dumps(document, sort_keys=True, allow_nan=False).encode()
     entries = {k: np.asarray(v, dtype=np.float64) for k, v in arrays.items()}
     entries[JSON_ENTRY] = np.frombuffer(payload, dtype=np.uint8)
@@ -46,10 +44,47 @@ def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]],
             npy = io.BytesIO()
             np.lib.format.write_array(npy, np.ascontiguousarray(array), allow_pickle=False)
             archive.writestr(zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0)), npy.getvalue())
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0)
-    handle = os.open(tmp, flags, 0o644)
-    return replace_atomically(handle, tmp, path, lambda stream: stream.write(buffer.getvalue()))
+    return buffer.getvalue()
+
+
+def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]], path: Any) -> Path:
+    """Write ``arrays`` and the JSON ``document`` to ``path`` through a temporary file and a rename.
+
+    ``path`` is an output the user named: a symbolic link is followed (its target is replaced), a target
+    that is not a regular file (a FIFO, a device, a folder) is refused with a ``ValueError`` naming it, and
+    a failed write is an ``OSError`` naming it. The temporary file is ``.NAME.PID.tmp`` in the target's
+    folder, created new (never through a link). Returns the file written.
+    """
+    target = Path(os.path.realpath(path))
+    try:
+        mode: int | None = os.stat(target).st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+    if mode is not None and not stat.S_ISREG(mode):
+        via = "" if target == Path(os.path.abspath(path)) else f" (the target of {path})"
+        raise ValueError(f"path: expected a regular file or a new file, got {_kind(mode)} {target}{via}")
+    data = policy_bytes(document, arrays)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        if os.path.lexists(tmp):  # our own temporary, left by a killed process of this id
+            os.unlink(tmp)
+        handle = os.open(tmp, flags, 0o644)
+        return replace_atomically(handle, tmp, target, lambda stream: stream.write(data))
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(target)) from None
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "a socket" if stat.S_ISSOCK(mode) else "a special file"
 
 
 def _read_bytes(path: Path) -> bytes:

@@ -328,6 +328,8 @@ class Runner:
         if self.run_dir is not None:
             self.run_dir.lock.acquire()
         try:
+            if self.run_dir is not None:  # with the lock held, any run temporary is a dead writer's
+                self.run_dir.remove_temporaries()
             finished = self.history.stop_reason is not None
             if not finished:
                 with DeferredInterrupt(enabled=self.run_dir is not None) as interrupt:
@@ -340,8 +342,6 @@ class Runner:
 
     def _iterate(self, interrupt: DeferredInterrupt) -> None:
         self._clock = time.perf_counter()
-        if self.run_dir is not None:
-            self.run_dir.remove_temporaries()
         self._log({"event": "resume" if self.iteration else "start", "iteration": self.iteration})
         backend = self.make_backend()
         try:

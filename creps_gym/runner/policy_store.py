@@ -28,10 +28,12 @@ from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import evaluate_policy, finite_mean, test_contexts
 from creps_gym.optimizers.policy_file import Policy
+from creps_gym.optimizers.policy_io import policy_bytes
 from creps_gym.runner.backends import run_episodes
 from creps_gym.runner.checks import real_params, unwrapped_model
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
+from creps_gym.runner.files import os_failure, write_run_file
 from creps_gym.runner.history import History, encode_float
 from creps_gym.runner.rundir import RunDir
 
@@ -123,8 +125,12 @@ class RunPolicies:
 
 
 def _write(run_dir: RunDir, name: str, policy: Policy) -> None:
-    path = policy.save(run_dir.file(name))
-    os.chmod(path, run_dir.file(RunDir.CONFIG).stat().st_mode & 0o777)  # one mode for the run's files
+    """Write a run folder's policy file like its other files (a link or special file there is refused)."""
+    path = write_run_file(run_dir.file(name), policy_bytes(policy.to_dict(arrays=False), policy.arrays()))
+    try:
+        os.chmod(path, os.lstat(run_dir.file(RunDir.CONFIG)).st_mode & 0o777)  # one mode for the run's files
+    except OSError as exc:
+        raise os_failure(path, exc, "set its mode") from None
 
 
 def _holds(run_dir: RunDir, name: str, policy: Policy) -> bool:

@@ -191,6 +191,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         if config is None:
             raise UsageError("argument --run-contexts: expected a run folder as RUN, got a policy file")
         n, seed = config.eval_contexts, split_seed(config.seed)[2]
+    try:
+        policy.check_batch(n, "argument --run-contexts" if args.run_contexts else "argument --contexts")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     env = _make(args.run, env_id, kwargs)
     if args.video:
         mode = _render_mode(env, env_id)

@@ -120,7 +120,8 @@ def test_a_policy_save_that_cannot_be_written_names_the_file(tmp_path, sphere_ru
 def test_policy_save_in_python_refuses_a_fifo_and_follows_a_link(tmp_path, sphere_run):
     policy = Policy.load(sphere_run / RunDir.BEST_POLICY)
     os.mkfifo(tmp_path / "fifo.npz")
-    with pytest.raises(ValueError, match=r"path: expected a regular file or a new file, got a FIFO .*fifo\.npz"):
+    match = r"path: expected a regular file or a new file, got a FIFO .*fifo\.npz"
+    with pytest.raises(ValueError, match=match):
         policy.save(tmp_path / "fifo.npz")
     (tmp_path / "link.npz").symlink_to(tmp_path / "target.npz")
     assert policy.save(tmp_path / "link.npz") == tmp_path / "target.npz"

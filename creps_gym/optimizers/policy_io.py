@@ -2,9 +2,11 @@
 
 A policy file is untrusted input (it may come from a run folder or another machine), so reading one is
 bounded and strict: a regular file opened without following a symbolic link, at most
-:data:`MAX_POLICY_BYTES`; only the known entries, each read to at most its declared size, each array's
-header checked (dtype float64, shape matching its bytes) before anything is allocated; the JSON document
-at most :data:`MAX_JSON_BYTES`, without NaN or infinity. Every failure is a ``ValueError`` naming the file.
+:data:`MAX_POLICY_BYTES`; only the known entries, each stored uncompressed (a compressed entry could
+declare far more than the file holds) and read to at most its declared size, each array's header checked
+(dtype float64, shape matching its bytes) before anything is allocated; the JSON document at most
+:data:`MAX_JSON_BYTES`, nested at most 100 levels deep, without NaN or infinity. Every failure is a
+``ValueError`` naming the file.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._validation import MAX_JSON_DEPTH
 from creps_gym.optimizers.state_files import replace_atomically
 
 __all__ = ["MAX_JSON_BYTES", "MAX_POLICY_BYTES", "policy_bytes", "read_policy_file", "write_policy_file"]
@@ -122,7 +125,7 @@ def _array(raw: bytes, name: str) -> NDArray[Any]:
     wanted = np.dtype(np.uint8) if name == JSON_ENTRY else np.dtype("<f8")
     if dtype != wanted or dtype.hasobject:
         raise ValueError(f"{name}: expected dtype {wanted}, got {dtype}")
-    if not all(isinstance(n, int) and n >= 0 for n in shape) or len(shape) > 2:
+    if not all(type(n) is int and n >= 0 for n in shape) or len(shape) > 2:  # not bool
         raise ValueError(f"{name}: expected a shape of at most two lengths, got {shape}")
     count = int(np.prod(shape, dtype=object))
     if count * dtype.itemsize != len(raw) - stream.tell():
@@ -133,10 +136,26 @@ def _array(raw: bytes, name: str) -> NDArray[Any]:
 
 
 def _finite_json(text: str) -> Any:
+    """Standard JSON (no NaN or infinity) nested at most :data:`MAX_JSON_DEPTH` levels deep."""
+
     def refuse(constant: str) -> None:
         raise ValueError(f"expected standard JSON, got {constant}")
 
-    return json.loads(text, parse_constant=refuse)
+    expected = f"{JSON_ENTRY}: expected JSON nested at most {MAX_JSON_DEPTH} levels deep"
+    try:
+        document = json.loads(text, parse_constant=refuse)
+    except RecursionError:
+        raise ValueError(f"{expected}, got deeper") from None
+    stack = [(document, 1)]
+    while stack:  # deep nesting would be a RecursionError in any recursive code that reads it
+        value, depth = stack.pop()
+        if isinstance(value, (dict, list)):
+            if depth > MAX_JSON_DEPTH:
+                raise ValueError(f"{expected}, got {depth} levels")
+            stack.extend(
+                (child, depth + 1) for child in (value.values() if isinstance(value, dict) else value)
+            )
+    return document
 
 
 def read_policy_file(path: Any) -> tuple[Any, dict[str, NDArray[np.float64]]]:
@@ -160,6 +179,10 @@ def read_policy_file(path: Any) -> tuple[Any, dict[str, NDArray[np.float64]]]:
             entries = {}
             for info in infos:
                 limit = MAX_JSON_BYTES if info.filename.startswith(JSON_ENTRY) else MAX_POLICY_BYTES
+                if info.compress_type != zipfile.ZIP_STORED or info.file_size != info.compress_size:
+                    raise ValueError(
+                        f"{info.filename}: expected an uncompressed entry (as written), got a compressed one"
+                    )
                 if info.file_size > limit:
                     raise ValueError(f"{info.filename}: expected at most {limit} bytes, got {info.file_size}")
                 with archive.open(info) as stream:

@@ -214,7 +214,7 @@ class Runner:
             self.env_rng.bit_generator.state = checks.generator_state(state["env_rng"])
             self.draws.selection.load(state)
             self.history = self._checkpoint_history(run_dir, state)
-            self.policies.restore(state.get("best_policy"))  # None in older checkpoints
+            self.policies.restore(state.get("best_policy"), self.history)  # None in older checkpoints
             self.iteration, self.episodes = int(state["iteration"]), int(state["episodes"])
             self._elapsed_before = float(state["elapsed"])
         except RunDirError:

@@ -126,7 +126,7 @@ def _array(raw: bytes, name: str) -> NDArray[Any]:
     if dtype != wanted or dtype.hasobject:
         raise ValueError(f"{name}: expected dtype {wanted}, got {dtype}")
     if not all(type(n) is int and n >= 0 for n in shape) or len(shape) > 2:  # not bool
-        raise ValueError(f"{name}: expected a shape of at most two lengths, got {shape}")
+        raise ValueError(f"{name}: expected a shape of non-negative ints, at most two, got {shape}")
     count = int(np.prod(shape, dtype=object))
     if count * dtype.itemsize != len(raw) - stream.tell():
         raise ValueError(f"{name}: expected {count * dtype.itemsize} bytes of data for shape {shape}")

@@ -189,8 +189,9 @@ class LearningProgressBandit:
         sums = as_float_array(state["sums"], "context_selector 'bandit' state sums", k)
         if (counts < 0).any() or (sums < 0).any() or (sums > counts * (1 + 1e-12)).any():
             raise ValueError("context_selector 'bandit' state: expected 0 <= sums <= counts in every cell")
-        if counts.sum() > MAX_COUNT:  # discounted episode counts: no run comes near
-            total = counts.sum()
+        with np.errstate(over="ignore"):
+            total = float(counts.sum())
+        if total > MAX_COUNT:  # discounted episode counts: no run comes near
             raise ValueError(
                 f"context_selector 'bandit' state counts: expected a sum <= {MAX_COUNT}, got {total:g}"
             )

@@ -358,3 +358,61 @@ def test_creps_state_fields_are_named_and_range_checked(tmp_path, key, value, er
     state[key] = value
     with pytest.raises(error, match=expected):
         restore_optimizer("creps", state)
+
+
+def test_an_ask_with_a_row_missing_is_refused_naming_ask_before_any_episode():
+    from creps_gym.optimizers.creps import CREPS
+
+    class Short(CREPS):
+        def ask(self, contexts):
+            return super().ask(contexts)[:-1]
+
+    with pytest.raises(
+        ValueError, match=r"optimizer\.ask\(\) output: expected shape \(12, 2\), got \(11, 2\)"
+    ):
+        run(Short(2, 1, seed=0), SPHERE, 2, 12, 0, env_kwargs={"dim": 2})
+
+
+@pytest.mark.parametrize("name", ["disable_env_checker", "max_episode_steps"])
+def test_an_argument_of_gymnasium_make_is_not_an_env_keyword(tmp_path, capsys, name):
+    args = [*RUN_ARGS, "--env-kwarg", f"{name}=1", "--no-plot"]
+    assert main([str(tmp_path / "new") if a == "NEW" else a for a in args]) == 2
+    err = capsys.readouterr().err
+    assert f"argument --env-kwarg: expected keyword arguments of the env, got '{name}'" in err
+    assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.parametrize("name", [RunDir.CONFIG, RunDir.HISTORY_JSON])
+def test_a_meta_that_is_not_an_object_is_damage_not_a_crash(tmp_path, capsys, name):
+    path = tmp_path / "run"
+    run("creps", SPHERE, 2, 12, 0, env_kwargs={"dim": 2}, run_dir=path)
+    document = json.loads((path / name).read_text())
+    document["meta"] = [1, 2]
+    (path / name).write_text(json.dumps(document))
+    code = main(["export", str(path), "-o", str(tmp_path / "out.csv")])
+    err = capsys.readouterr().err
+    if name == RunDir.CONFIG:
+        assert code == 3 and "config.json: damaged" in err and "expected a 'meta' object, got list" in err
+    else:  # the history is rebuilt from the log, with a warning
+        assert code == 0 and "meta: expected a JSON object, got list" in err
+
+
+def test_a_plot_title_with_bad_mathtext_is_a_usage_error(tmp_path, capsys, unfinished):
+    args = ["plot", str(unfinished), "-o", str(tmp_path / "p.png"), "--title", r"$\frac{$"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "argument --title: expected text matplotlib can draw" in err and "ParseSyntaxException" in err
+    assert not (tmp_path / "p.png").exists()
+    assert main([*args[:-1], r"a $x^2$ and \$5"]) == 0
+
+
+def test_an_integer_reward_beyond_the_float_range_is_named():
+    from creps_gym.runner.episodes import episode_return
+    from creps_gym.wrappers.episodic import _real_reward
+
+    with pytest.raises(
+        ValueError, match=r"reward: expected a finite real number .* 401 digits .* inner step 3"
+    ):
+        _real_reward(10**400, 3)
+    with pytest.raises(ValueError, match="reward: expected a finite return, got an integer of 401 digits"):
+        episode_return(10**400)

@@ -193,13 +193,15 @@ def generator_state(state: Any) -> Any:
     return check_generator_state(state, "env_rng")
 
 
-def real_params(value: Any, method: str) -> NDArray[np.float64]:
+def real_params(value: Any, method: str, shape: tuple[int, int] | None = None) -> NDArray[np.float64]:
     """The output of an optimiser's ``ask`` or ``recommend`` as float64, never converted from complex.
 
     ``TypeError`` naming ``method`` for complex, boolean, string or object output (numpy would drop an
-    imaginary part with only a warning); the shape and the values are checked where they are used.
+    imaginary part with only a warning); with ``shape`` (n, p), a ``ValueError`` naming ``method`` for
+    another shape (an ``ask`` that returns n - 1 rows), before any episode runs. The values are checked
+    where they are used.
     """
-    return as_float_array(value, f"optimizer.{method}() output", finite=False)
+    return as_float_array(value, f"optimizer.{method}() output", shape, finite=False)
 
 
 def stop_criteria(met: Any) -> list[str]:

@@ -295,7 +295,7 @@ class Runner:
         self._watch = self._watch or DivergenceWatch.of_history(self.config.divergence, self.history.records)
         n, label = self.config.samples, f"iteration {self.iteration + 1}"
         seeds, contexts = self.draws.draw(self.env_rng, n, label)
-        params = checks.real_params(self.optimizer.ask(contexts), "ask")
+        params = checks.real_params(self.optimizer.ask(contexts), "ask", (n, self.n_params))
         returns = backend.evaluate(seeds, contexts, params, label)
         self.optimizer.tell(contexts, params, returns)
         self.draws.tell(contexts, returns, self.optimizer)

@@ -93,7 +93,7 @@ VIDEO_SUFFIXES = (".mp4", ".gif")
 
 def _output(path: str | None, flag: str, suffixes: tuple[str, ...] | None = None) -> Any:
     """The file ``flag`` will write, checked like ``-o`` before anything is computed (exit 2 if refused)."""
-    from creps_gym.runner.files import check_output_path
+    from creps_gym.runner.outputs import check_output_path
 
     if path is None:
         return None
@@ -248,7 +248,7 @@ def _record(env: Any, policy: Any, seed: int, path: str) -> str:
     import imageio.v2 as imageio
     import numpy as np
 
-    from creps_gym.runner.files import write_output_with
+    from creps_gym.runner.outputs import write_output_with
 
     fps = env.metadata.get("render_fps", 4)
     try:

@@ -284,7 +284,9 @@ class Policy:
         return policy
 
     def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the policy file (``.npz``: the arrays and one JSON document, never pickle) atomically."""
+        """Write the policy file (``.npz``: the arrays and one JSON document, never pickle) atomically;
+        returns the file written. ``path`` is followed if it is a symbolic link (its target is replaced);
+        a FIFO, a device or a folder there is a ``ValueError``, a failed write an ``OSError`` naming it."""
         from creps_gym.optimizers.policy_io import write_policy_file
 
         return write_policy_file(self.to_dict(arrays=False), self.arrays(), path)

@@ -14,10 +14,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "MAX_COUNT",
     "as_float_array",
     "check_bool",
+    "check_count",
     "check_finite",
     "check_fits_in_memory",
+    "check_generator_state",
     "check_in_box",
     "check_positive_int",
     "check_real",
@@ -129,6 +132,39 @@ def check_positive_int(value: Any, name: str, minimum: int = 1) -> int:
     if value < minimum:
         raise ValueError(f"{name}: expected an integer >= {minimum}, got {value}")
     return int(value)
+
+
+#: Largest counter (iterations, restarts, generations, episodes) a state may hold: every count up to it is
+#: exact as a float (diagnostics are floats), and no run comes near it.
+MAX_COUNT = 2**53
+
+
+def check_count(value: Any, name: str, maximum: int = MAX_COUNT) -> int:
+    """``value`` as an int in ``[0, maximum]``; ``TypeError`` (not an integer: 1.5, 1e308, a str) or
+    ``ValueError`` (negative, or above ``maximum``: 10**400) naming ``name`` otherwise."""
+    count = check_positive_int(value, name, minimum=0)
+    if count > maximum:
+        shown = count if count < 10**30 else f"an integer of {len(str(count))} digits"
+        raise ValueError(f"{name}: expected an integer of at most {maximum}, got {shown}")
+    return count
+
+
+def check_generator_state(state: Any, name: str) -> Any:
+    """``state`` if it is a PCG64 state a ``numpy.random.Generator`` can have written, else ``ValueError``
+    naming ``name``. Checked here because numpy itself differs: recent versions raise ``OverflowError`` for
+    a word outside [0, 2**128), older ones (1.23) take ``-1`` silently as another state."""
+    inner = state.get("state") if isinstance(state, dict) else None
+    words = [inner.get("state"), inner.get("inc")] if isinstance(inner, dict) else [None]
+    if not (
+        isinstance(state, dict)
+        and state.get("bit_generator") == "PCG64"
+        and all(type(w) is int and 0 <= w < 2**128 for w in words)
+        and state.get("has_uint32") in (0, 1)
+        and type(state.get("uinteger")) is int
+        and 0 <= state["uinteger"] < 2**32
+    ):
+        raise ValueError(f"{name}: expected a PCG64 state with 128-bit words, got {str(state)[:200]}")
+    return state
 
 
 def check_seed(value: Any, name: str = "seed") -> int | None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -95,6 +96,35 @@ def _load(args: argparse.Namespace) -> Any:
         raise RunDirError(f"RUN: {exc}") from None
 
 
+#: The file names ``--video`` writes (imageio picks the format by the name).
+VIDEO_SUFFIXES = (".mp4", ".gif")
+
+
+def _output(path: str | None, flag: str, suffixes: tuple[str, ...] | None = None) -> Any:
+    """The file ``flag`` will write, checked like ``-o`` before anything is computed (exit 2 if refused)."""
+    from creps_gym.runner.outputs import check_output_path
+
+    if path is None:
+        return None
+    try:
+        return check_output_path(path, flag, suffixes)
+    except ValueError as exc:
+        raise UsageError(f"argument {exc}") from None
+
+
+def _written(flag: str, path: str, write: Any) -> str:
+    """``write()``'s file as printed (a link's target named); a failed write is exit 2 naming the file."""
+    try:
+        written = Path(write())
+    except ValueError as exc:
+        message = str(exc).removeprefix("path: ").removeprefix(f"{flag}: ")
+        raise UsageError(f"argument {flag}: {message}") from None
+    except OSError as exc:
+        cause = exc.strerror or type(exc).__name__
+        raise UsageError(f"argument {flag}: cannot write {exc.filename or path}: {cause}") from None
+    return path if Path(os.path.abspath(path)) == written else f"{written} (through the link {path})"
+
+
 def _numbers(array: Any) -> Any:
     return [[float(v) for v in row] for row in array]
 
@@ -102,6 +132,7 @@ def _numbers(array: Any) -> Any:
 def _cmd_policy(args: argparse.Namespace) -> int:
     import numpy as np
 
+    target = _output(args.save, "--save")
     policy = _load(args)
     out: dict[str, Any] = {"env": policy.env, "which": args.which, "source": policy.source}
     if args.context:
@@ -116,8 +147,8 @@ def _cmd_policy(args: argparse.Namespace) -> int:
         out.update(contexts=_numbers(args.context), params=_numbers(params))
     else:
         out.update(features=policy.features.spec(), coefficients=_numbers(policy.coefficients))
-    if args.save:
-        out["saved"] = str(policy.save(args.save))
+    if target is not None:
+        out["saved"] = _written("--save", args.save, lambda: policy.save(target))
     print(json.dumps(out, allow_nan=False))
     return 0
 
@@ -157,11 +188,11 @@ def _strings(value: Any) -> list[str]:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    import gymnasium as gym
 
     from creps_gym.runner.build import split_seed
     from creps_gym.runner.policy_store import evaluate_on_env
 
+    _output(args.video, "--video", VIDEO_SUFFIXES)
     policy = _load(args)
     env_id, kwargs, config = _environment(args, policy)
     n, seed = args.contexts if args.contexts is not None else (1 if args.video else 100), args.seed
@@ -169,7 +200,11 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         if config is None:
             raise UsageError("argument --run-contexts: expected a run folder as RUN, got a policy file")
         n, seed = config.eval_contexts, split_seed(config.seed)[2]
-    env = gym.make(env_id, **kwargs)
+    try:
+        policy.check_batch(n, "argument --run-contexts" if args.run_contexts else "argument --contexts")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    env = _make(args.run, env_id, kwargs)
     if args.video:
         mode = _render_mode(env, env_id)
     try:
@@ -179,19 +214,38 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     out = {"env": env_id, "which": args.which, "source": policy.source, "contexts": n, "seed": seed}
     out.update(mean_return=mean_return, mean_regret=None if math.isnan(mean_regret) else mean_regret)
     if args.video:
-        out["video"] = _record(gym.make(env_id, render_mode=mode, **kwargs), policy, n, seed, args.video)
+        out["video"] = _record(_make(args.run, env_id, kwargs, mode), policy, n, seed, args.video)
     print(json.dumps(out, allow_nan=False))
     return 0
+
+
+def _make(run: str, env_id: str, kwargs: dict[str, Any], render_mode: str | None = None) -> Any:
+    """``gymnasium.make`` of the env a run folder or policy file names; an env that cannot be made is
+    the file's fault (exit 3), its text escaped (a file may hold terminal control characters)."""
+    import gymnasium as gym
+
+    from creps_gym.runner.session import RunDirError
+    from creps_gym.runner.trust import escape_text
+
+    extra = {} if render_mode is None else {"render_mode": render_mode}
+    try:
+        return gym.make(env_id, **extra, **kwargs)
+    except (gym.error.Error, TypeError, ValueError) as exc:
+        cause = escape_text(f"{type(exc).__name__}: {exc}")
+        raise RunDirError(f"RUN: {run} names an env that cannot be made ({cause})") from None
 
 
 def _render_mode(env: Any, env_id: str) -> str:
     """The render mode that records an episode (the whole of it where the env can); checks the extra."""
     from creps_gym.optimizers.adapters.base import import_optional
+    from creps_gym.runner.trust import escape_text
 
     modes = list(env.metadata.get("render_modes", []))
     mode = next((m for m in ("rgb_array_list", "rgb_array") if m in modes), None)
     if mode is None:
-        raise UsageError(f"argument --video: expected an env that renders (rgb_array), got {env_id} {modes}")
+        raise UsageError(
+            f"argument --video: expected an env that renders (rgb_array), got {escape_text(env_id)} {modes}"
+        )
     import_optional("imageio", extra="video")
     import_optional("imageio_ffmpeg", extra="video")
     return mode
@@ -199,7 +253,10 @@ def _render_mode(env: Any, env_id: str) -> str:
 
 def _record(env: Any, policy: Any, n: int, seed: int, path: str) -> str:
     """Record the ``n`` episodes evaluated for ``seed`` (the same test contexts and reset seeds) of ``env``
-    to ``path``, each frame rendered as it is written, with progress on stderr; returns the path."""
+    to ``path``, each frame rendered as it is written, with progress on stderr, through a temporary that is
+    checked whole before it is renamed (exit 2 naming the file if it cannot be written, see
+    :func:`write_output_with`); returns the path as printed."""
+    from creps_gym.runner.outputs import write_output_with
     from creps_gym.runner.policy_store import evaluation_draws
     from creps_gym.runner.video import EpisodeVideo, write_video
 
@@ -208,8 +265,38 @@ def _record(env: Any, policy: Any, n: int, seed: int, path: str) -> str:
     except BaseException:
         env.close()
         raise
-    write_video(path, EpisodeVideo(env, policy, contexts, seeds, progress=sys.stderr))
-    return path
+    video = EpisodeVideo(env, policy, contexts, seeds, progress=sys.stderr)  # write_video closes the env
+
+    def frames_to(tmp: Path) -> None:
+        write_video(tmp, video)
+        check_video_file(tmp)
+
+    return _written("--video", path, lambda: write_output_with(path, frames_to, "--video", VIDEO_SUFFIXES))
+
+
+def check_video_file(path: str | os.PathLike[str]) -> None:
+    """``OSError`` unless ``path`` is a whole video file: a GIF that ends with its trailer, or an MP4 whose
+    top-level boxes fill it exactly and include its index (``moov``) and data (``mdat``). ffmpeg's exit
+    status is not checked by imageio, so a full disk or ``ulimit -f`` would otherwise leave a cut file."""
+    import errno
+
+    with open(path, "rb") as stream:
+        data = stream.read()
+    if Path(path).suffix.lower() == ".gif":
+        whole = data.startswith(b"GIF8") and data.endswith(b";")
+    else:
+        boxes, offset = set(), 0
+        while offset + 8 <= len(data):
+            size, kind = int.from_bytes(data[offset : offset + 4], "big"), data[offset + 4 : offset + 8]
+            if size == 1 and offset + 16 <= len(data):  # a 64-bit size follows
+                size = int.from_bytes(data[offset + 8 : offset + 16], "big")
+            if size < 8:
+                break
+            boxes.add(kind)
+            offset += size
+        whole = offset == len(data) and {b"ftyp", b"moov", b"mdat"} <= boxes
+    if not whole:
+        raise OSError(errno.EIO, f"the video written is incomplete ({len(data)} bytes)")
 
 
 COMMANDS = {"policy": _cmd_policy, "evaluate": _cmd_evaluate}

@@ -91,8 +91,13 @@ def _write_output(write: Any, args: argparse.Namespace, what: str, usage_error: 
 
 
 def _cmd_plot(args: argparse.Namespace, usage_error: type[Exception]) -> int:
-    from creps_gym.runner.plots import plot_histories, save_figure
+    from creps_gym.runner.plots import check_title, plot_histories, save_figure
 
+    if args.title is not None:
+        try:
+            check_title(args.title)
+        except ValueError as exc:
+            raise usage_error(f"argument --title: {str(exc).removeprefix('title: ')}") from None
     runs, groups, _ = _grouped(args, usage_error)
     targets = {config.target_regret for config, _ in runs}
     target = targets.pop() if len(targets) == 1 else None

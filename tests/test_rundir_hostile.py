@@ -364,7 +364,7 @@ def test_a_write_that_fails_stops_the_run_with_exit_3_and_resume_is_bit_identica
         real = files._write_all
 
         def write_all(fd, data):
-            calls["n"] += 1
+            calls["n"] += bytes(data[:2]) != b"PK"  # the policy files (zips) are not counted
             if calls["n"] == 6:  # config.json, versions.json, "start", iterations 1, 2 (checkpoint), 3
                 raise OSError(code, os.strerror(code))
             real(fd, data)

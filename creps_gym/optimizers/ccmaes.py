@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from creps_gym._validation import as_float_array, check_positive_int
+from creps_gym._validation import as_float_array, check_count, check_generator_state, check_positive_int
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.ccmaes_config import CCMAESConfig, options_doc, options_signature
 from creps_gym.optimizers.cma_rules import (
@@ -307,7 +307,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         )
         optimizer = cls.__new__(cls)
         optimizer._init_from_config(config)
-        optimizer.rng.bit_generator.state = state["rng"]
+        optimizer.rng.bit_generator.state = check_generator_state(state["rng"], "state['rng']")
         optimizer.policy = LinearGaussianPolicy.from_state(config.mean_map, config.n_params, state)
         p, z = config.n_params, config.n_context_dims
 
@@ -321,8 +321,10 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         optimizer.stagnation_window = window
         optimizer.past_contexts = read("past_contexts", (None, z))
         optimizer.past_returns = read("past_returns", (optimizer.past_contexts.shape[0],))
-        optimizer.flat_iterations = int(state["flat_iterations"])
-        optimizer.restarts_done = int(state["restarts_done"])
+        optimizer.flat_iterations = check_count(state["flat_iterations"], "state['flat_iterations']")
+        optimizer.restarts_done = check_count(
+            state["restarts_done"], "state['restarts_done']", config.restarts
+        )
         if "best_coefficients" in state and np.asarray(state["best_coefficients"]).size:  # absent before C10
             k = config.mean_map.n_features
             optimizer.best_coefficients = read("best_coefficients", (k, p))

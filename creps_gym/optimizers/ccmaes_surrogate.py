@@ -31,7 +31,7 @@ from typing import Any, ClassVar, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_positive_int, check_real_in_range
+from creps_gym._validation import as_float_array, check_count, check_positive_int, check_real_in_range
 from creps_gym.optimizers.ccmaes import CCMAES
 from creps_gym.optimizers.ccmaes_config import CCMAESConfig, options_doc, options_signature
 from creps_gym.optimizers.cma_rules import inverse_sqrt
@@ -248,7 +248,7 @@ class CCMAESSurrogate(CCMAES):
         returns = as_float_array(state["archive_returns"], "state['archive_returns']", (n,)).copy()
         optimizer.archive = (contexts, params, returns)
         for name in ("planned_generations", "model_generations_total"):
-            setattr(optimizer, name, check_positive_int(state[name], f"state[{name!r}]", minimum=0))
+            setattr(optimizer, name, check_count(state[name], f"state[{name!r}]"))
         if "model_kind" in state:
             n_features = config.mean_map.n_features
             optimizer.model = SurrogateModel.from_state(state, "model_", p, z, n_features)

@@ -24,7 +24,15 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from creps_gym._validation import as_float_array, check_positive_int, check_real_in_range, check_seed
+from creps_gym._validation import (
+    as_float_array,
+    check_count,
+    check_generator_state,
+    check_positive_int,
+    check_real,
+    check_real_in_range,
+    check_seed,
+)
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.cma_rules import scaled_mean, stagnation_window
 from creps_gym.optimizers.dual import DUAL_KL_TOL, DualSolution, solve_dual
@@ -316,10 +324,10 @@ class CREPS(PolicyAccess, ContextualOptimizer):
             **options,
         )
         optimizer = cls.from_config(config)
-        optimizer.rng.bit_generator.state = state["rng"]
+        optimizer.rng.bit_generator.state = check_generator_state(state["rng"], "state['rng']")
         optimizer.policy = LinearGaussianPolicy.from_state(config.mean_map, config.n_params, state)
-        optimizer._eta = float(state["dual_eta"])
-        optimizer.flat_iterations = int(state.get("flat_iterations", 0))
+        optimizer._eta = check_real(state["dual_eta"], "state['dual_eta']", strict=True)
+        optimizer.flat_iterations = check_count(state.get("flat_iterations", 0), "state['flat_iterations']")
         if "mean_returns" in state:  # checkpoints written before the stagnation criterion have none
             history = as_float_array(state["mean_returns"], "state['mean_returns']", (None,))
             optimizer.mean_returns = [float(v) for v in history]

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from creps_gym._validation import as_float_array, check_positive_int
+from creps_gym._validation import as_float_array, check_positive_int, check_real
 from creps_gym.optimizers.base import overflowing_contexts
 from creps_gym.optimizers.cma_rules import record_mean_return, stagnated, stagnation_window
 from creps_gym.optimizers.features import FeatureMap
@@ -279,11 +279,11 @@ class LinearGaussianPolicy:
                 "state['cov']: expected a positive-definite matrix, got one that is not"
             ) from None
         step_size = state.get("step_size", 1.0)
-        if isinstance(step_size, (bool, str)) or (not np.isscalar(step_size) and np.ndim(step_size) != 0):
-            raise TypeError(f"state['step_size']: expected a real number, got {step_size!r}")
-        step_size = float(step_size)
-        if not (np.isfinite(step_size) and step_size > 0.0):
-            raise ValueError(f"state['step_size']: expected a finite value > 0, got {step_size}")
+        step_size = check_real(step_size, "state['step_size']", strict=True)
+        if step_size**2 < np.finfo(np.float64).tiny:  # σ² would underflow: a NaN condition number
+            raise ValueError(
+                f"state['step_size']: expected a value >= 1.5e-154 (σ² a normal float), got {step_size}"
+            )
         check_usable_covariance(cov, "state['cov']", step_size)
         return cls(mean_map, coefficients, cov, step_size)
 

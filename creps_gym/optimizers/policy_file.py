@@ -22,7 +22,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_bool, check_in_box, check_positive_int
+from creps_gym._validation import (
+    as_float_array,
+    check_bool,
+    check_fits_in_memory,
+    check_in_box,
+    check_positive_int,
+)
 from creps_gym.optimizers.base import MAX_CONTEXT, overflowing_contexts
 from creps_gym.optimizers.features import FeatureMap, make_features
 
@@ -151,6 +157,17 @@ class Policy:
         """p, the parameter dimension."""
         return int(self.coefficients.shape[1])
 
+    def check_batch(self, n: int, name: str = "contexts") -> None:
+        """Refuse, before allocating, ``n`` contexts whose features and parameters would not fit in memory.
+
+        The estimate counts 8-byte floats: ``n k (z + 2)`` for the features (a radial basis map holds an
+        (n, k, z) array of differences) and ``2 n (z + p)`` for the contexts and the parameters; ``name``
+        is the argument named in the ``ValueError`` (a command-line flag, ``"contexts"``).
+        """
+        k, z, p = self.features.n_features, self.context_dim, self.n_params
+        what = f"the policy's features and parameters (n x k x z floats, k = {k}, z = {z}, p = {p})"
+        check_fits_in_memory(8.0 * n * (k * (z + 2) + 2 * (z + p)), name, n, what)
+
     def __call__(self, contexts: Any, *, extrapolate: bool = False) -> Array:
         """The mean parameters for contexts.
 
@@ -173,6 +190,7 @@ class Policy:
         if not single and (array.ndim != 2 or array.shape[1] != z or array.shape[0] < 1):
             raise ValueError(f"contexts: expected shape (n, {z}) with n >= 1, or ({z},), got {array.shape}")
         rows = array[None, :] if single else array
+        self.check_batch(rows.shape[0])
         largest = float(np.abs(rows).max()) if rows.size else 0.0
         if largest > MAX_CONTEXT:
             raise ValueError(f"contexts: expected |s| <= {MAX_CONTEXT:g}, got max |s| = {largest:g}")
@@ -266,7 +284,9 @@ class Policy:
         return policy
 
     def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the policy file (``.npz``: the arrays and one JSON document, never pickle) atomically."""
+        """Write the policy file (``.npz``: the arrays and one JSON document, never pickle) atomically;
+        returns the file written. ``path`` is followed if it is a symbolic link (its target is replaced);
+        a FIFO, a device or a folder there is a ``ValueError``, a failed write an ``OSError`` naming it."""
         from creps_gym.optimizers.policy_io import write_policy_file
 
         return write_policy_file(self.to_dict(arrays=False), self.arrays(), path)

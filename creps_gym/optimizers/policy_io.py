@@ -2,9 +2,11 @@
 
 A policy file is untrusted input (it may come from a run folder or another machine), so reading one is
 bounded and strict: a regular file opened without following a symbolic link, at most
-:data:`MAX_POLICY_BYTES`; only the known entries, each read to at most its declared size, each array's
-header checked (dtype float64, shape matching its bytes) before anything is allocated; the JSON document
-at most :data:`MAX_JSON_BYTES`, without NaN or infinity. Every failure is a ``ValueError`` naming the file.
+:data:`MAX_POLICY_BYTES`; only the known entries, each stored uncompressed (a compressed entry could
+declare far more than the file holds) and read to at most its declared size, each array's header checked
+(dtype float64, shape matching its bytes) before anything is allocated; the JSON document at most
+:data:`MAX_JSON_BYTES`, nested at most 100 levels deep, without NaN or infinity. Every failure is a
+``ValueError`` naming the file.
 """
 
 from __future__ import annotations
@@ -20,9 +22,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._validation import MAX_JSON_DEPTH
 from creps_gym.optimizers.state_files import replace_atomically
 
-__all__ = ["MAX_JSON_BYTES", "MAX_POLICY_BYTES", "read_policy_file", "write_policy_file"]
+__all__ = ["MAX_JSON_BYTES", "MAX_POLICY_BYTES", "policy_bytes", "read_policy_file", "write_policy_file"]
 
 MAX_POLICY_BYTES = 64 * 2**20
 MAX_JSON_BYTES = 8 * 2**20
@@ -30,13 +33,11 @@ JSON_ENTRY = "__policy__.json"
 ARRAY_ENTRIES = ("coefficients", "context_low", "context_high", "param_low", "param_high")
 
 
-def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]], path: Any) -> Path:
-    """Write ``arrays`` and the JSON ``document`` to ``path`` through a temporary file and a rename.
+def policy_bytes(document: dict[str, Any], arrays: dict[str, NDArray[Any]]) -> bytes:
+    """The bytes of a policy file: ``arrays`` and the JSON ``document``, stored uncompressed.
 
-    The temporary file is ``.NAME.PID.tmp`` in the same folder (a run folder's own temporaries look so).
-    The bytes depend on the policy only (the entries carry a fixed date), so equal policies give equal files.
+    They depend on the policy only (the entries carry a fixed date), so equal policies give equal files.
     """
-    path = Path(path)
     payload = json.dumps(document, sort_keys=True, allow_nan=False).encode()
     entries = {k: np.asarray(v, dtype=np.float64) for k, v in arrays.items()}
     entries[JSON_ENTRY] = np.frombuffer(payload, dtype=np.uint8)
@@ -46,10 +47,47 @@ def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]],
             npy = io.BytesIO()
             np.lib.format.write_array(npy, np.ascontiguousarray(array), allow_pickle=False)
             archive.writestr(zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0)), npy.getvalue())
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0)
-    handle = os.open(tmp, flags, 0o644)
-    return replace_atomically(handle, tmp, path, lambda stream: stream.write(buffer.getvalue()))
+    return buffer.getvalue()
+
+
+def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]], path: Any) -> Path:
+    """Write ``arrays`` and the JSON ``document`` to ``path`` through a temporary file and a rename.
+
+    ``path`` is an output the user named: a symbolic link is followed (its target is replaced), a target
+    that is not a regular file (a FIFO, a device, a folder) is refused with a ``ValueError`` naming it, and
+    a failed write is an ``OSError`` naming it. The temporary file is ``.NAME.PID.tmp`` in the target's
+    folder, created new (never through a link). Returns the file written.
+    """
+    target = Path(os.path.realpath(path))
+    try:
+        mode: int | None = os.stat(target).st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+    if mode is not None and not stat.S_ISREG(mode):
+        via = "" if target == Path(os.path.abspath(path)) else f" (the target of {path})"
+        raise ValueError(f"path: expected a regular file or a new file, got {_kind(mode)} {target}{via}")
+    data = policy_bytes(document, arrays)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        if os.path.lexists(tmp):  # our own temporary, left by a killed process of this id
+            os.unlink(tmp)
+        handle = os.open(tmp, flags, 0o644)
+        return replace_atomically(handle, tmp, target, lambda stream: stream.write(data))
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(target)) from None
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "a socket" if stat.S_ISSOCK(mode) else "a special file"
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -87,8 +125,8 @@ def _array(raw: bytes, name: str) -> NDArray[Any]:
     wanted = np.dtype(np.uint8) if name == JSON_ENTRY else np.dtype("<f8")
     if dtype != wanted or dtype.hasobject:
         raise ValueError(f"{name}: expected dtype {wanted}, got {dtype}")
-    if not all(isinstance(n, int) and n >= 0 for n in shape) or len(shape) > 2:
-        raise ValueError(f"{name}: expected a shape of at most two lengths, got {shape}")
+    if not all(type(n) is int and n >= 0 for n in shape) or len(shape) > 2:  # not bool
+        raise ValueError(f"{name}: expected a shape of non-negative ints, at most two, got {shape}")
     count = int(np.prod(shape, dtype=object))
     if count * dtype.itemsize != len(raw) - stream.tell():
         raise ValueError(f"{name}: expected {count * dtype.itemsize} bytes of data for shape {shape}")
@@ -98,10 +136,26 @@ def _array(raw: bytes, name: str) -> NDArray[Any]:
 
 
 def _finite_json(text: str) -> Any:
+    """Standard JSON (no NaN or infinity) nested at most :data:`MAX_JSON_DEPTH` levels deep."""
+
     def refuse(constant: str) -> None:
         raise ValueError(f"expected standard JSON, got {constant}")
 
-    return json.loads(text, parse_constant=refuse)
+    expected = f"{JSON_ENTRY}: expected JSON nested at most {MAX_JSON_DEPTH} levels deep"
+    try:
+        document = json.loads(text, parse_constant=refuse)
+    except RecursionError:
+        raise ValueError(f"{expected}, got deeper") from None
+    stack = [(document, 1)]
+    while stack:  # deep nesting would be a RecursionError in any recursive code that reads it
+        value, depth = stack.pop()
+        if isinstance(value, (dict, list)):
+            if depth > MAX_JSON_DEPTH:
+                raise ValueError(f"{expected}, got {depth} levels")
+            stack.extend(
+                (child, depth + 1) for child in (value.values() if isinstance(value, dict) else value)
+            )
+    return document
 
 
 def read_policy_file(path: Any) -> tuple[Any, dict[str, NDArray[np.float64]]]:
@@ -125,6 +179,10 @@ def read_policy_file(path: Any) -> tuple[Any, dict[str, NDArray[np.float64]]]:
             entries = {}
             for info in infos:
                 limit = MAX_JSON_BYTES if info.filename.startswith(JSON_ENTRY) else MAX_POLICY_BYTES
+                if info.compress_type != zipfile.ZIP_STORED or info.file_size != info.compress_size:
+                    raise ValueError(
+                        f"{info.filename}: expected an uncompressed entry (as written), got a compressed one"
+                    )
                 if info.file_size > limit:
                     raise ValueError(f"{info.filename}: expected at most {limit} bytes, got {info.file_size}")
                 with archive.open(info) as stream:

@@ -23,7 +23,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array
+from creps_gym._validation import as_float_array, check_generator_state
 from creps_gym.envs.evaluation import contextual_model
 from creps_gym.optimizers.registry import minimum_samples
 from creps_gym.wrappers import FixedContexts, SampleContexts
@@ -190,27 +190,18 @@ def generator_state(state: Any) -> Any:
     Checked here because numpy itself differs: recent versions raise ``OverflowError`` for a state outside
     [0, 2**128), older ones (1.23) take ``-1`` silently as another state.
     """
-    inner = state.get("state") if isinstance(state, dict) else None
-    words = [inner.get("state"), inner.get("inc")] if isinstance(inner, dict) else [None]
-    if not (
-        isinstance(state, dict)
-        and state.get("bit_generator") == "PCG64"
-        and all(type(w) is int and 0 <= w < 2**128 for w in words)
-        and state.get("has_uint32") in (0, 1)
-        and type(state.get("uinteger")) is int
-        and 0 <= state["uinteger"] < 2**32
-    ):
-        raise ValueError(f"env_rng: expected a PCG64 state with 128-bit words, got {str(state)[:200]}")
-    return state
+    return check_generator_state(state, "env_rng")
 
 
-def real_params(value: Any, method: str) -> NDArray[np.float64]:
+def real_params(value: Any, method: str, shape: tuple[int, int] | None = None) -> NDArray[np.float64]:
     """The output of an optimiser's ``ask`` or ``recommend`` as float64, never converted from complex.
 
     ``TypeError`` naming ``method`` for complex, boolean, string or object output (numpy would drop an
-    imaginary part with only a warning); the shape and the values are checked where they are used.
+    imaginary part with only a warning); with ``shape`` (n, p), a ``ValueError`` naming ``method`` for
+    another shape (an ``ask`` that returns n - 1 rows), before any episode runs. The values are checked
+    where they are used.
     """
-    return as_float_array(value, f"optimizer.{method}() output", finite=False)
+    return as_float_array(value, f"optimizer.{method}() output", shape, finite=False)
 
 
 def stop_criteria(met: Any) -> list[str]:

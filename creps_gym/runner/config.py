@@ -12,11 +12,23 @@ import numpy as np
 
 from creps_gym._validation import check_positive_int
 
-__all__ = ["BACKENDS", "CONTEXT_DRAWS", "RUN_OWNED_OPTIONS", "VECTOR_MODES", "RunConfig", "check_ray_address"]
+__all__ = [
+    "BACKENDS",
+    "CONTEXT_DRAWS",
+    "MAKE_ARGUMENTS",
+    "RUN_OWNED_OPTIONS",
+    "VECTOR_MODES",
+    "RunConfig",
+    "check_ray_address",
+]
 
 BACKENDS = ("auto", "serial", "vector", "ray")
 CONTEXT_DRAWS = ("batch", "reset")
 VECTOR_MODES = ("auto", "native", "sync", "async")
+
+#: ``gymnasium.make``'s own keyword arguments: never env keyword arguments (``make_vec`` and the native
+#: vector env would pass them to the env, which does not take them).
+MAKE_ARGUMENTS = ("max_episode_steps", "autoreset", "apply_api_compatibility", "disable_env_checker")
 
 
 def _optional_positive(value: Any, name: str, *, integer: bool) -> Any:
@@ -200,6 +212,12 @@ class RunConfig:
                 raise TypeError(f"{name}: expected a dict, got {type(getattr(self, name)).__name__}")
             object.__setattr__(self, name, dict(getattr(self, name)))
         _check_run_owned_options(self.optimizer_options)
+        taken = sorted(set(self.env_kwargs) & set(MAKE_ARGUMENTS))
+        if taken:
+            raise ValueError(
+                f"env_kwargs: expected keyword arguments of the env, got {taken[0]!r} (an argument of "
+                "gymnasium.make itself, which the runner sets; the vector backends would pass it to the env)"
+            )
         if self.backend not in BACKENDS:
             raise ValueError(f"backend: expected one of {list(BACKENDS)}, got {self.backend!r}")
         if self.context_draws not in CONTEXT_DRAWS:

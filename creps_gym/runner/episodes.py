@@ -121,7 +121,12 @@ def episode_return(reward: Any) -> float:
         reward = reward.reshape(())[()]
     if isinstance(reward, (bool, np.bool_)) or not isinstance(reward, numbers.Real):
         raise TypeError(f"reward: expected a real number, got {type(reward).__name__} {reward!r}")
-    value = float(reward)
+    try:
+        value = float(reward)
+    except OverflowError:  # a Python int beyond the float range
+        raise ValueError(
+            f"reward: expected a finite return, got an integer of {len(str(abs(int(reward))))} digits"
+        ) from None
     if not math.isfinite(value):
         raise ValueError(f"expected a finite return, got {value}")
     return value

@@ -175,7 +175,10 @@ class History:
     def from_dict(cls, data: Mapping[str, Any]) -> History:
         """Inverse of :meth:`to_dict`."""
         records = [IterationRecord.from_dict(r) for r in data["records"]]
-        return cls(records, dict(data.get("meta", {})), data.get("stop_reason"))
+        meta = data.get("meta", {})
+        if not isinstance(meta, dict):
+            raise ValueError(f"meta: expected a JSON object, got {type(meta).__name__}")
+        return cls(records, dict(meta), data.get("stop_reason"))
 
     def json_text(self) -> str:
         """The JSON document :meth:`to_json` writes."""

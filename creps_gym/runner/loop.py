@@ -214,7 +214,7 @@ class Runner:
             self.env_rng.bit_generator.state = checks.generator_state(state["env_rng"])
             self.draws.selection.load(state)
             self.history = self._checkpoint_history(run_dir, state)
-            self.policies.restore(state.get("best_policy"))  # None in older checkpoints
+            self.policies.restore(state.get("best_policy"), self.history)  # None in older checkpoints
             self.iteration, self.episodes = int(state["iteration"]), int(state["episodes"])
             self._elapsed_before = float(state["elapsed"])
         except RunDirError:
@@ -295,7 +295,7 @@ class Runner:
         self._watch = self._watch or DivergenceWatch.of_history(self.config.divergence, self.history.records)
         n, label = self.config.samples, f"iteration {self.iteration + 1}"
         seeds, contexts = self.draws.draw(self.env_rng, n, label)
-        params = checks.real_params(self.optimizer.ask(contexts), "ask")
+        params = checks.real_params(self.optimizer.ask(contexts), "ask", (n, self.n_params))
         returns = backend.evaluate(seeds, contexts, params, label)
         self.optimizer.tell(contexts, params, returns)
         self.draws.tell(contexts, returns, self.optimizer)
@@ -329,6 +329,8 @@ class Runner:
         if self.run_dir is not None:
             self.run_dir.lock.acquire()
         try:
+            if self.run_dir is not None:  # with the lock held, any run temporary is a dead writer's
+                self.run_dir.remove_temporaries()
             finished = self.history.stop_reason is not None
             with DeferredInterrupt(enabled=self.run_dir is not None) as interrupt:
                 if not finished:
@@ -342,8 +344,6 @@ class Runner:
 
     def _iterate(self, interrupt: DeferredInterrupt) -> None:
         self._clock = time.perf_counter()
-        if self.run_dir is not None:
-            self.run_dir.remove_temporaries()
         self._log({"event": "resume" if self.iteration else "start", "iteration": self.iteration})
         backend = self.make_backend()
         try:

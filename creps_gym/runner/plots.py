@@ -29,7 +29,7 @@ from creps_gym.runner.history import History
 from creps_gym.runner.rundir import RunDir
 from creps_gym.runner.trust import escape_text
 
-__all__ = ["figure_bytes", "load_history", "plot_histories", "plot_run_dirs", "save_figure"]
+__all__ = ["check_title", "figure_bytes", "load_history", "plot_histories", "plot_run_dirs", "save_figure"]
 
 
 def _stack(runs: Sequence[History], name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -44,6 +44,25 @@ def _stack(runs: Sequence[History], name: str) -> tuple[NDArray[np.float64], NDA
 def _plain(text: str) -> str:
     """Text from a run folder as matplotlib shows it literally: escaped controls, no mathtext (``$``)."""
     return escape_text(text).replace("$", r"\$")
+
+
+def check_title(title: Any) -> str:
+    """``title`` if matplotlib can draw it; ``ValueError`` naming ``title`` for bad mathtext (``$...$``)."""
+    from matplotlib import cbook
+    from matplotlib.mathtext import MathTextParser
+
+    if not isinstance(title, str):
+        raise TypeError(f"title: expected a str or None, got {type(title).__name__}")
+    if cbook.is_math_text(title):
+        try:
+            MathTextParser("path").parse(title)
+        except ValueError as exc:
+            reason = " ".join(str(exc).split())
+            raise ValueError(
+                f"title: expected text matplotlib can draw ($...$ is mathtext; write \\$ for a dollar sign), "
+                f"got {escape_text(title)!r} ({reason})"
+            ) from None
+    return title
 
 
 def _stop_text(runs: Sequence[History]) -> str:
@@ -131,6 +150,8 @@ def plot_histories(
         raise ValueError("groups: expected at least one group, each with at least one History")
     if not 0.0 <= band[0] < band[1] <= 1.0:
         raise ValueError(f"band: expected quantiles 0 <= low < high <= 1, got {band}")
+    if title is not None:
+        check_title(title)
     envs = check_one_env([run for runs in groups.values() for run in runs], mix_envs)
     regret = all(run.meta.get("metric") == "regret" for runs in groups.values() for run in runs)
     texts = [_plain(f"{label} (n={len(runs)}; stop: {_stop_text(runs)})") for label, runs in groups.items()]

@@ -10,6 +10,12 @@ A run folder holds two policy files (:class:`~creps_gym.optimizers.policy_file.P
 ``policy.npz``
     The optimiser's mean policy at the end of the run.
 
+Each is bound to its run: its ``source`` holds the run's fingerprint (``"run"``, the SHA-256 that binds a
+checkpoint to its configuration), and :func:`load_policy` and a resume check a kept policy like the loop's
+own state (:func:`check_kept_policy`: the run's fingerprint, env id and keywords, optimiser, parameter
+count, context dimension, and an iteration the run can have reached), so a policy file copied from another
+run, or a best policy forged in a checkpoint, is refused naming the file.
+
 Both exist only for optimisers with a ``mean_policy()`` method (every registered one); they are written
 like the checkpoint (a temporary file and a rename). A run folder is untrusted input: the files are read
 bounded, without pickle and without following a symbolic link (:mod:`creps_gym.optimizers.policy_io`).
@@ -28,14 +34,26 @@ from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import evaluate_policy, finite_mean, test_contexts
 from creps_gym.optimizers.policy_file import Policy
+from creps_gym.optimizers.policy_io import policy_bytes
 from creps_gym.runner.backends import run_episodes
 from creps_gym.runner.checks import real_params, unwrapped_model
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
+from creps_gym.runner.errors import RunDirError
+from creps_gym.runner.files import os_failure, write_run_file
 from creps_gym.runner.history import History, encode_float
 from creps_gym.runner.rundir import RunDir
+from creps_gym.runner.trust import config_fingerprint
 
-__all__ = ["WHICH", "RunPolicies", "evaluate_contexts", "evaluate_on_env", "evaluation_draws", "load_policy"]
+__all__ = [
+    "WHICH",
+    "RunPolicies",
+    "check_kept_policy",
+    "evaluate_contexts",
+    "evaluate_on_env",
+    "evaluation_draws",
+    "load_policy",
+]
 
 #: ``load_policy``'s choices: the run folder's file for each.
 WHICH = {"best": RunDir.BEST_POLICY, "final": RunDir.POLICY}
@@ -60,6 +78,7 @@ class RunPolicies:
             for name, space in (("context", env.observation_space), ("param", env.action_space))
         }
         self.optimizer_name = config.optimizer
+        self.config, self.fingerprint = config, config_fingerprint(config)
         self.best: Policy | None = None
         self.best_return = -math.inf
         self._written: Policy | None = None  # the best policy last written to the run folder
@@ -73,7 +92,7 @@ class RunPolicies:
         if not isinstance(policy, Policy):
             raise TypeError(f"optimizer.mean_policy(): expected a Policy, got {type(policy).__name__}")
         source = {"optimizer": self.optimizer_name or type(optimizer).__name__, "which": which}
-        source["iteration"] = int(iteration)
+        source.update(iteration=int(iteration), run=self.fingerprint)
         if record is not None:
             source.update(eval_return=encode_float(record[0]), eval_regret=encode_float(record[1]))
         arrays = {"features": policy.features, "coefficients": policy.coefficients}
@@ -94,14 +113,20 @@ class RunPolicies:
             self._written = self.best
         return None if self.best is None else self.best.to_dict()
 
-    def restore(self, document: Any) -> None:
-        """Take the best policy back from a checkpoint's :meth:`state` (``ValueError`` if damaged)."""
+    def restore(self, document: Any, history: History | None = None) -> None:
+        """Take the best policy back from a checkpoint's :meth:`checkpoint_state`, checked against the run
+        and its ``history`` up to the checkpoint (``ValueError`` if damaged or forged)."""
         self.best, self.best_return = None, -math.inf
         if document is not None:
             best = Policy.from_dict(document)
+            p, z = (self.boxes[f"{name}_box"][0].shape[0] for name in ("param", "context"))
+            last = len(history) if history is not None else self.config.iterations
+            check_kept_policy(best, self.config, self.fingerprint, p, z, "best", last, "best_policy")
             value = best.source.get("eval_return")
             if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
                 raise ValueError(f"best_policy: expected a finite eval_return in its source, got {value!r}")
+            if history is not None:
+                _check_best_record(best, history)
             self.best, self.best_return = best, float(value)
         self._written = self.best
 
@@ -122,9 +147,64 @@ class RunPolicies:
         self._written = self.best
 
 
+def check_kept_policy(
+    policy: Policy,
+    config: RunConfig,
+    fingerprint: str,
+    n_params: int,
+    context_dim: int,
+    which: str,
+    last_iteration: int,
+    name: str,
+) -> None:
+    """``ValueError`` naming ``name`` unless ``policy`` is one this run can have kept: its fingerprint
+    (where the source has one: files written before it existed have none), env id and keywords,
+    optimiser, p and z, ``which``, and an iteration in [0, ``last_iteration``]."""
+    source = policy.source
+    iteration = source.get("iteration")
+    expected = {
+        "fingerprint": (source.get("run", fingerprint), fingerprint),
+        "env": (policy.env, config.env or policy.env),
+        "env_kwargs": (policy.env_kwargs, dict(config.env_kwargs) if config.env else policy.env_kwargs),
+        "optimizer": (source.get("optimizer"), config.optimizer or source.get("optimizer")),
+        "which": (source.get("which"), which),
+        "n_params": (policy.n_params, n_params),
+        "context_dim": (policy.context_dim, context_dim),
+    }
+    for field, (found, wanted) in expected.items():
+        if found != wanted:
+            raise ValueError(
+                f"{name}: expected a policy kept by this run (its {field} {wanted!r}), got {found!r} (a "
+                "policy of another run?)"
+            )
+    if type(iteration) is not int or not 0 <= iteration <= last_iteration:
+        raise ValueError(
+            f"{name}: expected an iteration in [0, {last_iteration}] in its source, got {iteration!r}"
+        )
+
+
+def _check_best_record(best: Policy, history: History) -> None:
+    """The best policy's iteration and evaluation must be the history's best record's."""
+    at = history.best_iteration
+    record = None if at is None else history.records[at - 1]
+    found = (best.source.get("iteration"), best.source.get("eval_return"), best.source.get("eval_regret"))
+    wanted = (
+        None if record is None else (at, encode_float(record.eval_return), encode_float(record.eval_regret))
+    )
+    if found != wanted:
+        raise ValueError(
+            f"best_policy: expected the evaluation of the history's best iteration {wanted}, got {found} "
+            "(iteration, eval_return, eval_regret)"
+        )
+
+
 def _write(run_dir: RunDir, name: str, policy: Policy) -> None:
-    path = policy.save(run_dir.file(name))
-    os.chmod(path, run_dir.file(RunDir.CONFIG).stat().st_mode & 0o777)  # one mode for the run's files
+    """Write a run folder's policy file like its other files (a link or special file there is refused)."""
+    path = write_run_file(run_dir.file(name), policy_bytes(policy.to_dict(arrays=False), policy.arrays()))
+    try:
+        os.chmod(path, os.lstat(run_dir.file(RunDir.CONFIG)).st_mode & 0o777)  # one mode for the run's files
+    except OSError as exc:
+        raise os_failure(path, exc, "set its mode") from None
 
 
 def _holds(run_dir: RunDir, name: str, policy: Policy) -> bool:
@@ -169,9 +249,13 @@ def load_policy(path: str | os.PathLike[str], which: str = "best") -> Policy:
     file = directory.file(WHICH[which])
     if os.path.lexists(file):
         try:
-            return Policy.load(file)
+            policy = Policy.load(file)
+            _check_run_file(directory, policy, which)
         except ValueError as exc:
+            if isinstance(exc, RunDirError):
+                raise
             raise directory.damaged(WHICH[which], exc, "delete it, or restore it from a backup") from None
+        return policy
     if which == "final":
         policy = _checkpoint_policy(directory)
         if policy is not None:
@@ -181,6 +265,14 @@ def load_policy(path: str | os.PathLike[str], which: str = "best") -> Policy:
         "yet, with an optimiser that has no mean_policy(), or written before policy files existed); "
         "try which='final'"
     )
+
+
+def _check_run_file(directory: RunDir, policy: Policy, which: str) -> None:
+    """A run folder's policy file must be this run's (:func:`check_kept_policy`): not one copied in."""
+    config, meta = directory.config(), directory.document().get("meta")
+    meta = meta if isinstance(meta, dict) else {}
+    p, z = meta.get("n_params", policy.n_params), meta.get("n_context_dims", policy.context_dim)
+    check_kept_policy(policy, config, directory.fingerprint(), p, z, which, config.iterations, "its source")
 
 
 def _checkpoint_policy(directory: RunDir) -> Policy | None:
@@ -194,7 +286,7 @@ def _checkpoint_policy(directory: RunDir) -> Policy | None:
     state, optimizer_state = loaded
     try:
         optimizer = restore_optimizer(config.optimizer, optimizer_state)
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
         raise directory.damaged(RunDir.CHECKPOINT, exc, "restore it from a backup") from None
     make = getattr(optimizer, "mean_policy", None)
     if make is None:
@@ -223,6 +315,8 @@ def evaluate_on_env(policy: Policy, env: gym.Env, n: int, seed: int, retries: in
     """Mean return and mean regret (NaN without one) of ``policy`` on ``n`` test contexts of ``env``, drawn
     as a run draws its test contexts from its evaluation seed (``seed`` here): with a run's evaluation seed
     and count, the numbers are the run's."""
+    if isinstance(policy, Policy):
+        policy.check_batch(n, "n")  # before the contexts are drawn
     model, contexts, seeds = evaluation_draws(env, n, seed, retries)
     return evaluate_contexts(policy, env, model, contexts, seeds, retries)
 

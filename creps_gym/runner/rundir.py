@@ -214,6 +214,8 @@ class RunDir:
             document = files.json_document(data, self.CONFIG)
             if not isinstance(document, dict) or not isinstance(document.get("config"), dict):
                 raise ValueError("expected a JSON object with a 'config' object")
+            if not isinstance(document.get("meta", {}), dict):
+                raise ValueError(f"expected a 'meta' object, got {type(document['meta']).__name__}")
         except (OSError, ValueError) as exc:
             raise self.damaged(self.CONFIG, exc, "restore it from a backup or start a new run") from None
         return document

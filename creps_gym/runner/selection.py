@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from creps_gym._validation import check_generator_state
 from creps_gym.runner.config import RunConfig
 from creps_gym.selectors.base import ContextSelector
 from creps_gym.selectors.registry import make_selector
@@ -85,5 +86,5 @@ class Selection:
             return
         if len(present) != len(STATE_KEYS):
             raise KeyError(f"context_selector: expected {list(STATE_KEYS)} in the checkpoint, got {present}")
-        self.rng.bit_generator.state = state["selector_rng"]
+        self.rng.bit_generator.state = check_generator_state(state["selector_rng"], "selector_rng")
         self.selector.load_state_dict(state["selector"])

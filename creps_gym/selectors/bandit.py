@@ -35,7 +35,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_positive_int, check_real, check_real_in_range
+from creps_gym._validation import (
+    MAX_COUNT,
+    as_float_array,
+    check_positive_int,
+    check_real,
+    check_real_in_range,
+)
 from creps_gym.selectors.base import check_state_keys, finite_box
 
 __all__ = ["LearningProgressBandit", "cell_index", "ducb_index"]
@@ -143,7 +149,7 @@ class LearningProgressBandit:
         n = check_positive_int(n, "n")
         uniform = round(self.uniform_share * n)
         chosen = self.choose_cells(rng, n - uniform)
-        corner = np.array(np.unravel_index(chosen, self.cells)).T.reshape(len(chosen), -1)
+        corner = np.array(np.unravel_index(chosen, self.cells)).T.reshape(len(chosen), len(self.cells))
         size = (self.high - self.low) / np.asarray(self.cells)
         inside = self.low + (corner + rng.random(corner.shape)) * size
         anywhere = self.low + (self.high - self.low) * rng.random((uniform, self.low.shape[0]))
@@ -183,6 +189,12 @@ class LearningProgressBandit:
         sums = as_float_array(state["sums"], "context_selector 'bandit' state sums", k)
         if (counts < 0).any() or (sums < 0).any() or (sums > counts * (1 + 1e-12)).any():
             raise ValueError("context_selector 'bandit' state: expected 0 <= sums <= counts in every cell")
+        with np.errstate(over="ignore"):
+            total = float(counts.sum())
+        if total > MAX_COUNT:  # discounted episode counts: no run comes near
+            raise ValueError(
+                f"context_selector 'bandit' state counts: expected a sum <= {MAX_COUNT}, got {total:g}"
+            )
         last = state["last_mean"]
         if not isinstance(last, list) or len(last) != k[0]:
             raise ValueError(

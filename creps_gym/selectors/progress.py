@@ -22,12 +22,21 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_positive_int, check_real_in_range
+from creps_gym._validation import (
+    as_float_array,
+    check_count,
+    check_fits_in_memory,
+    check_positive_int,
+    check_real_in_range,
+)
 from creps_gym.selectors.base import check_state_keys, finite_box
 
 __all__ = ["KernelProgressSelector"]
 
 Array = NDArray[np.float64]
+#: Largest (points x kept episodes x z) block :meth:`KernelProgressSelector.progress` computes at once; a
+#: larger one (many candidates or kept episodes) is computed in blocks of rows, so its memory stays bounded.
+BLOCK = 2**22
 
 
 class KernelProgressSelector:
@@ -61,10 +70,29 @@ class KernelProgressSelector:
     def bind(self, low: Array, high: Array, env_sampler: Any) -> None:
         """Take the env's context box."""
         self.low, self.high = finite_box(low, high, "context_selector 'progress'")
-        self.contexts = np.zeros((0, self.low.shape[0]))
+        z = self.low.shape[0]
+        what = f"the candidate contexts and their progress (candidates x (z + 4) floats, z = {z})"
+        check_fits_in_memory(
+            8.0 * self.candidates * (z + 4) + 8.0 * BLOCK * 3, "candidates", self.candidates, what
+        )
+        self.contexts = np.zeros((0, z))
 
     def progress(self, points: Array) -> Array:
         """The estimate ``LP`` at ``points`` (m, z), shape (m,) (see the module docstring)."""
+        rows = max(1, BLOCK // max(1, self.contexts.size))
+        if points.shape[0] <= rows:
+            new, new_mass, old, old_mass = self._sides(points)
+        else:  # in blocks of rows: the kernel matrices of many points would not fit in memory
+            blocks = [self._sides(points[i : i + rows]) for i in range(0, points.shape[0], rows)]
+            new, new_mass, old, old_mass = (np.concatenate(parts) for parts in zip(*blocks, strict=True))
+        estimate = np.abs(new - old)
+        known = (new_mass >= 1.0) & (old_mass >= 1.0)
+        if not known.any():
+            return np.ones(points.shape[0])
+        return np.where(known, estimate, estimate[known].max())
+
+    def _sides(self, points: Array) -> tuple[Array, Array, Array, Array]:
+        """Kernel means and masses of the recent and the older episodes at ``points`` (m, z)."""
         scale = self.bandwidth * (self.high - self.low)
         gaps = (points[:, None, :] - self.contexts[None, :, :]) / scale
         weights = np.exp(-0.5 * np.einsum("mkz,mkz->mk", gaps, gaps))
@@ -73,13 +101,9 @@ class KernelProgressSelector:
         for mask in (recent, ~recent):
             mass = weights[:, mask].sum(axis=1)
             total = np.einsum("mk,k->m", weights[:, mask], self.returns[mask])
-            sides.append((total / np.maximum(mass, 1e-300), mass))
-        (new, new_mass), (old, old_mass) = sides
-        estimate = np.abs(new - old)
-        known = (new_mass >= 1.0) & (old_mass >= 1.0)
-        if not known.any():
-            return np.ones(points.shape[0])
-        return np.where(known, estimate, estimate[known].max())
+            sides.extend((total / np.maximum(mass, 1e-300), mass))
+        new, new_mass, old, old_mass = sides
+        return new, new_mass, old, old_mass
 
     def select(self, rng: np.random.Generator, n: int) -> Array:
         """``n`` contexts (n, z): candidates picked by ``LP``, then the uniform share."""
@@ -123,9 +147,14 @@ class KernelProgressSelector:
         """Restore :meth:`state_dict`'s output, checked (shapes, finite values, ages < 2 window)."""
         user = "context_selector 'progress' state"
         state = check_state_keys(state, {"iteration", "contexts", "returns", "ages"}, user)
-        iteration = check_positive_int(state["iteration"], f"{user} iteration", 0)
+        iteration = check_count(state["iteration"], f"{user} iteration")
+        if not isinstance(state["returns"], list):
+            raise TypeError(
+                f"{user} returns: expected a list of numbers, got {type(state['returns']).__name__}"
+            )
+        k, z = len(state["returns"]), self.low.shape[0]
+        check_fits_in_memory(8.0 * k * (z + 3), f"{user} returns", f"{k} kept episodes", "the kept episodes")
         returns = as_float_array(state["returns"], f"{user} returns", (None,))
-        k, z = returns.shape[0], self.low.shape[0]
         contexts = as_float_array(state["contexts"], f"{user} contexts", (k, z)) if k else np.zeros((0, z))
         ages = state["ages"]
         if not isinstance(ages, list) or len(ages) != k:

@@ -61,7 +61,14 @@ def _real_reward(reward: Any, step: int) -> float:
             f"reward: expected a real number (int or float) from the inner env's step(), got "
             f"{type(reward).__name__} {reward!r} at inner step {step}"
         )
-    return float(reward)
+    try:
+        return float(reward)
+    except OverflowError:  # a Python int beyond the float range
+        digits = len(str(abs(int(reward))))
+        raise ValueError(
+            f"reward: expected a finite real number from the inner env's step(), got an integer of {digits} "
+            f"digits (beyond the float range) at inner step {step}"
+        ) from None
 
 
 Array = NDArray[np.float64]

@@ -80,6 +80,39 @@ def cli_in_process(*args: Any, cwd: Any = None, env: dict[str, str] | None = Non
 _TEMPORARY = str(Path(__import__("tempfile").gettempdir()).resolve())
 
 
+# -- forged checkpoints and crashes: the run-folder attack and recovery tests
+_CHECKPOINT_KEYS = ("format", "fingerprint", "state_crc")
+
+
+def forge(path: Path, **changes: Any) -> None:
+    """Change fields of the loop state in the checkpoint ``path`` (``optimizer.KEY`` for the optimiser's)
+    and recompute its checksum, as a forger who knows the format would."""
+    import json
+    import zlib
+
+    from creps_gym.optimizers import load_state, save_state
+
+    flat = load_state(path)
+    flat.update(changes)
+    state = {k: v for k, v in flat.items() if not k.startswith("optimizer.") and k not in _CHECKPOINT_KEYS}
+    flat["state_crc"] = zlib.crc32(json.dumps(state, allow_nan=False, sort_keys=True).encode())
+    save_state(flat, path)
+
+
+def crash_at(iteration: int) -> Any:
+    """A runner callback that raises ``RuntimeError("crash")`` after ``iteration``'s record (with
+    ``checkpoint_every=1`` the run's last checkpoint is the iteration before)."""
+    from creps_gym.runner import Callback
+
+    class CrashAt(Callback):
+        def on_iteration(self, record: Any, history: Any) -> bool:
+            if record.iteration == iteration:
+                raise RuntimeError("crash")
+            return False
+
+    return CrashAt()
+
+
 # -- the `extras` marker: tests that need an optional extra; CI's lowest-versions environment runs the others
 EXTRAS = pytest.mark.extras
 _EXTRA_ENV_MODULES = ("creps_gym.envs.kick", "creps_gym.wrappers")  # MuJoCo, Gymnasium(-Robotics) MuJoCo envs

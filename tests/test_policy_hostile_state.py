@@ -13,21 +13,18 @@ import shutil
 import subprocess
 import tracemalloc
 import zipfile
-import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import SPHERE, cli_command
+from helpers import SPHERE, cli_command, crash_at, forge
 
 import creps_gym
 from creps_gym.cli import main
 from creps_gym.optimizers import Policy, load_state, restore_optimizer, save_state
-from creps_gym.runner import Callback, RunDir, resume, run
+from creps_gym.runner import RunDir, resume, run
 from creps_gym.runner.errors import RunDirError
 from creps_gym.selectors.progress import KernelProgressSelector
-
-_CHECKPOINT_KEYS = ("format", "fingerprint", "state_crc")
 
 
 def policy_bytes(document: dict, arrays: dict) -> bytes:
@@ -42,30 +39,11 @@ def policy_bytes(document: dict, arrays: dict) -> bytes:
     return buffer.getvalue()
 
 
-def forge(path: Path, **changes) -> None:
-    """Change fields of ``checkpoint.npz`` (``optimizer.KEY`` for the optimiser's) and recompute its CRC."""
-    flat = load_state(path)
-    flat.update(changes)
-    state = {k: v for k, v in flat.items() if not k.startswith("optimizer.") and k not in _CHECKPOINT_KEYS}
-    flat["state_crc"] = zlib.crc32(json.dumps(state, allow_nan=False, sort_keys=True).encode())
-    save_state(flat, path)
-
-
-class _Crash(Callback):
-    def __init__(self, iteration: int) -> None:
-        self.iteration = iteration
-
-    def on_iteration(self, record, history) -> bool:
-        if record.iteration == self.iteration:
-            raise RuntimeError("crash")
-        return False
-
-
 def _unfinished(path: Path, optimizer: str = "c-cma-es", **options) -> Path:
     """A run of 6 iterations whose last checkpoint is iteration 4 (evaluated at every iteration)."""
     with pytest.raises(RuntimeError, match="crash"):
         run(optimizer, SPHERE, 6, None, 0, env_kwargs={"dim": 2}, run_dir=path, checkpoint_every=1,
-            callbacks=[_Crash(5)], **options)  # fmt: skip
+            callbacks=[crash_at(5)], **options)  # fmt: skip
     return path
 
 

@@ -8,40 +8,18 @@ is shown escaped (never raw ANSI codes, never matplotlib mathtext).
 from __future__ import annotations
 
 import json
-import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import crash_at, forge
 
 from creps_gym.cli import main
 from creps_gym.optimizers import load_state, save_state
-from creps_gym.runner import Callback, RunDirError, resume, run
+from creps_gym.runner import RunDirError, resume, run
 from creps_gym.runner.trust import escape_text
 
 SPHERE = "creps_gym/Sphere-v0"
-_CHECKPOINT_KEYS = ("format", "fingerprint", "state_crc")
-
-
-def forge(path: Path, **changes) -> None:
-    """Change fields of the loop state in the checkpoint ``path`` and recompute its checksum."""
-    flat = load_state(path)
-    flat.update(changes)
-    state = {k: v for k, v in flat.items() if not k.startswith("optimizer.") and k not in _CHECKPOINT_KEYS}
-    flat["state_crc"] = zlib.crc32(json.dumps(state, allow_nan=False, sort_keys=True).encode())
-    save_state(flat, path)
-
-
-class _Crash(Callback):
-    """Raises at ``iteration``: the run's last checkpoint is the one before (``checkpoint_every=1``)."""
-
-    def __init__(self, iteration: int) -> None:
-        self.iteration = iteration
-
-    def on_iteration(self, record, history) -> bool:
-        if record.iteration == self.iteration:
-            raise RuntimeError("crash")
-        return False
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +44,7 @@ def unfinished(tmp_path_factory) -> Path:
             env_kwargs={"dim": 2},
             run_dir=path,
             checkpoint_every=1,
-            callbacks=[_Crash(3)],
+            callbacks=[crash_at(3)],
         )
     return path
 

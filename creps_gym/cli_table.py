@@ -40,6 +40,7 @@ OPTIMIZERS = [['creps', 'Contextual REPS: KL-bounded weights, weighted ML mean a
  ['creps-cma-csa', 'CREPS-CMA with step-size control: CREPS weights and mean, CMA covariance and CSA'],
  ['c-cma-es', 'Contextual CMA-ES: rank weights on context-baselined returns, step-size control (CSA)'],
  ['c-cma-es-surrogate', 'C-CMA-ES with a linear-quadratic surrogate of the return, used while it ranks'],
+ ['c-bo', 'Contextual Bayesian optimisation: a GP over (s, theta), MES or UCB at each s (50-500 episodes)'],
  ['cma', "pycma CMA-ES (non-contextual: ignores the context; extra 'adapters')"],
  ['nevergrad', "nevergrad optimiser, TwoPointsDE by default (non-contextual; extra 'adapters')"],
  ['optuna', "optuna TPE sampler, ask-and-tell (non-contextual; extra 'adapters')"]]

@@ -113,8 +113,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--z", type=int, default=1)
     parser.add_argument("--budget", type=int, default=200)
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--out", type=Path, required=True, help="the results' JSON (read with --render-only)")
+    parser.add_argument("--render-only", action="store_true", help="only write the table next to --out")
     args = parser.parse_args(argv)
+    if args.render_only:
+        render(args.out)
+        return
     runs = []
     for function in args.functions:
         for method in args.methods:
@@ -123,7 +127,16 @@ def main(argv: list[str] | None = None) -> None:
                 print(json.dumps(runs[-1]), flush=True)
     document = {"command": sys.argv, "runs": runs, "provenance": provenance()}
     args.out.write_text(json.dumps(document, indent=1) + "\n")
-    print(summary(runs))
+    print(render(args.out))
+
+
+def render(path: Path) -> str:
+    """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
+    document = json.loads(path.read_text())
+    command = " ".join(["python -m benchmarks.low_budget.compare", *document["command"][1:]])
+    text = f"{summary(document['runs'])}\n\nCommand: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
+    path.with_suffix(".md").write_text(text)
+    return text
 
 
 if __name__ == "__main__":

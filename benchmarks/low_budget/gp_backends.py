@@ -96,14 +96,40 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", nargs="+", type=int, default=[200, 500])
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--out", type=Path, required=True, help="the results' JSON (read with --render-only)")
+    parser.add_argument("--render-only", action="store_true", help="only write the table next to --out")
     args = parser.parse_args(argv)
+    if args.render_only:
+        render(args.out)
+        return
     results = {}
     for n in args.sizes:
         results[str(n)] = {"sklearn": sklearn_times(n, args.repeats), "numpy": numpy_times(n, args.repeats)}
         print(n, json.dumps(results[str(n)]), flush=True)
     document = {"command": sys.argv, "results": results, "provenance": provenance(["scikit-learn"])}
     args.out.write_text(json.dumps(document, indent=1) + "\n")
+    print(render(args.out))
+
+
+def render(path: Path) -> str:
+    """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
+    document = json.loads(path.read_text())
+    lines = [
+        "| episodes n | GP | fit (s) | predict, 320 candidates (s) | value + gradient in θ (s) | "
+        "c-bo's ask per episode (s) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for n, row in document["results"].items():
+        for name, times in row.items():
+            ask = f"{times['ask_per_episode']:.3g}" if "ask_per_episode" in times else "–"
+            lines.append(
+                f"| {n} | {name} | {times['fit']:.3g} | {times['predict']:.3g} | "
+                f"{times['gradient_eval']:.3g} | {ask} |"
+            )
+    command = " ".join(["python -m benchmarks.low_budget.gp_backends", *document["command"][1:]])
+    text = "\n".join(lines) + f"\n\nMedians of the repeats. Command: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
+    path.with_suffix(".md").write_text(text)
+    return text
 
 
 if __name__ == "__main__":

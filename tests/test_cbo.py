@@ -14,8 +14,8 @@ import pytest
 
 from creps_gym.optimizers import make_optimizer
 from creps_gym.optimizers.acquisitions import gumbel_max_values, mes, ucb
-from creps_gym.optimizers.cbo import ContextualBO, transformed_returns
-from creps_gym.optimizers.gp_model import fit_gp, log_marginal_likelihood, matern52
+from creps_gym.optimizers.cbo import ContextualBO
+from creps_gym.optimizers.gp_model import fit_gp, log_marginal_likelihood, matern52, transformed_returns
 
 H = 1e-6
 

@@ -34,18 +34,24 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import special, stats
 
 from creps_gym._validation import as_float_array, check_fits_in_memory, check_positive_int
 from creps_gym.optimizers.acquisitions import Acquisition, AcquisitionMaximiser, gumbel_max_values, mes, ucb
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.cbo_config import CBOConfig
 from creps_gym.optimizers.ccmaes_config import options_doc, options_signature
-from creps_gym.optimizers.gp_model import GPModel, default_start, fit_gp, fit_hyperparameters, hyper_bounds
+from creps_gym.optimizers.gp_model import (
+    GPModel,
+    default_start,
+    fit_gp,
+    fit_hyperparameters,
+    hyper_bounds,
+    transformed_returns,
+)
 from creps_gym.optimizers.policies import check_option_names
 from creps_gym.optimizers.policy_file import Policy
 
-__all__ = ["ContextualBO", "transformed_returns"]
+__all__ = ["ContextualBO"]
 
 Array = NDArray[np.float64]
 #: Seed of the fixed candidate set of ``recommend`` (which must not draw from the optimiser's Generator).
@@ -53,37 +59,6 @@ RECOMMEND_SEED = 20_150_901
 #: ``stop()`` looks at the model only from this many told episodes on, and reports ``no_signal`` when the
 #: fitted noise holds at least this share of the model's variance.
 STOP_EPISODES, NOISE_SHARE = 50, 0.95
-
-
-def _standardised(values: Array, prior_mean: str) -> Array:
-    """Values divided by their standard deviation and shifted so that the GP's zero prior mean is their
-    mean (``"mean"``) or their minimum (``"min"``: far from the data the model expects the worst return seen,
-    so neither the acquisition nor ``recommend`` is drawn to unexplored corners by the prior)."""
-    values = values - values.max()  # finite (the protocol checks the spread), then scaled to [-1, 0], so
-    width = -float(values.min())  # the squares below are too
-    values = values / width if width > 0.0 else values
-    spread = float(values.std())
-    centre = float(values.min()) if prior_mean == "min" else float(values.mean())
-    return (values - centre) / (spread if spread > 0.0 else 1.0)
-
-
-def transformed_returns(returns: Array, transform: str, prior_mean: str = "min") -> Array:
-    """The GP's targets: returns after ``transform``, standardised (see :func:`_standardised`).
-
-    ``"none"``: the returns. ``"log"``: −log(1 + (R_max − R)/c) with c the median of R_max − R over the data
-    (at least 1e-12 times their largest), which compresses a long tail of bad returns (Rosenbrock's valley
-    walls) while keeping the order. ``"rank"``: Φ⁻¹((rank − 1/2)/n), the Gaussian copula of the ranks (ties
-    share their mean rank).
-    """
-    if transform == "log":
-        gaps = returns.max() - returns
-        scale = max(float(np.median(gaps)), 1e-12 * float(gaps.max()), 1e-300)
-        values = -np.log1p(gaps / scale)
-    elif transform == "rank":
-        values = special.ndtri((stats.rankdata(returns) - 0.5) / returns.shape[0])
-    else:
-        values = returns
-    return _standardised(values, prior_mean)
 
 
 class ContextualBO(ContextualOptimizer):

@@ -4,9 +4,10 @@ The kernel is the ARD Matérn-5/2 kernel (Rasmussen & Williams 2006, Eq. 4.17)
 
     k(x, x') = σ_f² (1 + √5 r + 5r²/3) exp(−√5 r),   r² = Σ_j (x_j − x'_j)² / ℓ_j²,          (G1)
 
-plus a noise term σ_n² on the diagonal. Returns are standardised (zero mean, unit variance) before the fit,
-so the hyperparameters h = (log ℓ_1 … log ℓ_d, log σ_f², log σ_n²) live on a fixed scale and their bounds
-(:data:`LOG_BOUNDS`) do not depend on the task. With K = k(X, X) + σ_n² I = LLᵀ and α = K⁻¹y:
+plus a noise term σ_n² on the diagonal. The targets are the returns after :func:`transformed_returns`
+(an order-preserving transform, standardised to unit variance), so the hyperparameters
+h = (log ℓ_1 … log ℓ_d, log σ_f², log σ_n²) live on a fixed scale and their bounds (:data:`LOG_BOUNDS`) do
+not depend on the task. With K = k(X, X) + σ_n² I = LLᵀ and α = K⁻¹y:
 
     μ(x) = k(x, X) α,   σ²(x) = σ_f² − ‖L⁻¹ k(X, x)‖²                                         (G2)
 
@@ -27,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, optimize
+from scipy import linalg, optimize, special, stats
 
 __all__ = [
     "LOG_BOUNDS",
@@ -38,6 +39,7 @@ __all__ = [
     "hyper_bounds",
     "log_marginal_likelihood",
     "matern52",
+    "transformed_returns",
 ]
 
 Array = NDArray[np.float64]
@@ -245,3 +247,34 @@ def fit_hyperparameters(
         if np.isfinite(result.fun) and result.fun < best_value:
             best, best_value = np.asarray(result.x, dtype=np.float64), float(result.fun)
     return best
+
+
+def _standardised(values: Array, prior_mean: str) -> Array:
+    """Values divided by their standard deviation and shifted so that the GP's zero prior mean is their
+    mean (``"mean"``) or their minimum (``"min"``: far from the data the model expects the worst return seen,
+    so neither the acquisition nor ``recommend`` is drawn to unexplored corners by the prior)."""
+    values = values - values.max()  # finite (the protocol checks the spread), then scaled to [-1, 0], so
+    width = -float(values.min())  # the squares below are too
+    values = values / width if width > 0.0 else values
+    spread = float(values.std())
+    centre = float(values.min()) if prior_mean == "min" else float(values.mean())
+    return (values - centre) / (spread if spread > 0.0 else 1.0)
+
+
+def transformed_returns(returns: Array, transform: str, prior_mean: str = "min") -> Array:
+    """The GP's targets: returns after ``transform``, standardised (see :func:`_standardised`).
+
+    ``"none"``: the returns. ``"log"``: −log(1 + (R_max − R)/c) with c the median of R_max − R over the data
+    (at least 1e-12 times their largest), which compresses a long tail of bad returns (Rosenbrock's valley
+    walls) while keeping the order. ``"rank"``: Φ⁻¹((rank − 1/2)/n), the Gaussian copula of the ranks (ties
+    share their mean rank).
+    """
+    if transform == "log":
+        gaps = returns.max() - returns
+        scale = max(float(np.median(gaps)), 1e-12 * float(gaps.max()), 1e-300)
+        values = -np.log1p(gaps / scale)
+    elif transform == "rank":
+        values = special.ndtri((stats.rankdata(returns) - 0.5) / returns.shape[0])
+    else:
+        values = returns
+    return _standardised(values, prior_mean)

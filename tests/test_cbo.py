@@ -214,6 +214,8 @@ def test_the_first_asks_draw_the_initial_design_inside_the_box():
         ({"context_low": [0.0], "context_high": [1.0, 2.0]}, ValueError, "context_high: expected shape"),
         ({"starts": 0}, ValueError, "starts: expected an integer >= 1"),
         ({"kappa": 1.0}, TypeError, "options: expected names in .* got unknown \\['kappa'\\]"),
+        ({"candidates": 10**9}, ValueError, "candidates: expected an integer of at most 100000"),
+        ({"distillation_points": 20_000}, ValueError, "distillation_points: expected an integer of at most"),
     ],
 )
 def test_bad_options_are_refused_naming_them(options, error, match):
@@ -269,3 +271,25 @@ def test_returns_near_the_float_limit_give_finite_asks_and_restore(tmp_path):
     restored = type(optimizer).load(optimizer.save(tmp_path / "ckpt.npz"))
     assert np.isfinite(restored.ask(contexts[:3])).all()
     assert restored.model.chol.tobytes() == optimizer.model.chol.tobytes()
+
+
+def test_a_checkpoint_whose_data_would_not_fit_in_memory_is_refused_before_the_gp_is_built():
+    state = _trained().state_dict()
+    n = 2_000_000  # the kernel matrices would need n² x (p + z + 6) x 8 bytes: about 3e14
+    state.update(data_contexts=np.zeros((n, 1)), data_params=np.zeros((n, 3)), data_returns=np.zeros(n))
+    with pytest.raises(
+        ValueError, match=r"state\['data_returns'\]: expected a size whose arrays fit in memory"
+    ):
+        ContextualBO.from_state_dict(state)
+
+
+def test_many_context_dimensions_distil_on_a_bounded_design():
+    optimizer = make_optimizer("c-bo", 2, 16, 0, context_low=0.0, context_high=1.0)
+    assert optimizer.distillation_contexts().shape == (1000, 16)
+
+
+def test_a_distillation_grid_beyond_its_bound_is_refused():
+    with pytest.raises(
+        ValueError, match=r"distillation_points: expected a grid of at most 10000 .* got 30 \*\* 3"
+    ):
+        make_optimizer("c-bo", 2, 3, 0, distillation_points=30)

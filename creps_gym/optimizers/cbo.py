@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from creps_gym._validation import as_float_array, check_fits_in_memory, check_positive_int
 from creps_gym.optimizers.acquisitions import Acquisition, AcquisitionMaximiser, gumbel_max_values, mes, ucb
 from creps_gym.optimizers.base import ContextualOptimizer
-from creps_gym.optimizers.cbo_config import CBOConfig
+from creps_gym.optimizers.cbo_config import MAX_COUNTS, CBOConfig
 from creps_gym.optimizers.ccmaes_config import options_doc, options_signature
 from creps_gym.optimizers.gp_model import (
     GPModel,
@@ -278,7 +278,8 @@ class ContextualBO(ContextualOptimizer):
 
     def distillation_contexts(self) -> Array:
         """The grid :meth:`mean_policy` fits on: ``grid_points`` per dimension over the configured context
-        box, else over the told contexts' range, shape (g, z)."""
+        box, else over the told contexts' range, shape (g, z) (beyond 10,000 grid points, 1,000 uniform
+        contexts from a fixed seed)."""
         z = self.n_context_dims
         if self.config.context_box is not None:
             low, high = self.config.context_box
@@ -286,6 +287,9 @@ class ContextualBO(ContextualOptimizer):
             low, high = self.contexts.min(axis=0), self.contexts.max(axis=0)
         else:
             return np.zeros((1, z))
+        if self.config.grid_points**z > MAX_COUNTS["grid"]:  # many context dimensions: a fixed random design
+            unit = np.random.default_rng(RECOMMEND_SEED).uniform(size=(MAX_COUNTS["grid"] // 10, z))
+            return low + unit * (high - low)
         axes = [np.linspace(a, b, self.config.grid_points) for a, b in zip(low, high, strict=True)]
         return np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1).reshape(-1, z)
 

@@ -22,6 +22,16 @@ from creps_gym.optimizers.policies import initial_covariance
 __all__ = ["CBOConfig"]
 
 Array = NDArray[np.float64]
+#: Largest counts the options may set (each sizes arrays or loops of every ask, refit or distillation; a
+#: checkpoint's config is untrusted input).
+MAX_COUNTS = {
+    "mes_samples": 10_000,
+    "candidates": 100_000,
+    "starts": 1_000,
+    "hyper_restarts": 100,
+    "fit_points": 10_000,
+    "grid": 10_000,
+}
 TRANSFORMS = ("none", "log", "rank")
 PRIOR_MEANS = ("min", "mean")
 _BOX_ARRAYS = ("param_low", "param_high", "context_low", "context_high")
@@ -42,6 +52,14 @@ def _optional_box(low: Any, high: Any, names: tuple[str, str], size: int) -> tup
             f"{names[0]}, {names[1]}: expected low < high in every entry, got {pair[0]}, {pair[1]}"
         )
     return pair[0].copy(), pair[1].copy()
+
+
+def _bounded_int(value: Any, name: str, minimum: int, maximum: int) -> int:
+    """``value`` as an int in [minimum, maximum], else ``TypeError``/``ValueError`` naming ``name``."""
+    number = check_positive_int(value, name, minimum)
+    if number > maximum:
+        raise ValueError(f"{name}: expected an integer of at most {maximum}, got {number}")
+    return number
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,11 +140,16 @@ class CBOConfig:
             ("hyper_restarts", 0),
             ("fit_points", 2),
         ):
-            set_(self, name, check_positive_int(getattr(self, name), name, minimum))
+            set_(self, name, _bounded_int(getattr(self, name), name, minimum, MAX_COUNTS[name]))
         if self.initial_samples is not None:
             set_(self, "initial_samples", check_positive_int(self.initial_samples, "initial_samples", 2))
         if self.distillation_points is not None:
-            points = check_positive_int(self.distillation_points, "distillation_points", 2)
+            points = _bounded_int(self.distillation_points, "distillation_points", 2, MAX_COUNTS["grid"])
+            if points ** max(z, 1) > MAX_COUNTS["grid"]:
+                raise ValueError(
+                    f"distillation_points: expected a grid of at most {MAX_COUNTS['grid']} contexts "
+                    f"(points ** z), got {points} ** {z}"
+                )
             set_(self, "distillation_points", points)
         if not isinstance(self.acquisition, str) or self.acquisition not in ACQUISITIONS:
             raise ValueError(f"acquisition: expected one of {ACQUISITIONS}, got {self.acquisition!r}")

@@ -293,3 +293,16 @@ def test_a_distillation_grid_beyond_its_bound_is_refused():
         ValueError, match=r"distillation_points: expected a grid of at most 10000 .* got 30 \*\* 3"
     ):
         make_optimizer("c-bo", 2, 3, 0, distillation_points=30)
+
+
+def test_without_context_dimensions_it_is_plain_bayesian_optimisation():
+    optimizer = make_optimizer("c-bo", 2, 0, 0, initial_cov=4.0)
+    for _ in range(10):
+        contexts = np.zeros((4, 0))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -((params - 1.0) ** 2).sum(axis=1))
+    best = optimizer.recommend(np.zeros((1, 0)))[0]
+    assert np.abs(best - 1.0).max() < 0.05
+    policy = optimizer.mean_policy()
+    assert policy(np.zeros((1, 0))).tobytes() == optimizer.recommend(np.zeros((1, 0))).tobytes()
+    assert optimizer.diagnostics["distillation_rmse"] == 0.0

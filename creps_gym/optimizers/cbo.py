@@ -281,6 +281,8 @@ class ContextualBO(ContextualOptimizer):
         box, else over the told contexts' range, shape (g, z) (beyond 10,000 grid points, 1,000 uniform
         contexts from a fixed seed)."""
         z = self.n_context_dims
+        if z == 0:  # one (empty) context: the policy is a constant
+            return np.zeros((1, 0))
         if self.config.context_box is not None:
             low, high = self.config.context_box
         elif self.returns.shape[0]:

@@ -386,10 +386,10 @@ def test_every_vector_wrapper_on_every_registered_native_vector_env(env_id):
 DOC = Path(__file__).resolve().parents[1] / "docs" / "wrappers.md"
 
 
-@pytest.mark.parametrize("index", [0, pytest.param(1, marks=EXTRAS)])  # block 1 makes a MuJoCo env
+@pytest.mark.parametrize("index", [0, 1, pytest.param(2, marks=EXTRAS)])  # block 2 makes a MuJoCo env
 def test_doc_examples_run(index, capsys):
     blocks = python_blocks(DOC)
-    assert len(blocks) == 4
+    assert len(blocks) == 5
     exec(compile(blocks[index], f"{DOC}:block{index}", "exec"), {"__name__": "docs"})
     assert "return" in capsys.readouterr().out
 

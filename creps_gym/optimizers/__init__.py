@@ -1,10 +1,13 @@
-"""Ask/tell optimisers: CREPS, CREPS-CMA and contextual CMA-ES, plus adapters (pycma, nevergrad, optuna).
+"""Ask/tell optimisers: CREPS, CREPS-CMA, contextual CMA-ES and contextual BO, plus adapters (pycma,
+nevergrad, optuna).
 
 Returns are maximised. Optimisers never see an environment: ``ask(contexts) -> params``,
 ``tell(contexts, params, returns)``, ``recommend(contexts) -> params``.
 """
 
 from creps_gym.optimizers.base import AskTellOptimizer, ContextualOptimizer, load_state, save_state
+from creps_gym.optimizers.cbo import ContextualBO
+from creps_gym.optimizers.cbo_config import CBOConfig
 from creps_gym.optimizers.ccmaes import CCMAES, CCMAESConfig, recommended_batch_size
 from creps_gym.optimizers.creps import (
     CREPS,
@@ -48,9 +51,11 @@ __all__ = [
     "AffineFeatures",
     "AskTellOptimizer",
     "BaselineFeatures",
+    "CBOConfig",
     "CCMAESConfig",
     "CREPSCMAConfig",
     "CREPSConfig",
+    "ContextualBO",
     "ContextualOptimizer",
     "FeatureMap",
     "LinearGaussianPolicy",

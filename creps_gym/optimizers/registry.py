@@ -14,6 +14,7 @@ name                   optimiser
 ``creps-cma-csa``      :class:`~creps_gym.optimizers.creps_cma.CREPSCMA` with ``step_size="csa"``
 ``c-cma-es``           :class:`~creps_gym.optimizers.ccmaes.CCMAES`
 ``c-cma-es-surrogate`` :class:`~creps_gym.optimizers.ccmaes_surrogate.CCMAESSurrogate`
+``c-bo``               :class:`~creps_gym.optimizers.cbo.ContextualBO`
 ``cma``                :class:`~creps_gym.optimizers.adapters.pycma.CMAAdapter`
 ``nevergrad``          :class:`~creps_gym.optimizers.adapters.nevergrad.NevergradAdapter`
 ``optuna``             :class:`~creps_gym.optimizers.adapters.optuna.OptunaAdapter`
@@ -224,6 +225,8 @@ _DEFAULTS = (
      "creps_gym.optimizers.ccmaes:CCMAES", {}),
     ("c-cma-es-surrogate", "C-CMA-ES with a linear-quadratic surrogate of the return, used while it ranks",
      "creps_gym.optimizers.ccmaes_surrogate:CCMAESSurrogate", {}),
+    ("c-bo", "Contextual Bayesian optimisation: a GP over (s, theta), MES or UCB at each s (50-500 episodes)",
+     "creps_gym.optimizers.cbo:ContextualBO", {}),
     ("cma", "pycma CMA-ES (non-contextual: ignores the context; extra 'adapters')",
      "creps_gym.optimizers.adapters.pycma:CMAAdapter", {}),
     ("nevergrad", "nevergrad optimiser, TwoPointsDE by default (non-contextual; extra 'adapters')",

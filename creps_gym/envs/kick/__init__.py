@@ -15,6 +15,10 @@ Registered ids
     As v0 with a return for forward distance only: sign(x) x² - y².
 ``creps_gym/KickFlexibility-v2``
     As v1, and a kick that misses the ball scores minus its closest foot-ball distance (m) instead of 0.
+``creps_gym/KickPrecisionLowDim-v0``, ``creps_gym/KickFlexibilityLowDim-v0``
+    KickPrecision-v1 and KickFlexibility-v2 searched over six metaparameters around the reference kick
+    (swing amplitude, wind-up, duration, aim, lean, reach: :mod:`creps_gym.envs.kick.subspace`, through
+    :class:`creps_gym.envs.subspace.AffineSubspaceEnv`).
 """
 
 from __future__ import annotations
@@ -56,4 +60,12 @@ REGISTRATIONS: list[dict[str, Any]] = [
         "vector_entry_point": f"{_TASKS}:KickFlexibilityVectorEnv",
         "kwargs": {"rolling_friction": 0.003, "fall_penalty": 1.0, "forward_only": True, "miss_weight": 1.0},
     },
+    *(
+        {
+            "id": f"creps_gym/Kick{task}LowDim-v0",
+            "entry_point": "creps_gym.envs.kick.subspace:make_low_dimensional_kick",
+            "kwargs": {"full_id": f"creps_gym/Kick{task}-{version}", "initial_std": 0.3},
+        }
+        for task, version in (("Precision", "v1"), ("Flexibility", "v2"))
+    ),
 ]

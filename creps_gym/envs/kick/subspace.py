@@ -1,0 +1,60 @@
+"""The low-dimensional kicks' subspace (``creps_gym/KickPrecisionLowDim-v0``, ``KickFlexibilityLowDim-v0``):
+six movement metaparameters around the reference kick.
+
+θ_ref is the reference right-leg kick (``model.REFERENCE_KICK``, normalised units). With Δ = θ_final,r −
+θ_initial,r the kicking leg's swing (its six joints), the columns of B are, in normalised units:
+
+1. ``amplitude``: 0.5 Δ on the kicking leg's final pose (u = ±1: a swing 1.5 or 0.5 times as long);
+2. ``hip``: 0.6 on the kicking leg's final hip pitch (the foot further forward: the reference reaches balls
+   up to x_B = 0.20 m, u = 1 one at 0.25 m);
+3. ``ankle``: 0.6 on its final ankle pitch (the toe's angle at contact, which also moves the contact
+   forward);
+4. ``duration``: 0.5 on the swing time t. The reference swings at the fastest time (t = −1, 0.05 s), which
+   the env clips at: u < 0 is as fast as u = 0, u = 1 is t = −0.5 (0.19 s);
+5. ``aim``: 0.6 on the kicking leg's final hip roll (the swing's sideways direction);
+6. ``lean``: 0.1 on both hips' roll in both poses (the body's sideways shift over the support foot).
+
+The scales were chosen by hand, as a robot's engineer picks metaparameters, from one-at-a-time scans at
+u_i = ±0.5 and ±1 (eight contexts): none of them makes the robot fall alone, while moving the initial
+(wind-up) pose of the kicking leg by half its swing, or the hips' roll by twice the ``lean`` scale, does,
+which is why neither is a larger direction. They are not fitted, and a combination of several large u_i
+can still fall.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["METAPARAMETERS", "kick_metaparameters", "make_low_dimensional_kick"]
+
+Array = NDArray[np.float64]
+METAPARAMETERS = ("amplitude", "hip", "ankle", "duration", "aim", "lean")
+_R, _L = 0, 6  # first joint of the right (kicking) and left leg in a pose; poses: initial 0-11, final 12-23
+_HIP_ROLL, _HIP_PITCH, _ANKLE_PITCH, _FINAL, _DURATION = 1, 2, 4, 12, 24
+
+
+def kick_metaparameters(env: Any) -> tuple[Array, Array, list[str]]:
+    """(θ_ref (25,), B (25, 6), names) for a kick env (its ``reference_params()``)."""
+    reference = np.asarray(env.reference_params(), dtype=np.float64)
+    swing = reference[_FINAL + _R : _FINAL + _R + 6] - reference[_R : _R + 6]
+    basis = np.zeros((reference.shape[0], len(METAPARAMETERS)))
+    basis[_FINAL + _R : _FINAL + _R + 6, 0] = 0.5 * swing
+    basis[_FINAL + _R + _HIP_PITCH, 1] = 0.6
+    basis[_FINAL + _R + _ANKLE_PITCH, 2] = 0.6
+    basis[_DURATION, 3] = 0.5
+    basis[_FINAL + _R + _HIP_ROLL, 4] = 0.6
+    for pose in (0, _FINAL):
+        for leg in (_R, _L):
+            basis[pose + leg + _HIP_ROLL, 5] += 0.1
+    return reference, basis, list(METAPARAMETERS)
+
+
+def make_low_dimensional_kick(full_id: str, **kwargs: Any) -> Any:
+    """The entry point of the low-dimensional kick ids: ``full_id`` in :func:`kick_metaparameters`'s
+    subspace (``kwargs``: :func:`~creps_gym.envs.subspace.make_low_dimensional`'s and the full env's)."""
+    from creps_gym.envs.subspace import make_low_dimensional
+
+    return make_low_dimensional(kick_metaparameters, full_id, **kwargs)

@@ -1,0 +1,173 @@
+"""Acquisition functions of contextual Bayesian optimisation and their maximisation over θ at a fixed s.
+
+With μ and σ the GP's posterior mean and standard deviation (:mod:`creps_gym.optimizers.gp_model`):
+
+* **UCB** (Srinivas et al., ICML 2010): α(x) = μ(x) + √β σ(x).                                       (A1)
+* **Max-value entropy search** (MES; Wang & Jegelka, ICML 2017): the expected reduction of the entropy of the
+  maximum value y* = max_θ f(s, θ) at the asked context s,
+
+      α(x) = (1/K) Σ_k [γ_k φ(γ_k) / (2Φ(γ_k)) − log Φ(γ_k)],   γ_k = (y*_k − μ(x)) / σ(x),           (A2)
+
+  with K samples y*_k of the maximum drawn from a Gumbel distribution fitted to
+  P(y* < y) ≈ Π_i Φ((y − μ_i)/σ_i) over a candidate set at s (Wang & Jegelka's Gumbel sampling).   (A3)
+
+Each is maximised over θ in the parameter box with s fixed: the acquisition is evaluated on many candidates
+(random draws and the observed θ) and L-BFGS-B, with the analytic gradient, starts from the best few.
+Everything is deterministic given the candidates and the Generator.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import optimize, special
+
+from creps_gym.optimizers.gp_model import GPModel
+
+__all__ = [
+    "ACQUISITIONS",
+    "AcquisitionMaximiser",
+    "gumbel_max_values",
+    "mes",
+    "ucb",
+]
+
+Array = NDArray[np.float64]
+#: An acquisition: (mean (m,), variance (m,)) -> (value (m,), ∂value/∂mean (m,), ∂value/∂variance (m,)).
+Acquisition = Callable[[Array, Array], tuple[Array, Array, Array]]
+ACQUISITIONS = ("ucb", "mes")
+_LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+def ucb(mean: Array, variance: Array, beta: float) -> tuple[Array, Array, Array]:
+    """Eq. (A1) and its derivatives with respect to μ and σ²."""
+    std = np.sqrt(variance)
+    root = math.sqrt(beta)
+    return mean + root * std, np.ones_like(mean), root / (2.0 * std)
+
+
+def mes(mean: Array, variance: Array, max_values: Array) -> tuple[Array, Array, Array]:
+    """Eq. (A2) for K sampled maxima ``max_values`` (K,), and its derivatives with respect to μ and σ².
+
+    Uses h = φ(γ)/Φ(γ) from ``log_ndtr`` (stable for very negative γ) and
+    ∂/∂γ [γh/2 − log Φ(γ)] = −(h/2)(1 + γ² + γh).
+    """
+    std = np.sqrt(variance)
+    gamma = (max_values[None, :] - mean[:, None]) / std[:, None]  # (m, K)
+    log_cdf = special.log_ndtr(gamma)
+    ratio = np.exp(-0.5 * gamma * gamma - _LOG_SQRT_2PI - log_cdf)
+    value = (0.5 * gamma * ratio - log_cdf).mean(axis=1)
+    slope = -0.5 * ratio * (1.0 + gamma * gamma + gamma * ratio)  # ∂/∂γ
+    dmean = (slope * (-1.0 / std[:, None])).mean(axis=1)
+    dvariance = (slope * (-gamma / (2.0 * variance[:, None]))).mean(axis=1)
+    return value, dmean, dvariance
+
+
+def gumbel_max_values(mean: Array, variance: Array, n_samples: int, rng: np.random.Generator) -> Array:
+    """K samples of max_θ f(s, θ), Eq. (A3): a Gumbel fitted to the quartiles of Π_i Φ((y − μ_i)/σ_i)
+    over the candidates (m,), found by bisection; samples below max μ_i + 1e-6·(1 + |max μ_i|) are raised
+    to it (the maximum is at least the best mean's value, up to noise)."""
+    std = np.sqrt(variance)
+    floor = float(mean.max())
+    low = floor - 1e-9
+    high = float((mean + 6.0 * std).max()) + 1e-9
+
+    def log_cdf(y: Array) -> Array:
+        return special.log_ndtr((y[:, None] - mean[None, :]) / std[None, :]).sum(axis=1)
+
+    targets = np.log(np.array([0.25, 0.5, 0.75]))
+    lows, highs = np.full(3, low), np.full(3, high)
+    for _ in range(60):
+        middle = 0.5 * (lows + highs)
+        below = log_cdf(middle) < targets
+        lows, highs = np.where(below, middle, lows), np.where(below, highs, middle)
+    q25, q50, q75 = 0.5 * (lows + highs)
+    scale = max((q75 - q25) / (math.log(-math.log(0.25)) - math.log(-math.log(0.75))), 1e-12)
+    location = q50 + scale * math.log(-math.log(0.5))
+    uniform = rng.uniform(1e-12, 1.0 - 1e-12, n_samples)
+    samples = location - scale * np.log(-np.log(uniform))
+    return np.maximum(samples, floor + 1e-6 * (1.0 + abs(floor)))
+
+
+class AcquisitionMaximiser:
+    """Maximise an acquisition (or the posterior mean) over θ in the unit box with s fixed.
+
+    Parameters
+    ----------
+    n_starts : int
+        L-BFGS-B runs, from the best distinct candidates.
+    max_iter : int
+        L-BFGS-B iterations per run.
+    """
+
+    def __init__(self, n_starts: int, max_iter: int = 50) -> None:
+        self.n_starts = n_starts
+        self.max_iter = max_iter
+
+    def maximise(
+        self, model: GPModel, context: Array, candidates: Array, acquisition: Acquisition | None
+    ) -> tuple[Array, float]:
+        """The best θ (q,) in [0, 1]^q found at the scaled context (c,) and its value.
+
+        ``acquisition`` None maximises the posterior mean. ``candidates`` (m, q) are scored first; the best
+        ``n_starts`` start L-BFGS-B; the result is the best of the runs and the candidates.
+        """
+        mean, variance = model.predict(self.inputs(context, candidates))
+        return self.maximise_scored(model, context, candidates, mean, variance, acquisition)
+
+    def maximise_scored(
+        self,
+        model: GPModel,
+        context: Array,
+        candidates: Array,
+        mean: Array,
+        variance: Array,
+        acquisition: Acquisition | None,
+    ) -> tuple[Array, float]:
+        """:meth:`maximise` with the posterior (``mean``, ``variance``, (m,)) at the candidates given."""
+        values = mean if acquisition is None else acquisition(mean, variance)[0]
+        order = np.argsort(-values, kind="stable")
+        best, best_value = candidates[order[0]].copy(), float(values[order[0]])
+        starts, seen = [], set()
+        for index in order:
+            key = candidates[index].tobytes()
+            if key not in seen:
+                seen.add(key)
+                starts.append(candidates[index])
+            if len(starts) == self.n_starts:
+                break
+        for start in starts:
+            theta, value = self._local(model, context, start, acquisition)
+            if value > best_value:
+                best, best_value = theta, value
+        return best, best_value
+
+    @staticmethod
+    def inputs(context: Array, thetas: Array) -> Array:
+        return np.hstack([np.broadcast_to(context, (thetas.shape[0], context.shape[0])), thetas])
+
+    def _local(
+        self, model: GPModel, context: Array, start: Array, acquisition: Acquisition | None
+    ) -> tuple[Array, float]:
+        width = context.shape[0]
+
+        def negative(theta: Array) -> tuple[float, Array]:
+            x = np.concatenate([context, theta])[None, :]
+            mean, variance, dmean, dvariance = model.predict_with_gradient(x)
+            if acquisition is None:
+                return -float(mean[0]), -dmean[0, width:]
+            value, by_mean, by_variance = acquisition(mean, variance)
+            gradient = by_mean[0] * dmean[0, width:] + by_variance[0] * dvariance[0, width:]
+            return -float(value[0]), -gradient
+
+        bounds = [(0.0, 1.0)] * start.shape[0]
+        options = {"maxiter": self.max_iter}
+        result = optimize.minimize(
+            negative, start, jac=True, method="L-BFGS-B", bounds=bounds, options=options
+        )
+        theta = np.clip(np.asarray(result.x, dtype=np.float64), 0.0, 1.0)
+        value = -negative(theta)[0]
+        return theta, value if math.isfinite(value) else -math.inf

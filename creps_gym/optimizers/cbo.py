@@ -1,0 +1,376 @@
+"""Contextual Bayesian optimisation (c-bo): a Gaussian process of the return over (s, θ), asked at each s.
+
+References: J. H. Metzen, A. Fabisch, J. Hansen, "Bayesian Optimization for Contextual Policy Search",
+IROS 2015 workshop / Metzen 2015 (BO-CPS: a GP over context and parameters, an acquisition maximised over θ
+with the observed s fixed); Z. Wang, S. Jegelka, "Max-value Entropy Search for Efficient Bayesian
+Optimization", ICML 2017 (A2, A3); N. Srinivas et al., "Gaussian Process Optimization in the Bandit Setting",
+ICML 2010 (A1); D. Ginsbourger et al. 2010 (the kriging believer).
+
+One ``ask(contexts)`` for a batch of n contexts (the GP of :mod:`creps_gym.optimizers.gp_model`, the
+acquisitions of :mod:`creps_gym.optimizers.acquisitions`):
+
+1. The first ``initial_samples`` episodes are drawn from the initial distribution N(initial_mean,
+   initial_cov), clipped to the parameter box.
+2. After that, each row's θ maximises the acquisition at its context s (UCB, A1, or MES, A2–A3) over the
+   parameter box: random candidates and the observed θ are scored, L-BFGS-B starts from the best few.
+3. Within a batch, each chosen (s, θ) is added to the model with its posterior mean as a fantasised return
+   (the kriging believer), so a batch of any size spreads out.
+
+``tell`` appends the episodes to the data; the hyperparameters (G3) are refitted by maximum likelihood when
+the data have grown by ``refit_growth`` since the last fit, and otherwise kept, so an ask costs one Cholesky
+factor and the acquisition's optimisation. ``recommend(contexts)`` is the posterior mean's maximiser at each
+s; :meth:`ContextualBO.mean_policy` distils it into a :class:`~creps_gym.optimizers.policy_file.Policy`
+(least squares of the maximisers on a context grid) and reports the distillation error in ``diagnostics``.
+
+Checkpoints store the data, the hyperparameters, the context scaling and the Generator; the GP is refitted
+from them on restore (never pickled), giving the same bits.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym._validation import as_float_array, check_fits_in_memory, check_positive_int
+from creps_gym.optimizers.acquisitions import Acquisition, AcquisitionMaximiser, gumbel_max_values, mes, ucb
+from creps_gym.optimizers.base import ContextualOptimizer
+from creps_gym.optimizers.cbo_config import MAX_COUNTS, CBOConfig
+from creps_gym.optimizers.ccmaes_config import options_doc, options_signature
+from creps_gym.optimizers.gp_model import (
+    GPModel,
+    default_start,
+    fit_gp,
+    fit_hyperparameters,
+    hyper_bounds,
+    transformed_returns,
+)
+from creps_gym.optimizers.policies import check_option_names
+from creps_gym.optimizers.policy_file import Policy
+
+__all__ = ["ContextualBO"]
+
+Array = NDArray[np.float64]
+#: Seed of the fixed candidate set of ``recommend`` (which must not draw from the optimiser's Generator).
+RECOMMEND_SEED = 20_150_901
+#: ``stop()`` looks at the model only from this many told episodes on, and reports ``no_signal`` when the
+#: fitted noise holds at least this share of the model's variance.
+STOP_EPISODES, NOISE_SHARE = 50, 0.95
+
+
+class ContextualBO(ContextualOptimizer):
+    """Contextual Bayesian optimisation over (s, θ) (see the module docstring).
+
+    Parameters
+    ----------
+    n_params : int
+        p, the dimension of θ.
+    n_context_dims : int
+        z, the dimension of s.
+    **options
+        The fields of :class:`~creps_gym.optimizers.cbo_config.CBOConfig` (listed below).
+    """
+
+    kind: ClassVar[str] = "c-bo"
+    config_class: ClassVar[type] = CBOConfig
+    #: ``mean_policy()`` is a least-squares distillation of ``recommend``, not equal to it bit for bit.
+    distilled_policy: ClassVar[bool] = True
+
+    @staticmethod
+    def recommended_batch_size(n_params: int, n_context_dims: int) -> int:
+        """4: small batches keep the model's choices nearly sequential (the kriging believer fills them)."""
+        check_positive_int(n_params, "n_params")
+        check_positive_int(n_context_dims, "n_context_dims", minimum=0)
+        return 4
+
+    @staticmethod
+    def minimum_batch_size(n_params: int, n_context_dims: int) -> int:
+        """2, the protocol's smallest tell: every episode is data for the GP."""
+        check_positive_int(n_params, "n_params")
+        check_positive_int(n_context_dims, "n_context_dims", minimum=0)
+        return 2
+
+    def __init__(self, n_params: int, n_context_dims: int, **options: Any) -> None:
+        check_option_names(CBOConfig, options)
+        self._init_from_config(CBOConfig(n_params, n_context_dims, **options))
+
+    def _init_from_config(self, config: CBOConfig) -> None:
+        ContextualOptimizer.__init__(self)
+        self.config = config
+        self.n_params, self.n_context_dims = config.n_params, config.n_context_dims
+        self.rng = np.random.default_rng(config.seed)
+        p, z = self.n_params, self.n_context_dims
+        self.contexts, self.params, self.returns = np.zeros((0, z)), np.zeros((0, p)), np.zeros(0)
+        self.log_hyper = default_start(p + z)
+        box = config.context_box
+        self.context_scale = (np.zeros(z), np.ones(z)) if box is None else (box[0].copy(), box[1].copy())
+        self.fitted_at = 0
+        self.model: GPModel | None = None
+        self._maximiser = AcquisitionMaximiser(config.starts)
+        self._recommend_candidates: Array | None = None
+        self._chol_initial = np.linalg.cholesky(config.initial_cov)
+
+    # -- scaling -------------------------------------------------------------------------------------------
+    def _scaled_contexts(self, contexts: Array, scale: tuple[Array, Array] | None = None) -> Array:
+        low, high = self.context_scale if scale is None else scale
+        return (contexts - low) / (high - low)
+
+    def _scaled_params(self, params: Array) -> Array:
+        low, high = self.config.param_box
+        return (params - low) / (high - low)
+
+    def _unscaled_params(self, unit: Array) -> Array:
+        low, high = self.config.param_box
+        return low + unit * (high - low)
+
+    def _fit_scale(self, contexts: Array) -> tuple[Array, Array]:
+        """The context box of the GP's scaling: the configured one, else the told contexts' range (a
+        degenerate dimension gets a width of 1 around its value)."""
+        if self.config.context_box is not None:
+            return self.context_scale
+        low, high = contexts.min(axis=0), contexts.max(axis=0)
+        flat = high - low <= 1e-12 * np.maximum(np.abs(low), 1.0)
+        return np.where(flat, low - 0.5, low), np.where(flat, low + 0.5, high)
+
+    def _targets(self, returns: Array, prior_mean: str | None = None) -> Array:
+        """The GP's targets; ``prior_mean`` None: the configured one (the posterior's), "mean" for the
+        likelihood of a refit (a constant-mean GP: the pessimistic shift is no signal to explain)."""
+        centre = self.config.prior_mean if prior_mean is None else prior_mean
+        return transformed_returns(returns, self.config.transform, centre)
+
+    def _inputs(self, contexts: Array, params: Array, scale: tuple[Array, Array] | None = None) -> Array:
+        return np.hstack([self._scaled_contexts(contexts, scale), self._scaled_params(params)])
+
+    # -- tell ----------------------------------------------------------------------------------------------
+    def _update(self, contexts: Array, params: Array, returns: Array) -> None:
+        all_contexts = np.vstack([self.contexts, contexts])
+        all_params, all_returns = np.vstack([self.params, params]), np.concatenate([self.returns, returns])
+        n = all_returns.shape[0]
+        check_fits_in_memory(
+            8.0 * n * n * (self.n_params + self.n_context_dims + 6),
+            "returns",
+            n,
+            "the GP's kernel matrices (n x n x (p + z + 6) floats)",
+        )
+        log_hyper, scale, fitted_at = self.log_hyper, self.context_scale, self.fitted_at
+        refit = fitted_at == 0 or n >= fitted_at * self.config.refit_growth
+        rng_state = self.rng.bit_generator.state
+        try:
+            if refit:
+                scale = self._fit_scale(all_contexts)
+                recent = slice(max(0, n - self.config.fit_points), n)
+                inputs = self._inputs(all_contexts[recent], all_params[recent], scale)
+                restarts = self.config.hyper_restarts
+                log_hyper = fit_hyperparameters(
+                    inputs, self._targets(all_returns, "mean")[recent], log_hyper, self.rng, restarts
+                )
+                fitted_at = n
+            model = fit_gp(
+                self._inputs(all_contexts, all_params, scale), self._targets(all_returns), log_hyper
+            )
+        except BaseException:
+            self.rng.bit_generator.state = rng_state  # a failed tell changes nothing
+            raise
+        self.contexts, self.params, self.returns = all_contexts, all_params, all_returns
+        self.log_hyper, self.context_scale, self.fitted_at, self.model = log_hyper, scale, fitted_at, model
+        self._diagnostics = self._model_diagnostics(refit)
+
+    def _model_diagnostics(self, refitted: bool) -> dict[str, float]:
+        lengthscales = np.exp(self.log_hyper[:-2])
+        return {
+            "episodes": float(self.returns.shape[0]),
+            "refitted": float(refitted),
+            "lengthscale_min": float(lengthscales.min()),
+            "lengthscale_max": float(lengthscales.max()),
+            "signal_variance": float(np.exp(self.log_hyper[-2])),
+            "noise_variance": float(np.exp(self.log_hyper[-1])),
+            "best_return": float(self.returns.max()),
+        }
+
+    def stop(self) -> dict[str, Any]:
+        """Met once at least :data:`STOP_EPISODES` episodes are told: ``no_signal`` (the fitted noise is at
+        least :data:`NOISE_SHARE` of the model's variance, σ_n²/(σ_f² + σ_n²): the returns look like noise
+        in θ and s) or ``tolflatfitness`` (every told return is equal)."""
+        n = self.returns.shape[0]
+        if n < STOP_EPISODES:
+            return {}
+        if float(self.returns.max() - self.returns.min()) == 0.0:
+            return {"tolflatfitness": n}
+        noise, signal = math.exp(self.log_hyper[-1]), math.exp(self.log_hyper[-2])
+        share = noise / (noise + signal)
+        return {"no_signal": share} if share >= NOISE_SHARE else {}
+
+    # -- ask -----------------------------------------------------------------------------------------------
+    def _sample(self, contexts: Array) -> Array:
+        state = self.rng.bit_generator.state
+        try:
+            return self._choose(contexts)
+        except BaseException:
+            self.rng.bit_generator.state = state  # a rejected ask changes nothing
+            raise
+
+    def _choose(self, contexts: Array) -> Array:
+        n = contexts.shape[0]
+        rows = np.empty((n, self.n_params))
+        model, known = self.model, self.returns.shape[0]
+        scaled = self._scaled_contexts(contexts)
+        for i in range(n):
+            if model is None or known + i < self.config.n_initial:
+                draw = self.config.initial_mean + self._chol_initial @ self.rng.standard_normal(self.n_params)
+                rows[i] = np.clip(draw, *self.config.param_box)
+                continue
+            unit = self._propose(model, scaled[i])
+            rows[i] = self._unscaled_params(unit)
+            if i + 1 < n:  # the kriging believer: the chosen point's posterior mean as its return
+                x = np.concatenate([scaled[i], unit])
+                model = model.condition(x, float(model.predict(x[None, :])[0][0]))
+        return rows
+
+    def _observed_units(self, context: Array) -> Array:
+        """The observed θ (scaled, clipped to the box) of the ``candidates // 4`` episodes whose scaled
+        contexts are nearest to ``context`` (the first on ties): candidates that know where returns were
+        good."""
+        units = np.clip(self._scaled_params(self.params), 0.0, 1.0)
+        keep = max(1, self.config.candidates // 4)
+        if units.shape[0] <= keep:
+            return units
+        distance = ((self._scaled_contexts(self.contexts) - context) ** 2).sum(axis=1)
+        return units[np.argsort(distance, kind="stable")[:keep]]
+
+    def _propose(self, model: GPModel, context: Array) -> Array:
+        random = self.rng.uniform(size=(self.config.candidates, self.n_params))
+        candidates = np.vstack([random, self._observed_units(context)])
+        mean, variance = model.predict(self._maximiser.inputs(context, candidates))
+        if self.config.acquisition == "ucb":
+            beta = self.config.beta
+            acquisition: Acquisition = lambda m, v: ucb(m, v, beta)  # noqa: E731
+        else:
+            maxima = gumbel_max_values(mean, variance, self.config.mes_samples, self.rng)
+            acquisition = lambda m, v: mes(m, v, maxima)  # noqa: E731
+        maximiser = self._maximiser.maximise_scored
+        return maximiser(model, context, candidates, mean, variance, acquisition)[0]
+
+    # -- recommend and the policy --------------------------------------------------------------------------
+    def recommend(self, contexts: Any) -> Array:
+        """The posterior mean's maximiser over the parameter box at each context: shape (n, p).
+
+        Before the GP exists (fewer than two episodes told) it is the initial mean. Deterministic: the
+        candidates come from a fixed seed, so a context gives the same θ alone or in any batch.
+        """
+        contexts = self._check_contexts(contexts, "contexts")
+        if self.model is None:
+            return np.tile(self.config.initial_mean, (contexts.shape[0], 1))
+        if self._recommend_candidates is None:
+            fixed = np.random.default_rng(RECOMMEND_SEED).uniform(
+                size=(self.config.candidates, self.n_params)
+            )
+            self._recommend_candidates = fixed
+        fixed, model = self._recommend_candidates, self.model
+        scaled = self._scaled_contexts(contexts)
+        units = [
+            self._maximiser.maximise(model, row, np.vstack([fixed, self._observed_units(row)]), None)[0]
+            for row in scaled
+        ]
+        return self._unscaled_params(np.array(units))
+
+    def distillation_contexts(self) -> Array:
+        """The grid :meth:`mean_policy` fits on: ``grid_points`` per dimension over the configured context
+        box, else over the told contexts' range, shape (g, z) (beyond 10,000 grid points, 1,000 uniform
+        contexts from a fixed seed)."""
+        z = self.n_context_dims
+        if z == 0:  # one (empty) context: the policy is a constant
+            return np.zeros((1, 0))
+        if self.config.context_box is not None:
+            low, high = self.config.context_box
+        elif self.returns.shape[0]:
+            low, high = self.contexts.min(axis=0), self.contexts.max(axis=0)
+        else:
+            return np.zeros((1, z))
+        if self.config.grid_points**z > MAX_COUNTS["grid"]:  # many context dimensions: a fixed random design
+            unit = np.random.default_rng(RECOMMEND_SEED).uniform(size=(MAX_COUNTS["grid"] // 10, z))
+            return low + unit * (high - low)
+        axes = [np.linspace(a, b, self.config.grid_points) for a, b in zip(low, high, strict=True)]
+        return np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1).reshape(-1, z)
+
+    def mean_policy(self) -> Policy:
+        """``recommend`` distilled into a :class:`Policy` with the ``mean_features`` map: the least-squares
+        fit of the maximisers on :meth:`distillation_contexts`. Its error on the grid goes into
+        ``diagnostics``: ``distillation_rmse`` (root mean square over the grid and the parameters) and
+        ``distillation_max_error``, in parameter units."""
+        grid = self.distillation_contexts()
+        targets = self.recommend(grid)
+        features = self.config.mean_map(grid)
+        coefficients = np.linalg.lstsq(features, targets, rcond=None)[0]
+        residual = features @ coefficients - targets
+        self._diagnostics["distillation_rmse"] = float(np.sqrt(np.mean(residual**2)))
+        self._diagnostics["distillation_max_error"] = float(np.abs(residual).max())
+        source = {"optimizer": self.kind, "iteration": self.iteration}
+        return Policy(self.config.mean_map, coefficients, source=source)
+
+    # -- checkpoints ---------------------------------------------------------------------------------------
+    def _state(self) -> dict[str, Any]:
+        state: dict[str, Any] = {"config": self.config.to_json(), **self.config.arrays()}
+        state.update(
+            rng=self.rng.bit_generator.state,
+            data_contexts=self.contexts.copy(),
+            data_params=self.params.copy(),
+            data_returns=self.returns.copy(),
+            log_hyper=self.log_hyper.copy(),
+            scale_low=self.context_scale[0].copy(),
+            scale_high=self.context_scale[1].copy(),
+            fitted_at=self.fitted_at,
+        )
+        return state
+
+    @classmethod
+    def _from_state(cls, state: Mapping[str, Any]) -> ContextualBO:
+        document = state["config"]
+        if not isinstance(document, Mapping):
+            raise TypeError(f"state['config']: expected a JSON object, got {type(document).__name__}")
+        own = ("n_params", "n_context_dims", "has_param_box", "has_context_box")
+        check_option_names(CBOConfig, {k: v for k, v in document.items() if k not in own})
+        config = CBOConfig.from_state(state)
+        optimizer = cls.__new__(cls)
+        optimizer._init_from_config(config)
+        optimizer.rng.bit_generator.state = state["rng"]
+        optimizer._restore_data(state)
+        return optimizer
+
+    def _restore_data(self, state: Mapping[str, Any]) -> None:
+        p, z = self.n_params, self.n_context_dims
+        contexts = as_float_array(state["data_contexts"], "state['data_contexts']", (None, z)).copy()
+        n = contexts.shape[0]
+        params = as_float_array(state["data_params"], "state['data_params']", (n, p)).copy()
+        returns = as_float_array(state["data_returns"], "state['data_returns']", (n,)).copy()
+        log_hyper = as_float_array(state["log_hyper"], "state['log_hyper']", (p + z + 2,)).copy()
+        low, high = np.array(hyper_bounds(p + z)).T
+        if ((log_hyper < low) | (log_hyper > high)).any():
+            raise ValueError(
+                f"state['log_hyper']: expected values within {low.tolist()} and {high.tolist()}, "
+                f"got {log_hyper.tolist()}"
+            )
+        scale = tuple(
+            as_float_array(state[k], f"state['{k}']", (z,)).copy() for k in ("scale_low", "scale_high")
+        )
+        if not (scale[0] < scale[1]).all():
+            raise ValueError(f"state['scale_low'], state['scale_high']: expected low < high, got {scale}")
+        fitted_at = check_positive_int(state["fitted_at"], "state['fitted_at']", minimum=0)
+        if fitted_at > n:
+            raise ValueError(f"state['fitted_at']: expected at most the {n} stored episodes, got {fitted_at}")
+        check_fits_in_memory(
+            8.0 * n * n * (p + z + 6),
+            "state['data_returns']",
+            n,
+            "the GP's kernel matrices (n x n x (p + z + 6) floats)",
+        )
+        self.contexts, self.params, self.returns = contexts, params, returns
+        self.log_hyper, self.context_scale, self.fitted_at = log_hyper, (scale[0], scale[1]), fitted_at
+        if n >= 1 and fitted_at > 0:
+            self.model = fit_gp(self._inputs(contexts, params), self._targets(returns), log_hyper)
+
+
+ContextualBO.__signature__ = options_signature(CBOConfig)  # type: ignore[attr-defined]
+ContextualBO.__doc__ = (ContextualBO.__doc__ or "") + options_doc(CBOConfig)

@@ -1,0 +1,228 @@
+"""The configuration of contextual Bayesian optimisation (:class:`~creps_gym.optimizers.cbo.ContextualBO`):
+a frozen dataclass that validates every option on construction."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym._validation import (
+    as_float_array,
+    check_positive_int,
+    check_real_in_range,
+    check_seed,
+)
+from creps_gym.optimizers.acquisitions import ACQUISITIONS
+from creps_gym.optimizers.features import FeatureMap, make_features
+from creps_gym.optimizers.policies import initial_covariance
+
+__all__ = ["CBOConfig"]
+
+Array = NDArray[np.float64]
+#: Largest counts the options may set (each sizes arrays or loops of every ask, refit or distillation; a
+#: checkpoint's config is untrusted input).
+MAX_COUNTS = {
+    "mes_samples": 10_000,
+    "candidates": 100_000,
+    "starts": 1_000,
+    "hyper_restarts": 100,
+    "fit_points": 10_000,
+    "grid": 10_000,
+}
+TRANSFORMS = ("none", "log", "rank")
+PRIOR_MEANS = ("min", "mean")
+_BOX_ARRAYS = ("param_low", "param_high", "context_low", "context_high")
+
+
+def _optional_box(low: Any, high: Any, names: tuple[str, str], size: int) -> tuple[Array, Array] | None:
+    """Both bounds as finite arrays (size,) with low < high, or None when both are None."""
+    if low is None and high is None:
+        return None
+    if low is None or high is None:
+        raise ValueError(f"{names[0]}, {names[1]}: expected both or neither, got one of them")
+    pair = []
+    for value, name in zip((low, high), names, strict=True):
+        array = as_float_array(value, name)
+        pair.append(np.full(size, float(array)) if array.ndim == 0 else as_float_array(array, name, (size,)))
+    if not (pair[0] < pair[1]).all():
+        raise ValueError(
+            f"{names[0]}, {names[1]}: expected low < high in every entry, got {pair[0]}, {pair[1]}"
+        )
+    return pair[0].copy(), pair[1].copy()
+
+
+def _bounded_int(value: Any, name: str, minimum: int, maximum: int) -> int:
+    """``value`` as an int in [minimum, maximum], else ``TypeError``/``ValueError`` naming ``name``."""
+    number = check_positive_int(value, name, minimum)
+    if number > maximum:
+        raise ValueError(f"{name}: expected an integer of at most {maximum}, got {number}")
+    return number
+
+
+@dataclass(frozen=True, eq=False)
+class CBOConfig:
+    """Configuration of :class:`ContextualBO`; validates itself on construction.
+
+    Parameters
+    ----------
+    n_params : int                  p, the dimension of θ.
+    n_context_dims : int            z, the dimension of s (0: plain Bayesian optimisation).
+    initial_mean : scalar or (p,)   centre of the initial design and of the default parameter box.
+    initial_cov : scalar, (p,) or (p, p)   covariance of the initial design (draws clipped to the box); its
+        standard deviations set the default parameter box.
+    param_low, param_high : scalar, (p,) or None   the box θ is searched in; None: initial_mean ± 3
+        standard deviations of ``initial_cov``.
+    context_low, context_high : scalar, (z,) or None   the context box: the GP's context scaling and the grid
+        of :meth:`ContextualBO.mean_policy`; None: the range of the told contexts at the last refit.
+    acquisition : str               ``"mes"`` (max-value entropy search, A2) or ``"ucb"`` (A1).
+    beta : float                    UCB's β: α = μ + √β σ.
+    transform : str                 the returns' transform before the GP, order-preserving: ``"log"``
+        (−log(1 + (R_max − R)/c), c the median gap to the best return; it compresses long tails of bad
+        returns), ``"none"`` or ``"rank"`` (the Gaussian copula of the ranks); see
+        :func:`~creps_gym.optimizers.cbo.transformed_returns`.
+    prior_mean : str                the GP's constant prior mean: the smallest transformed return seen
+        (``"min"``, pessimistic: unexplored θ are not recommended for their prior) or their mean (``"mean"``).
+    mes_samples : int               K, the sampled maximum values of MES (A3).
+    initial_samples : int or None   episodes drawn from the initial distribution before the GP is used;
+        None: max(4, 2(p + z)).
+    candidates : int                random θ scored at each asked context (the observed θ are scored too).
+    starts : int                    L-BFGS-B runs from the best candidates.
+    refit_growth : float            the hyperparameters are refitted (maximum likelihood, G3) when the data
+        have grown by this factor since the last fit (a geometric schedule); in between only the Cholesky
+        factor is updated, so asks stay fast.
+    hyper_restarts : int            random L-BFGS-B starts of a refit, besides the previous hyperparameters.
+    fit_points : int                a refit maximises the likelihood of the most recent ``fit_points``
+        episodes only (its cost grows as their cube); the GP itself conditions on every episode.
+    mean_features : str, dict or FeatureMap   ϕ(s) of :meth:`ContextualBO.mean_policy`'s distilled policy.
+    distillation_points : int or None   contexts per dimension of the distillation grid; None:
+        max(2, round(25^(1/z))).
+    seed : int or None              seed of the Generator (initial design, candidates, MES samples, refits).
+    """
+
+    n_params: int
+    n_context_dims: int
+    initial_mean: Any = 0.0
+    initial_cov: Any = 1.0
+    param_low: Any = None
+    param_high: Any = None
+    context_low: Any = None
+    context_high: Any = None
+    acquisition: str = "mes"
+    beta: float = 4.0
+    transform: str = "log"
+    prior_mean: str = "min"
+    mes_samples: int = 10
+    initial_samples: int | None = None
+    candidates: int = 256
+    starts: int = 3
+    refit_growth: float = 1.2
+    hyper_restarts: int = 1
+    fit_points: int = 256
+    mean_features: Any = "affine"
+    distillation_points: int | None = None
+    seed: int | None = None
+    mean_map: FeatureMap = field(init=False, repr=False)
+    param_box: tuple[Array, Array] = field(init=False, repr=False)
+    context_box: tuple[Array, Array] | None = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "n_params", check_positive_int(self.n_params, "n_params"))
+        set_(self, "n_context_dims", check_positive_int(self.n_context_dims, "n_context_dims", minimum=0))
+        p, z = self.n_params, self.n_context_dims
+        for name, minimum in (
+            ("mes_samples", 1),
+            ("candidates", 1),
+            ("starts", 1),
+            ("hyper_restarts", 0),
+            ("fit_points", 2),
+        ):
+            set_(self, name, _bounded_int(getattr(self, name), name, minimum, MAX_COUNTS[name]))
+        if self.initial_samples is not None:
+            set_(self, "initial_samples", check_positive_int(self.initial_samples, "initial_samples", 2))
+        if self.distillation_points is not None:
+            points = _bounded_int(self.distillation_points, "distillation_points", 2, MAX_COUNTS["grid"])
+            if points ** max(z, 1) > MAX_COUNTS["grid"]:
+                raise ValueError(
+                    f"distillation_points: expected a grid of at most {MAX_COUNTS['grid']} contexts "
+                    f"(points ** z), got {points} ** {z}"
+                )
+            set_(self, "distillation_points", points)
+        if not isinstance(self.acquisition, str) or self.acquisition not in ACQUISITIONS:
+            raise ValueError(f"acquisition: expected one of {ACQUISITIONS}, got {self.acquisition!r}")
+        if not isinstance(self.transform, str) or self.transform not in TRANSFORMS:
+            raise ValueError(f"transform: expected one of {TRANSFORMS}, got {self.transform!r}")
+        if not isinstance(self.prior_mean, str) or self.prior_mean not in PRIOR_MEANS:
+            raise ValueError(f"prior_mean: expected one of {PRIOR_MEANS}, got {self.prior_mean!r}")
+        set_(self, "beta", check_real_in_range(self.beta, "beta", 0.0, 1e6))
+        set_(self, "refit_growth", check_real_in_range(self.refit_growth, "refit_growth", 1.0, 1e6))
+        set_(self, "seed", check_seed(self.seed))
+        mean = as_float_array(self.initial_mean, "initial_mean")
+        if mean.ndim == 0:
+            mean = np.full(p, float(mean))
+        set_(self, "initial_mean", as_float_array(mean, "initial_mean", (p,)).copy())
+        set_(self, "initial_cov", initial_covariance(self.initial_cov, p))
+        box = _optional_box(self.param_low, self.param_high, ("param_low", "param_high"), p)
+        if box is None:
+            spread = 3.0 * np.sqrt(np.diag(self.initial_cov))
+            box = (self.initial_mean - spread, self.initial_mean + spread)
+            if not (np.isfinite(box[0]).all() and np.isfinite(box[1]).all() and (box[0] < box[1]).all()):
+                raise ValueError(
+                    "initial_cov: expected a box initial_mean ± 3 std that is finite and not empty"
+                )
+        set_(self, "param_box", box)
+        set_(
+            self,
+            "context_box",
+            _optional_box(self.context_low, self.context_high, ("context_low", "context_high"), z),
+        )
+        set_(self, "mean_map", make_features(self.mean_features, z, "mean_features"))
+
+    @property
+    def n_initial(self) -> int:
+        """Episodes of the initial design (``initial_samples`` or its default)."""
+        default = max(4, 2 * (self.n_params + self.n_context_dims))
+        return self.initial_samples if self.initial_samples is not None else default
+
+    @property
+    def grid_points(self) -> int:
+        """Contexts per dimension of the distillation grid."""
+        if self.distillation_points is not None:
+            return self.distillation_points
+        return max(2, round(25 ** (1.0 / max(self.n_context_dims, 1))))
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-serialisable scalars and the feature spec (the arrays are saved separately, see
+        :meth:`arrays`)."""
+        skip = {"initial_mean", "initial_cov", "mean_features", *_BOX_ARRAYS}
+        data = {f.name: getattr(self, f.name) for f in fields(self) if f.init and f.name not in skip}
+        data["mean_features"] = self.mean_map.spec()
+        data["has_param_box"] = self.param_low is not None
+        data["has_context_box"] = self.context_box is not None
+        return data
+
+    def arrays(self) -> dict[str, Array]:
+        """The array options: initial mean and covariance, and the boxes that were given."""
+        arrays = {"initial_mean": self.initial_mean.copy(), "initial_cov": self.initial_cov.copy()}
+        if self.param_low is not None:
+            arrays["param_low"], arrays["param_high"] = (a.copy() for a in self.param_box)
+        if self.context_box is not None:
+            arrays["context_low"], arrays["context_high"] = (a.copy() for a in self.context_box)
+        return arrays
+
+    @classmethod
+    def from_state(cls, state: Any) -> CBOConfig:
+        """Rebuild the configuration from a checkpoint's ``config`` document and arrays."""
+        document = dict(state["config"])
+        has_param, has_context = document.pop("has_param_box", False), document.pop("has_context_box", False)
+        arrays = {
+            "initial_mean": np.asarray(state["initial_mean"]),
+            "initial_cov": np.asarray(state["initial_cov"]),
+        }
+        for flag, names in ((has_param, _BOX_ARRAYS[:2]), (has_context, _BOX_ARRAYS[2:])):
+            if flag is True:
+                arrays.update({name: np.asarray(state[name]) for name in names})
+        return cls(**arrays, **document)

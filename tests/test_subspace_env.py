@@ -1,0 +1,107 @@
+"""AffineSubspaceEnv and the registered low-dimensional ids: θ = θ_ref + B u, the full env's task at u = 0,
+the recipes' structure and bad arguments. (Every registered id also goes through the registry-driven env
+tests: check_env, overflow, the runner.)"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from helpers import EXTRAS
+
+from creps_gym.envs.kick.subspace import METAPARAMETERS, kick_metaparameters
+from creps_gym.envs.reacher.subspace import via_point_bumps
+from creps_gym.envs.subspace import AffineSubspaceEnv
+
+REACHER = "creps_gym/PlanarReacher-v1"
+
+
+def test_the_low_dimensional_reacher_evaluates_the_full_reacher_at_the_mapped_parameters():
+    env = gym.make("creps_gym/PlanarReacherLowDim-v0").unwrapped
+    full = gym.make(REACHER).unwrapped
+    rng = np.random.default_rng(0)
+    contexts, u = env.sample_contexts(rng, 6), rng.uniform(-1, 1, (6, 5))
+    returns, info = env.evaluate(contexts, u)
+    theta = env.reference + u @ env.basis.T
+    np.testing.assert_allclose(info["full_params"], theta, rtol=1e-15, atol=1e-12)
+    assert returns.tobytes() == full.evaluate(contexts, info["full_params"])[0].tobytes()
+    zero = env.evaluate(contexts, np.zeros((6, 5)))[0]
+    assert zero.tobytes() == full.evaluate(contexts, np.zeros((6, 25)))[0].tobytes()  # u = 0: the plain DMP
+    mean, std = env.initial_distribution()
+    assert mean.tolist() == [0.0] * 5 and std.tolist() == [0.3] * 5
+    assert env.param_names == [f"bump/joint{j}" for j in range(5)]
+
+
+def test_a_batch_gives_the_bits_of_single_rows():
+    env = gym.make("creps_gym/PlanarReacherLowDim-v0").unwrapped
+    rng = np.random.default_rng(1)
+    contexts, u = env.sample_contexts(rng, 5), rng.uniform(-1, 1, (5, 5))
+    batch = env.evaluate(contexts, u)[0]
+    single = [env.evaluate(contexts[i : i + 1], u[i : i + 1])[0][0] for i in range(5)]
+    assert batch.tobytes() == np.array(single).tobytes()
+
+
+def test_the_reacher_recipe_bumps_each_joint_only_and_spans_the_box():
+    _, basis, names = via_point_bumps(gym.make(REACHER).unwrapped)
+    assert basis.shape == (25, 5) and len(names) == 5
+    for joint in range(5):
+        rows = np.flatnonzero(basis[:, joint])
+        assert rows.min() >= 5 * joint and rows.max() < 5 * joint + 5
+        assert basis[:, joint].max() == 30.0 and (basis[:, joint] >= 0).all()
+
+
+class _Kick:
+    """Stands in for a kick env (its reference kick only), so the recipe is checked without MuJoCo."""
+
+    def reference_params(self) -> np.ndarray:
+        return np.linspace(-0.5, 0.5, 25)
+
+
+def test_the_kick_recipe_has_six_independent_metaparameters_around_the_reference():
+    reference, basis, names = kick_metaparameters(_Kick())
+    assert names == list(METAPARAMETERS) and basis.shape == (25, 6)
+    assert np.linalg.matrix_rank(basis) == 6 and reference.tolist() == _Kick().reference_params().tolist()
+    swing = reference[12:18] - reference[0:6]
+    np.testing.assert_allclose(basis[12:18, 0], 0.5 * swing)  # the amplitude scales the kicking leg's swing
+    assert basis[24].tolist() == [0, 0, 0, 0.5, 0, 0]  # only `duration` moves the swing time
+
+
+@EXTRAS
+@pytest.mark.parametrize(
+    ("low", "full"), [("Precision", "KickPrecision-v1"), ("Flexibility", "KickFlexibility-v2")]
+)
+def test_a_low_dimensional_kick_at_zero_is_the_reference_kick(low, full):
+    env = gym.make(f"creps_gym/Kick{low}LowDim-v0").unwrapped
+    full_env = gym.make(f"creps_gym/{full}").unwrapped
+    contexts = env.sample_contexts(np.random.default_rng(0), 2)
+    reference = np.tile(full_env.reference_params(), (2, 1))
+    assert (
+        env.evaluate(contexts, np.zeros((2, 6)))[0].tobytes()
+        == full_env.evaluate(contexts, reference)[0].tobytes()
+    )
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"reference": np.zeros(3)}, ValueError, r"reference: expected shape \(25,\)"),
+        ({"basis": np.zeros((25, 2))}, ValueError, "basis: expected 1 to 25 linearly independent columns"),
+        ({"basis": np.ones((25, 2))}, ValueError, "basis: expected 1 to 25 linearly independent columns"),
+        ({"basis": np.eye(25, 2) * np.nan}, ValueError, "basis: expected finite values"),
+        ({"names": ["a"]}, ValueError, "names: expected 2 names"),
+        ({"initial_std": 0.0}, ValueError, "initial_std: expected a finite value > 0"),
+        ({"env": "creps_gym/PlanarReacher-v1"}, TypeError, "env: expected a ContextualEpisodicEnv"),
+    ],
+)
+def test_bad_arguments_are_refused_naming_them(kwargs, error, match):
+    arguments = {"env": gym.make(REACHER).unwrapped, "reference": np.zeros(25), "basis": np.eye(25, 2)}
+    arguments.update(kwargs)
+    with pytest.raises(error, match=match):
+        AffineSubspaceEnv(**arguments)
+
+
+def test_the_vector_env_and_the_step_api_work_through_gymnasium():
+    vector = gym.make_vec("creps_gym/PlanarReacherLowDim-v0", num_envs=3)
+    vector.reset(seed=0)
+    _, rewards, terminated, _, _ = vector.step(np.zeros((3, 5)))
+    assert rewards.shape == (3,) and terminated.all()

@@ -68,6 +68,19 @@ def test_the_final_policy_is_the_recommendation_after_a_restart_that_kept_the_be
     assert last.eval_regret < 1e-4
 
 
+@pytest.mark.parametrize("name", ["c-cma-es", "c-bo"])
+def test_a_policy_files_evaluation_is_its_own(name, tmp_path):
+    """What the runner evaluates is the policy it keeps, also where that policy distils ``recommend``
+    (c-bo): ``creps-gym evaluate RUN --run-contexts`` reproduces the recorded ``eval_return``."""
+    options = {"env_kwargs": {"dim": 2}, "eval_every": 2}
+    history = run(name, SPHERE, 4, None, 0, run_dir=tmp_path / "run", **options)
+    for which in ("best", "final"):
+        policy = creps_gym.load_policy(tmp_path / "run", which)
+        record = history.records[policy.source["iteration"] - 1]
+        value = evaluate_on_env(policy, gym.make(SPHERE, dim=2), 16, split_seed(0)[2])
+        assert value == (record.eval_return, record.eval_regret), which
+
+
 class _Crash(Exception):
     pass
 

@@ -46,7 +46,7 @@ from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
 from creps_gym.runner.divergence import DivergenceWatch, evaluation_loss
 from creps_gym.runner.history import History, IterationRecord
-from creps_gym.runner.policy_store import RunPolicies, evaluate_contexts
+from creps_gym.runner.policy_store import RunPolicies, evaluate_contexts, evaluated_policy
 from creps_gym.runner.recovery import REBUILD, chain_crc, checkpoint_history, history_crc
 from creps_gym.runner.rundir import RESTART, RunDir, RunDirError
 from creps_gym.runner.session import DeferredInterrupt
@@ -277,7 +277,7 @@ class Runner:
 
     def _evaluate_once(self) -> tuple[float, float]:
         where = (self.env, self._model, self.test_contexts, self.eval_seeds, self.config.retries)
-        return evaluate_contexts(self.optimizer.recommend, *where)
+        return evaluate_contexts(evaluated_policy(self.optimizer), *where)
 
     def _stop_before_evaluation(self) -> str | None:
         config = self.config

@@ -51,6 +51,7 @@ __all__ = [
     "check_kept_policy",
     "evaluate_contexts",
     "evaluate_on_env",
+    "evaluated_policy",
     "evaluation_draws",
     "load_policy",
 ]
@@ -295,6 +296,17 @@ def _checkpoint_policy(directory: RunDir) -> Policy | None:
     source = {"optimizer": config.optimizer, "which": "final", "iteration": int(state["iteration"])}
     arrays = {"features": policy.features, "coefficients": policy.coefficients}
     return Policy(**arrays, env=config.env, env_kwargs=config.env_kwargs, source=source)
+
+
+def evaluated_policy(optimizer: Any) -> Any:
+    """What the runner evaluates: ``optimizer.recommend``, or for an optimiser whose kept policy is a
+    distillation of it (``distilled_policy``, c-bo: a linear fit of a GP's maximisers) that kept policy,
+    so that a policy file's ``eval_return`` is its own evaluation. For every other optimiser the two give
+    the same parameters bit for bit (``mean_policy()`` equals ``recommend``)."""
+    if getattr(optimizer, "distilled_policy", False):
+        policy = optimizer.mean_policy()
+        return lambda contexts: policy(contexts, extrapolate=True)
+    return optimizer.recommend
 
 
 def evaluate_contexts(

@@ -12,7 +12,7 @@ import pytest
 
 pytest.importorskip("matplotlib")  # the study renders its figures with it (extra 'plot')
 
-from benchmarks.contextual_bbo import problems, protocol, run
+from benchmarks.contextual_bbo import problems, protocol, report, run
 from benchmarks.contextual_bbo.problems import PROBLEMS, draw_run
 from benchmarks.study_tools import load_document
 
@@ -69,6 +69,40 @@ def test_a_run_counts_true_episodes_and_records_its_stack(monkeypatch):
     assert document["curve"]["generation"][-1] == 12 and document["stop_reason"] == "budget"
     assert document["protocol_last"] == document["curve"]["average_return"][-1] < 0
     assert {"numpy", "scipy", "python", "cpu", "creps_gym"} <= set(document["environment"])
+
+
+def test_published_json_holds_every_cell_of_the_published_table_with_its_source():
+    published = report.load_published()
+    methods = published["methods"]
+    assert len(methods) == 7 and len(PROBLEMS) == 6
+    cells = [(row["function"], row["method"]) for row in published["values"]]
+    assert len(cells) == 42 and set(cells) == {(f, m) for f in PROBLEMS for m in methods}
+    for row in [*published["values"], *published["hyperparameter_study"]]:
+        assert row["source"] in published["sources"] and row["function"] in PROBLEMS
+        if row["value"] is None:  # NaN in the table: the published runs diverged
+            assert row["printed"] == "NaN"
+        else:
+            assert row["value"] == float(row["printed"]) < 0
+    value = {(row["function"], row["method"]): row["value"] for row in published["values"]}
+    assert value["Sphere", "C-ACM-ES+"] == -1.294e-08 and value["DifferentPowers", "aC-ACM-ES"] == -1.284e-14
+    assert value["Ackley", "C-ACM-ES+"] is None and value["Discus", "C-ACM-ES"] == -8.877e-12
+    tuned = {(row["function"], row["setting"]): row["value"] for row in published["hyperparameter_study"]}
+    assert (
+        tuned["Rosenbrock", "n_iter = 10000"] == -2.396e-14
+        and tuned["Ackley", "n_start = 3000"] == -3.995e-09
+    )
+    # the rendered table shows every published cell as printed, in its function's row and method's column
+    lines = report.protocol_table([], published).splitlines()
+    head = [cell.strip() for cell in lines[0].strip("|").split("|")]
+    rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|").split("|")] for line in lines[2:]}
+    for row in published["values"]:
+        assert rows[row["function"]][head.index(row["method"])] == row["printed"]
+    assert rows["Rosenbrock"][head.index("hyperparameter study: best")].startswith("-2.396e-14")
+    best = report.best_table([], published)
+    assert (
+        "| DifferentPowers | -1.3e-14 | aC-ACM-ES |" in best
+        and "| Rosenbrock | -2.4e-14 | C-ACM-ES, n_iter" in best
+    )
 
 
 @pytest.mark.parametrize("mode", ["quick", "full"])

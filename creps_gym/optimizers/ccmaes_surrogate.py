@@ -20,11 +20,11 @@ Every ``tell`` is a true generation: the plain C-CMA-ES update (C1)–(C9) on th
    counters of episodes (``evaluations``, ``true_episodes``) and the stop criteria's histories see only true
    returns.
 5. The true batch after model generations checks them (S7): if its median return is below the smallest return
-   of the true batch before them, the model led the search where every sample is worse (τ ranks θ within a
+   of the true batch before them, the model led the search where most samples are worse (τ ranks θ within a
    batch, so it cannot see a model that extrapolates); the distribution and paths go back to where the model
    generations started, the batch updates nothing but the archive and the model, n̂ starts again at 0, and
-   the most model generations per true one halves for the rest of the search (after 4 rejections with the
-   default 10, the search is plain C-CMA-ES until a restart).
+   the most model generations per true one (the cap) halves. A true batch after model generations whose
+   median is at least the one before them doubles the cap again (+1, up to ``max_model_generations``).
 """
 
 from __future__ import annotations
@@ -111,19 +111,20 @@ def next_model_generations(tau: float | None, previous: int, most: int, min_tau:
 
 @dataclass(frozen=True)
 class _Rollback:
-    """The distribution and paths where model generations started, and the smallest return of the true batch
-    before them (S7)."""
+    """The distribution and paths where model generations started, and the true batch before them: its
+    smallest return (the floor) and its median (S7)."""
 
     policy: LinearGaussianPolicy
     path_sigma: Array
     path_cov: Array
     floor: float
+    median: float
 
     @classmethod
     def of(cls, optimizer: CCMAES, returns: Array) -> _Rollback:
-        """The optimiser's distribution and paths now, with the floor ``min(returns)``."""
+        """The optimiser's distribution and paths now, and the smallest and median of ``returns``."""
         paths = (optimizer.path_sigma.copy(), optimizer.path_cov.copy())
-        return cls(optimizer.policy.copy(), *paths, float(returns.min()))
+        return cls(optimizer.policy.copy(), *paths, float(returns.min()), float(np.median(returns)))
 
 
 class CCMAESSurrogate(CCMAES):
@@ -155,12 +156,14 @@ class CCMAESSurrogate(CCMAES):
     def _reset_search(self) -> None:
         super()._reset_search()
         self.rollback: _Rollback | None = None  # S7: the distribution before the last model generations
-        self.model_cap = self.config.max_model_generations  # S7: halved at each rejection, reset at a restart
+        self.model_cap = self.config.max_model_generations  # S7: halved by a rejection, reset at a restart
 
     def _update(self, contexts: Array, params: Array, returns: Array) -> None:
         if self._model_made_worse(returns):  # Eq. (S7): undo the model generations, keep the batch's data
             self._reject_model_generations(contexts, params, returns)
             return
+        if self.rollback is not None and float(np.median(returns)) >= self.rollback.median:  # Eq. (S7)
+            self.model_cap = min(self.config.max_model_generations, 2 * self.model_cap + 1)  # they helped
         tau = self._fresh_tau(contexts, params, returns)  # before the update: its V is the one C1 fits
         super()._update(contexts, params, returns)  # the true generation; raises with the state unchanged
         true_diagnostics = dict(self._diagnostics)
@@ -307,6 +310,7 @@ class CCMAESSurrogate(CCMAES):
                 rollback_path_sigma=rollback.path_sigma.copy(),
                 rollback_path_cov=rollback.path_cov.copy(),
                 rollback_floor=np.asarray([rollback.floor]),
+                rollback_median=np.asarray([rollback.median]),
             )
         return state
 
@@ -352,11 +356,12 @@ def _read_rollback(optimizer: CCMAESSurrogate, state: Mapping[str, Any]) -> _Rol
         path_sigma = as_float_array(entries["path_sigma"], "state['path_sigma']", optimizer.path_sigma.shape)
         path_cov = as_float_array(entries["path_cov"], "state['path_cov']", (config.n_params,))
         floor = as_float_array(entries["floor"], "state['floor']", (1,))
+        median = as_float_array(entries["median"], "state['median']", (1,))
     except KeyError as exc:
         raise ValueError(f"state: expected the key 'rollback_{exc.args[0]}' of the rollback (S7)") from None
     except (TypeError, ValueError) as exc:
         raise type(exc)(str(exc).replace("state['", "state['rollback_")) from None
-    return _Rollback(policy, path_sigma.copy(), path_cov.copy(), float(floor[0]))
+    return _Rollback(policy, path_sigma.copy(), path_cov.copy(), float(floor[0]), float(median[0]))
 
 
 # help(CCMAESSurrogate) and inspect.signature show every option with its default, from the config.

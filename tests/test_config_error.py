@@ -66,3 +66,18 @@ def test_the_cli_names_the_flag_of_the_field(tmp_path, capsys, flags, expected):
     argv += ["--seed", "0", "--out", str(tmp_path / "r"), "--no-plot", "--no-progress", *flags]
     assert main(argv) == 2
     assert f"creps-gym run: error: {expected}" in capsys.readouterr().err
+
+
+def test_every_field_that_a_flag_sets_maps_to_that_flag():
+    from dataclasses import fields
+
+    from creps_gym.cli import build_parser
+    from creps_gym.cli.run import _as_usage_error
+
+    commands = next(a for a in build_parser()._actions if a.dest == "command")
+    flags = {flag for action in commands.choices["run"]._actions for flag in action.option_strings}
+    api_only = {"context_draws"}  # no flag: the Python API's
+    for field in {f.name for f in fields(RunConfig)} - api_only:
+        text = str(_as_usage_error(ConfigError(field, "expected x, got y")))
+        flag = text.removeprefix("argument ").partition(":")[0]
+        assert flag in flags, (field, text)

@@ -7,7 +7,8 @@ and what was received, so that bad input never turns into a silent NaN further d
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -15,6 +16,8 @@ from numpy.typing import NDArray
 
 __all__ = [
     "MAX_COUNT",
+    "ConfigError",
+    "ConfigTypeError",
     "as_float_array",
     "check_bool",
     "check_count",
@@ -26,8 +29,46 @@ __all__ = [
     "check_real",
     "check_real_in_range",
     "check_seed",
+    "config_field",
     "load_json",
 ]
+
+
+class ConfigError(ValueError):
+    """A bad value of one field of a run's configuration (a ``RunConfig`` field, e.g. ``samples``).
+
+    ``field`` names the field (the command line names the flag that sets it), ``reason`` says what was
+    expected and what was given; the message is ``"field: reason"`` unless given (a component's own error
+    about the field, e.g. an optimiser's about one of ``optimizer_options``, keeps its message).
+    """
+
+    def __init__(self, field: str, reason: str, message: str | None = None) -> None:
+        super().__init__(f"{field}: {reason}" if message is None else message)
+        self.field, self.reason = field, reason
+
+    def __reduce__(self) -> Any:  # pickled with its field (e.g. across processes)
+        return type(self), (self.field, self.reason, str(self))
+
+
+class ConfigTypeError(ConfigError, TypeError):
+    """A :class:`ConfigError` about a value of the wrong type (also a ``TypeError``)."""
+
+
+@contextmanager
+def config_field(field: str | None) -> Iterator[None]:
+    """A ``ValueError`` or ``TypeError`` raised inside is about the configuration field ``field``: it is
+    raised again as a :class:`ConfigError` (``ConfigTypeError`` for a ``TypeError``) of ``field``, its message
+    unchanged. Nothing changes for ``field=None``, for a ``ConfigError`` (it names its own field) or for
+    another subclass of ``ValueError`` (e.g. a run directory's error)."""
+    try:
+        yield
+    except (ValueError, TypeError) as exc:
+        if field is None or isinstance(exc, ConfigError) or type(exc) not in (ValueError, TypeError):
+            raise
+        message = str(exc)
+        reason = message.removeprefix(f"{field}: ")
+        kind = ConfigTypeError if isinstance(exc, TypeError) else ConfigError
+        raise kind(field, reason, message) from None
 
 
 def _shape_text(shape: Sequence[int | None]) -> str:

@@ -1,7 +1,8 @@
 """Argument types of the ``creps-gym`` command line: each names what it expected and what it got.
 
-Names that a module may register (``--env``, ``--optimizer``) are checked after ``--import``, in
-:mod:`creps_gym.cli`, not here.
+Also what every command module shares: :class:`UsageError` (exit code 2), the ``--import`` flag and the
+imports it asks for. Names that a module may register (``--env``, ``--optimizer``) are checked after
+``--import`` (:func:`import_modules_and_check_names`), not by their argument types.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ from typing import Any
 
 __all__ = [
     "UsageError",
+    "add_import",
+    "import_modules_and_check_names",
     "import_user_modules",
     "initial_mean",
     "integer",
@@ -45,6 +48,66 @@ def import_user_modules(modules: Sequence[str]) -> None:
         import_modules(modules)
     except ValueError as exc:
         raise UsageError(f"argument --import: {exc}") from None
+
+
+def add_import(parser: argparse.ArgumentParser) -> None:
+    """The ``--import MODULE`` flag (repeatable) of every command that may need a user's module."""
+    parser.add_argument(
+        "--import",
+        dest="imports",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="import MODULE first (e.g. the module that registers your env or optimiser; repeatable; "
+        "searched in the current directory too); a run directory never makes creps-gym import anything",
+    )
+
+
+def import_modules_and_check_names(args: argparse.Namespace) -> None:
+    """Import the ``--import`` modules, then check the names they may register: ``--env`` (a
+    ``module:Env-v0``'s module is imported) and ``--optimizer``.
+
+    The current directory is searched for an ``--import`` module, after every other path entry (so it
+    never shadows an installed module); nothing is ever imported from a run directory.
+    """
+    from creps_gym.runner.trust import registered_env_id
+
+    import_user_modules(args.imports)
+    if getattr(args, "env", None) is not None:
+        try:
+            registered_env_id(args.env, import_module=True)
+        except ValueError as exc:
+            unknown = str(exc).startswith("expected one of")  # else: its module cannot be imported
+            raise UsageError(f"argument --env: {_unknown_env(args.env) if unknown else exc}") from None
+    if getattr(args, "optimizer", None) is not None:
+        try:
+            _registered_optimizer(args.optimizer)
+        except ValueError as exc:
+            raise UsageError(f"argument --optimizer: {exc}") from None
+
+
+def _unknown_env(env_id: str) -> str:
+    """The hint first (a short line), then the registered ids, wrapped."""
+    import textwrap
+
+    import creps_gym
+    from creps_gym.listing import did_you_mean
+
+    ids = creps_gym.registered_ids()
+    listing = textwrap.fill(", ".join(ids), width=100, initial_indent="  ", subsequent_indent="  ")
+    return (
+        f"unknown env id {env_id!r}{did_you_mean(env_id, ids)}\n"
+        f"expected one of these ids (`creps-gym list` describes them) or module:Env-v0:\n{listing}"
+    )
+
+
+def _registered_optimizer(name: str) -> None:
+    from creps_gym.listing import did_you_mean
+    from creps_gym.optimizers.registry import optimizer_names
+
+    names = optimizer_names()
+    if name not in names:
+        raise ValueError(f"expected one of {names}, got {name!r}{did_you_mean(name, names)}")
 
 
 def integer(minimum: int):

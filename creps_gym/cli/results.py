@@ -1,6 +1,6 @@
 """The ``creps-gym`` commands that read: ``list`` (envs and optimisers), ``plot`` and ``export`` (results).
 
-``list`` prints the static table :mod:`creps_gym.cli_table` (generated from the registries), so it starts
+``list`` prints the static table :mod:`creps_gym.cli.table` (generated from the registries), so it starts
 without importing numpy, Gymnasium or any env. ``plot`` and ``export`` group their run directories by
 setting (:mod:`creps_gym.runner.groups`: everything fingerprinted but the seed) and take ``--label``.
 """
@@ -11,7 +11,9 @@ import argparse
 import os
 from typing import Any
 
-__all__ = ["RESULT_COMMANDS", "add_result_commands"]
+from creps_gym.cli.types import UsageError, add_import, import_user_modules
+
+__all__ = ["COMMANDS", "add_commands"]
 
 _LABEL_HELP = (
     "legend / algorithm_id label (repeatable): one per DIR (runs with the same label are pooled as seeds) "
@@ -20,7 +22,7 @@ _LABEL_HELP = (
 )
 
 
-def add_result_commands(commands: Any, add_import: Any) -> None:
+def add_commands(commands: Any) -> None:
     """Add ``list``, ``plot`` and ``export`` to the sub-command parsers ``commands``."""
     commands.add_parser(
         "list",
@@ -49,8 +51,8 @@ def add_result_commands(commands: Any, add_import: Any) -> None:
         add_import(command)
 
 
-def _cmd_list(_: argparse.Namespace, usage_error: type[Exception]) -> int:
-    from creps_gym.cli_table import ENVS, OPTIMIZERS
+def _cmd_list(_: argparse.Namespace) -> int:
+    from creps_gym.cli.table import ENVS, OPTIMIZERS
     from creps_gym.listing import OPTIMIZER_HEADER, available_env_rows, env_listing, table_wrapped
 
     print("Environments: id, context space, parameter space θ, initial search distribution by default")
@@ -60,7 +62,13 @@ def _cmd_list(_: argparse.Namespace, usage_error: type[Exception]) -> int:
     return 0
 
 
-def _grouped(args: argparse.Namespace, usage_error: type[Exception]) -> tuple[list[Any], dict, list[str]]:
+def _import(args: argparse.Namespace) -> None:
+    """The ``--import`` modules, if any (a user's env, optimiser or selector class that a run names)."""
+    if args.imports:
+        import_user_modules(args.imports)
+
+
+def _grouped(args: argparse.Namespace) -> tuple[list[Any], dict, list[str]]:
     """The runs of ``args.run_dirs`` (read before anything may turn a ``RunDirError`` into a usage
     error), their groups and each run's label."""
     from creps_gym.runner.export import check_one_env
@@ -72,11 +80,11 @@ def _grouped(args: argparse.Namespace, usage_error: type[Exception]) -> tuple[li
         groups, labels = group_runs(runs, args.labels)
     except ValueError as exc:  # runs of different envs without --mix-envs, or a bad number of labels
         field, _, rest = str(exc).partition(": ")
-        raise usage_error(f"argument --label: {rest}" if field == "labels" else str(exc)) from None
+        raise UsageError(f"argument --label: {rest}" if field == "labels" else str(exc)) from None
     return runs, groups, labels
 
 
-def _write_output(write: Any, args: argparse.Namespace, what: str, usage_error: type[Exception]) -> int:
+def _write_output(write: Any, args: argparse.Namespace, what: str) -> int:
     """Write ``-o`` with ``write(path)`` (exit 2 if it cannot be) and print the file actually written."""
     try:
         written = write(args.output)
@@ -84,37 +92,41 @@ def _write_output(write: Any, args: argparse.Namespace, what: str, usage_error: 
         cause = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         cause = cause.removeprefix("path: ")
         where = f"cannot write {args.output}: " if isinstance(exc, OSError) else ""
-        raise usage_error(f"argument -o/--output: {where}{cause}") from None
+        raise UsageError(f"argument -o/--output: {where}{cause}") from None
     named = os.path.abspath(args.output) == str(written)
     print(f"{what}: {args.output}" if named else f"{what}: {written} (through the link {args.output})")
     return 0
 
 
-def _cmd_plot(args: argparse.Namespace, usage_error: type[Exception]) -> int:
+def _cmd_plot(args: argparse.Namespace) -> int:
     from creps_gym.runner.plots import check_title, plot_histories, save_figure
+
+    _import(args)
 
     if args.title is not None:
         try:
             check_title(args.title)
         except ValueError as exc:
-            raise usage_error(f"argument --title: {str(exc).removeprefix('title: ')}") from None
-    runs, groups, _ = _grouped(args, usage_error)
+            raise UsageError(f"argument --title: {str(exc).removeprefix('title: ')}") from None
+    runs, groups, _ = _grouped(args)
     targets = {config.target_regret for config, _ in runs}
     target = targets.pop() if len(targets) == 1 else None
     figure = plot_histories(groups, title=args.title, mix_envs=args.mix_envs, target_regret=target)
-    return _write_output(lambda path: save_figure(figure, path), args, "plot", usage_error)
+    return _write_output(lambda path: save_figure(figure, path), args, "plot")
 
 
-def _cmd_export(args: argparse.Namespace, usage_error: type[Exception]) -> int:
+def _cmd_export(args: argparse.Namespace) -> int:
     from creps_gym.runner.export import write_iohanalyzer
 
-    runs, _, labels = _grouped(args, usage_error)
+    _import(args)
+
+    runs, _, labels = _grouped(args)
     histories = [history for _, history in runs]
 
     def write(path: str) -> Any:
         return write_iohanalyzer(histories, path, mix_envs=args.mix_envs, labels=labels)
 
-    return _write_output(write, args, "IOHanalyzer CSV", usage_error)
+    return _write_output(write, args, "IOHanalyzer CSV")
 
 
-RESULT_COMMANDS = {"list": _cmd_list, "plot": _cmd_plot, "export": _cmd_export}
+COMMANDS = {"list": _cmd_list, "plot": _cmd_plot, "export": _cmd_export}

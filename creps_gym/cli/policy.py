@@ -20,10 +20,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from creps_gym.cli_parsers import add_import
-from creps_gym.cli_types import UsageError, import_user_modules, integer
+from creps_gym.cli.types import UsageError, add_import, import_user_modules, integer
 
-__all__ = ["COMMANDS", "add_commands"]
+__all__ = ["COMMANDS", "VIDEO_SUFFIXES", "add_commands", "check_video_file"]
 
 
 def add_commands(commands: Any) -> None:

@@ -1,14 +1,19 @@
-"""The ``creps-gym run`` parser and the flags several commands share (``--progress``, ``--import``).
+"""``creps-gym run`` and ``creps-gym resume``: their arguments and handlers.
 
-Building it imports neither numpy nor Gymnasium: the defaults come from :mod:`creps_gym.cli_table`.
+Building the parsers imports neither numpy nor Gymnasium: the defaults come from :mod:`creps_gym.cli.table`.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import sys
 from typing import Any
 
-from creps_gym.cli_types import (
+from creps_gym.cli.types import (
+    UsageError,
+    add_import,
+    import_modules_and_check_names,
     initial_mean,
     integer,
     key_value,
@@ -18,7 +23,7 @@ from creps_gym.cli_types import (
     selector_name,
 )
 
-__all__ = ["OPT_EXAMPLE", "add_import", "add_progress", "add_run"]
+__all__ = ["COMMANDS", "OPT_EXAMPLE", "add_commands", "add_progress"]
 
 #: The ``--opt`` example of ``run --help``: an option of the README's optimiser, c-cma-es (tested).
 OPT_EXAMPLE = "restarts=0"
@@ -27,6 +32,14 @@ _DIVERGENCE_HELP = (
     "stop once 10 evaluations in a row are worse than the first by this factor of its size ('none': never)"
 )
 _INITIAL_MEAN_HELP = "a number, p comma-separated numbers, or 'uniform' in the box"
+
+
+def add_commands(commands: Any) -> None:
+    """Add ``run`` and ``resume`` to the sub-command parsers ``commands``."""
+    _add_run(commands)
+    resume = commands.add_parser("resume", help="continue a run from its last checkpoint")
+    resume.add_argument("run_dir", metavar="DIR")
+    add_progress(resume)
 
 
 def add_progress(parser: argparse.ArgumentParser) -> None:
@@ -45,10 +58,10 @@ def add_progress(parser: argparse.ArgumentParser) -> None:
     add_import(parser)
 
 
-def add_run(commands: Any) -> None:
+def _add_run(commands: Any) -> None:
     """The ``run`` command's parser: the required flags, where episodes run, budgets and evaluation, the
     search's start and the optimiser's, env's and selector's options."""
-    from creps_gym.cli_table import RUN_DEFAULTS  # RunConfig's (listing checks they agree): no numpy
+    from creps_gym.cli.table import RUN_DEFAULTS  # RunConfig's (listing checks they agree): no numpy
 
     run = commands.add_parser(
         "run", help="run an optimiser on an env", description="Run an optimiser on an env."
@@ -81,7 +94,7 @@ def _add_required(run: argparse.ArgumentParser) -> None:
 
 
 def _add_backend(run: argparse.ArgumentParser, defaults: dict[str, Any]) -> None:
-    from creps_gym.cli_table import BACKENDS, VECTOR_MODES
+    from creps_gym.cli.table import BACKENDS, VECTOR_MODES
 
     run.add_argument(
         "--backend",
@@ -152,13 +165,101 @@ def _add_options(run: argparse.ArgumentParser) -> None:
         )
 
 
-def add_import(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--import",
-        dest="imports",
-        action="append",
-        default=[],
-        metavar="MODULE",
-        help="import MODULE first (e.g. the module that registers your env or optimiser; repeatable; "
-        "searched in the current directory too); a run directory never makes creps-gym import anything",
-    )
+# -- handlers -----------------------------------------------------------------------------------------------
+_FLAGS = {
+    "samples": "--samples",
+    "optimizer_options": "--opt",
+    "env_kwargs": "--env-kwarg",
+    "context_selector_options": "--selector-opt",
+}
+
+
+def _as_usage_error(exc: Exception) -> UsageError:
+    """A configuration error as a usage error naming the flag that sets its field (``ConfigError.field``:
+    ``eval_every`` -> ``--eval-every``, ``optimizer_options`` -> ``--opt``); any other as it is."""
+    from creps_gym.runner.config import ConfigError
+
+    if isinstance(exc, ConfigError):
+        flag = _FLAGS.get(exc.field, "--" + exc.field.replace("_", "-"))
+        return UsageError(f"argument {flag}: {exc.reason}")
+    return UsageError(str(exc))
+
+
+def _finish(runner: Any, args: argparse.Namespace) -> int:
+    from creps_gym.runner.session import DeferredInterrupt
+
+    history = runner.run()
+    # The run has finished: a first Ctrl-C from here on still gets its summary and plot, and exit code 0.
+    with DeferredInterrupt(message=DeferredInterrupt.FINISHING):
+        last = history.records[-1] if history.records else None
+        if last is not None:
+            value = last.eval_regret if not math.isnan(last.eval_regret) else last.eval_return
+            metric = history.meta.get("metric", "return")
+            print(
+                f"iterations {last.iteration}, episodes {last.episodes}, {metric} {value:.6g}, "
+                f"stop: {history.stop_reason}; run directory {runner.run_dir.path}"
+            )
+        if not args.no_plot and history.records:
+            _write_plot(runner.run_dir)
+    return 0
+
+
+def _write_plot(run_dir: Any) -> None:
+    from creps_gym.runner.rundir import RunDir
+
+    try:
+        from creps_gym.runner.plots import figure_bytes, plot_run_dirs
+
+        figure = plot_run_dirs([run_dir.path])
+        run_dir.write_file(RunDir.PLOT, figure_bytes(figure))  # never through a link
+        print(f"plot: {run_dir.file(RunDir.PLOT)}")
+    except ImportError as exc:
+        print(f"creps-gym: no plot written ({exc})", file=sys.stderr)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from dataclasses import fields
+
+    from creps_gym.runner.callbacks import ProgressBar
+    from creps_gym.runner.config import RunConfig
+    from creps_gym.runner.loop import Runner
+    from creps_gym.runner.session import RunDirError
+
+    import_modules_and_check_names(args)
+    options = {f.name: getattr(args, f.name) for f in fields(RunConfig) if hasattr(args, f.name)}
+    options.update(optimizer_options=dict(args.opt), env_kwargs=dict(args.env_kwarg))
+    options.update(context_selector_options=dict(args.selector_opt))
+    try:
+        config = RunConfig(**options)
+        runner = Runner(
+            config, callbacks=[ProgressBar(args.progress)], run_dir=args.out, overwrite=args.overwrite
+        )
+    except RunDirError:
+        raise
+    except (ValueError, TypeError) as exc:
+        raise _as_usage_error(exc) from None
+    return _finish(runner, args)
+
+
+def _cmd_resume(args: argparse.Namespace) -> int:
+    from creps_gym.runner.api import resumed_runner
+    from creps_gym.runner.callbacks import ProgressBar
+    from creps_gym.runner.checks import check_ray_cluster
+    from creps_gym.runner.rundir import RunDir
+
+    import_modules_and_check_names(args)
+    directory = RunDir.open(args.run_dir)
+    config = directory.config()
+    if config.env is None or config.optimizer is None:
+        raise UsageError(
+            f"DIR: expected a run started by `creps-gym run`, got {directory.path} (use the Python API)"
+        )
+    try:  # a wrong cluster address (RAY_ADDRESS) fails at once, as it does for `run`
+        check_ray_cluster(config)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    runner = resumed_runner(directory, config, callbacks=[ProgressBar(args.progress)])
+    return _finish(runner, args)
+
+
+COMMANDS = {"run": _cmd_run, "resume": _cmd_resume}

@@ -121,6 +121,13 @@ class CCMAESConfig:
     initial_shape: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        self._check_counts_and_flags()
+        self._check_choices()
+        self._check_reals()
+        self._check_combinations()
+        self._resolve_start()
+
+    def _check_counts_and_flags(self) -> None:
         for name, minimum in (
             ("n_params", 1),
             ("n_context_dims", 0),
@@ -136,6 +143,8 @@ class CCMAESConfig:
         object.__setattr__(self, "keep_best", check_bool(self.keep_best, "keep_best"))
         standardise = check_bool(self.standardise_advantages, "standardise_advantages")
         object.__setattr__(self, "standardise_advantages", standardise)
+
+    def _check_choices(self) -> None:
         if self.baseline_loss not in LOSSES:
             raise ValueError(f"baseline_loss: expected one of {LOSSES}, got {self.baseline_loss!r}")
         loss = self.restart_baseline_loss
@@ -150,6 +159,8 @@ class CCMAESConfig:
             raise ValueError(f"ridge_centre: expected one of {RIDGE_CENTRES}, got {self.ridge_centre!r}")
         if self.step_size_signal not in SIGNALS:
             raise ValueError(f"step_size_signal: expected one of {SIGNALS}, got {self.step_size_signal!r}")
+
+    def _check_reals(self) -> None:
         for name, low, high in (
             ("ridge", 0.0, 1.0),
             ("baseline_ridge", 0.0, 1.0),
@@ -165,6 +176,9 @@ class CCMAESConfig:
             if getattr(self, name) is not None:  # None: the tutorial's default; else in (0, high]
                 object.__setattr__(self, name, check_real_in_range(getattr(self, name), name, 0.0, high))
         object.__setattr__(self, "c_m", check_real_in_range(self.c_m, "c_m", 0.0, 1.0))
+
+    def _check_combinations(self) -> None:
+        """The options that constrain each other (checked after each is valid on its own)."""
         if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
             raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
         defaults = {option.name: option.default for option in fields(self)}
@@ -178,6 +192,9 @@ class CCMAESConfig:
             )
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
+
+    def _resolve_start(self) -> None:
+        """The seed, the mean features and the initial distribution (coefficients, σ and C)."""
         object.__setattr__(self, "seed", check_seed(self.seed))
         mean_map = make_features(self.mean_features, self.n_context_dims, "mean_features")
         object.__setattr__(self, "mean_map", mean_map)

@@ -3,7 +3,7 @@
 **Run-directory files** (:func:`read_run_file`, :func:`open_run_file`, :func:`append_run_file`,
 :func:`write_run_file`). A run directory is untrusted input, so each of its files is either absent or a
 regular file: a symbolic link, a FIFO, a device, a socket or a directory in a file's place raises
-:class:`~creps_gym.runner.errors.RunDirError` naming the file (CLI exit code 3). Files are opened with
+:class:`~creps_gym.errors.RunDirError` naming the file (CLI exit code 3). Files are opened with
 ``O_NOFOLLOW`` and ``O_NONBLOCK`` and checked again on the open descriptor, so a link planted in a run
 directory never makes the runner read or write anything outside it, and a FIFO never blocks it. Reads are
 bounded: a file larger than its limit (:data:`LIMITS`, :data:`DEFAULT_LIMIT`) is refused before it is
@@ -32,7 +32,7 @@ from typing import Any, BinaryIO
 
 from creps_gym._validation import MAX_JSON_DEPTH as MAX_DEPTH
 from creps_gym._validation import load_json
-from creps_gym.runner.errors import RunDirError
+from creps_gym.errors import RunDirError
 
 __all__ = [
     "DEFAULT_LIMIT",

@@ -43,6 +43,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
+from creps_gym.errors import RunDirError, RunDirWarning
 from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.runner import files
 from creps_gym.runner.config import RunConfig
@@ -51,7 +52,7 @@ from creps_gym.runner.ioh import iohanalyzer_text
 from creps_gym.runner.recovery import RESTART, read_history
 from creps_gym.runner.runlog import entry_crc as _crc
 from creps_gym.runner.runlog import log_line, parse_log, record_chain
-from creps_gym.runner.session import RunDirError, RunDirWarning, RunLock
+from creps_gym.runner.session import RunLock
 from creps_gym.runner.trust import (
     CHECKPOINT_FORMAT,
     LEGACY_FORMATS,

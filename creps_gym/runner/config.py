@@ -151,7 +151,8 @@ class RunConfig:
         (:func:`~creps_gym.envs.base.initial_distribution`: an env's own start, else the action box's centre
         and a quarter of its width).
         ``initial_mean="uniform"`` draws the mean uniformly in the action box from the master seed (the
-        paper's initialisation), from a fourth ``SeedSequence`` child that no other stream uses.
+        paper's initialisation), from its own ``SeedSequence`` child
+        (:class:`~creps_gym.runner.seeds.SeedPlan`).
     ray_address : str or None
         ``backend="ray"`` only: join the running Ray cluster at ``"HOST:PORT"`` (or ``"auto"``, the
         cluster last started on this machine) and leave it running. None: the ``RAY_ADDRESS`` environment

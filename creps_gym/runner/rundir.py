@@ -93,8 +93,9 @@ class RunDir:
     LOCK = "run.lock"
     BEST_POLICY, POLICY = "best_policy.npz", "policy.npz"
     FILES = (CONFIG, VERSIONS, LOG, CHECKPOINT, HISTORY_JSON, HISTORY_CSV, IOH, PLOT, BEST_POLICY, POLICY)
-    #: The run's own temporary files: ``atomic_write_text``'s ``.NAME.PID.tmp`` and ``save_state``'s
-    #: ``checkpoint.npzXXXXXXXX.tmp``. Other ``*.tmp`` files are the user's and are never touched.
+    #: The run's own temporary files: ``.NAME.PID.tmp`` (:func:`creps_gym._files.replace_atomically`) and
+    #: ``checkpoint.npzXXXXXXXX.tmp`` (``save_state``'s before it used it). Other ``*.tmp`` files are the
+    #: user's and are never touched.
     TEMPORARY = re.compile(
         r"^(\.(" + "|".join(map(re.escape, FILES)) + r")\.\d+|" + re.escape(CHECKPOINT) + r"\w+)\.tmp$"
     )

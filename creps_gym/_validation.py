@@ -7,14 +7,19 @@ and what was received, so that bad input never turns into a silent NaN further d
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym.errors import ConfigError, ConfigTypeError  # re-exported: their home is creps_gym.errors
+
 __all__ = [
     "MAX_COUNT",
+    "ConfigError",
+    "ConfigTypeError",
     "as_float_array",
     "check_bool",
     "check_count",
@@ -26,8 +31,26 @@ __all__ = [
     "check_real",
     "check_real_in_range",
     "check_seed",
+    "config_field",
     "load_json",
 ]
+
+
+@contextmanager
+def config_field(field: str | None) -> Iterator[None]:
+    """A ``ValueError`` or ``TypeError`` raised inside is about the configuration field ``field``: it is
+    raised again as a :class:`ConfigError` (``ConfigTypeError`` for a ``TypeError``) of ``field``, its message
+    unchanged. Nothing changes for ``field=None``, for a ``ConfigError`` (it names its own field) or for
+    another subclass of ``ValueError`` (e.g. a run directory's error)."""
+    try:
+        yield
+    except (ValueError, TypeError) as exc:
+        if field is None or isinstance(exc, ConfigError) or type(exc) not in (ValueError, TypeError):
+            raise
+        message = str(exc)
+        reason = message.removeprefix(f"{field}: ")
+        kind = ConfigTypeError if isinstance(exc, TypeError) else ConfigError
+        raise kind(field, reason, message) from None
 
 
 def _shape_text(shape: Sequence[int | None]) -> str:

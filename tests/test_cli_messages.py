@@ -21,7 +21,7 @@ from helpers import EXTRAS, SPHERE, marked
 
 import creps_gym
 from creps_gym.cli import main
-from creps_gym.cli_types import key_value
+from creps_gym.cli.types import key_value
 from creps_gym.optimizers import registry
 from creps_gym.runner import RunConfig, RunDir, run
 
@@ -259,7 +259,7 @@ def test_a_deprecated_id_warns_once_without_terminal_escapes(tmp_path, capsys):
 
 
 def test_list_fits_in_100_columns_and_marks_the_deprecated_ids(capsys):
-    from creps_gym.cli_table import ENVS
+    from creps_gym.cli.table import ENVS
     from creps_gym.listing import deprecated_ids
 
     assert main(["list"]) == 0

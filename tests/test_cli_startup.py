@@ -70,7 +70,7 @@ def test_the_static_table_agrees_with_the_registries_and_run_config():
 
 
 def test_list_prints_every_row_of_the_static_table():
-    from creps_gym.cli_table import ENVS, OPTIMIZERS
+    from creps_gym.cli.table import ENVS, OPTIMIZERS
 
     listed = subprocess.run(cli_command("list"), capture_output=True, text=True, timeout=60)
     ids = [line.split()[0] for line in listed.stdout.splitlines() if re.match(r"  \S", line)]
@@ -84,7 +84,7 @@ def test_list_prints_every_row_of_the_static_table():
 def test_a_subpackage_that_imports_gymnasium_first_registers_every_id(module):
     """Gymnasium imported for the first time *by* a creps_gym module: the ids are registered from the
     static table (before: registering imported that module's package again, half-initialised)."""
-    from creps_gym.cli_table import REGISTRATIONS
+    from creps_gym.cli.table import REGISTRATIONS
 
     result = _python(
         f"""

@@ -3,6 +3,7 @@ document, and the committed renderings against the committed run documents."""
 
 from __future__ import annotations
 
+import json
 import math
 import shutil
 from pathlib import Path
@@ -12,7 +13,7 @@ import pytest
 
 pytest.importorskip("matplotlib")  # the study renders its figures with it (extra 'plot')
 
-from benchmarks.contextual_bbo import problems, protocol, run
+from benchmarks.contextual_bbo import floor_probe, problems, protocol, report, run
 from benchmarks.contextual_bbo.problems import PROBLEMS, draw_run
 from benchmarks.study_tools import load_document
 
@@ -69,6 +70,69 @@ def test_a_run_counts_true_episodes_and_records_its_stack(monkeypatch):
     assert document["curve"]["generation"][-1] == 12 and document["stop_reason"] == "budget"
     assert document["protocol_last"] == document["curve"]["average_return"][-1] < 0
     assert {"numpy", "scipy", "python", "cpu", "creps_gym"} <= set(document["environment"])
+
+
+def test_the_floor_probe_runs_cells_and_measures_the_baseline_against_the_context_effect(
+    monkeypatch, tmp_path
+):
+    monkeypatch.setitem(PROBLEMS, "Discus", problems.Problem("Discus", 1, 8))
+    out = tmp_path / "cells.json"
+    options = '{"restarts": 0, "ridge_centre": "old"}'
+    assert (
+        floor_probe.main(
+            ["cells", "--functions", "Discus", "--seeds", "2", "--options", options, "--out", str(out)]
+        )
+        == 0
+    )
+    document = json.loads(out.read_text())
+    assert [row["seed"] for row in document["rows"]] == [0, 1] and document["options"][
+        "ridge_centre"
+    ] == "old"
+    assert document["rows"][0]["generations_run"] == 8 and document["provenance"]["recorded"] is True
+    rows = floor_probe.advantage_rows("Discus", 0, {"restarts": 0}, every=4, draws=50)
+    assert [row["generation"] for row in rows] == [0, 4, 7]
+    first = rows[0]
+    assert (
+        first["theta_part_std"] > 0
+        and first["baseline_error_rms"] >= 0
+        and -1 <= first["tau_advantages_theta"] <= 1
+    )
+    with pytest.raises(SystemExit):
+        floor_probe.main(["cells", "--options", "[1, 2]"])
+
+
+def test_published_json_holds_every_cell_of_the_published_table_with_its_source():
+    published = report.load_published()
+    methods = published["methods"]
+    assert len(methods) == 7 and len(PROBLEMS) == 6
+    cells = [(row["function"], row["method"]) for row in published["values"]]
+    assert len(cells) == 42 and set(cells) == {(f, m) for f in PROBLEMS for m in methods}
+    for row in [*published["values"], *published["hyperparameter_study"]]:
+        assert row["source"] in published["sources"] and row["function"] in PROBLEMS
+        if row["value"] is None:  # NaN in the table: the published runs diverged
+            assert row["printed"] == "NaN"
+        else:
+            assert row["value"] == float(row["printed"]) < 0
+    value = {(row["function"], row["method"]): row["value"] for row in published["values"]}
+    assert value["Sphere", "C-ACM-ES+"] == -1.294e-08 and value["DifferentPowers", "aC-ACM-ES"] == -1.284e-14
+    assert value["Ackley", "C-ACM-ES+"] is None and value["Discus", "C-ACM-ES"] == -8.877e-12
+    tuned = {(row["function"], row["setting"]): row["value"] for row in published["hyperparameter_study"]}
+    assert (
+        tuned["Rosenbrock", "n_iter = 10000"] == -2.396e-14
+        and tuned["Ackley", "n_start = 3000"] == -3.995e-09
+    )
+    # the rendered table shows every published cell as printed, in its function's row and method's column
+    lines = report.protocol_table([], published).splitlines()
+    head = [cell.strip() for cell in lines[0].strip("|").split("|")]
+    rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|").split("|")] for line in lines[2:]}
+    for row in published["values"]:
+        assert rows[row["function"]][head.index(row["method"])] == row["printed"]
+    assert rows["Rosenbrock"][head.index("hyperparameter study: best")].startswith("-2.396e-14")
+    best = report.best_table([], published)
+    assert (
+        "| DifferentPowers | -1.3e-14 | aC-ACM-ES |" in best
+        and "| Rosenbrock | -2.4e-14 | C-ACM-ES, n_iter" in best
+    )
 
 
 @pytest.mark.parametrize("mode", ["quick", "full"])

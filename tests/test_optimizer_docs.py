@@ -18,6 +18,7 @@ SECTIONS = {
     "CREPSCMAConfig": ["## Configuration"],
     "CCMAESConfig": ["## Contextual CMA-ES ("],
     "SurrogateConfig": ["## Contextual CMA-ES (", "## Surrogate-assisted contextual CMA-ES"],
+    "CBOConfig": ["## Contextual Bayesian optimisation ("],
 }
 _NOT_OPTIONS = {"n_params", "n_context_dims"}  # positional arguments
 

@@ -189,7 +189,7 @@ def test_a_video_cut_by_a_full_disk_is_an_error_naming_the_file(tmp_path, reache
 @EXTRAS
 @pytest.mark.parametrize("suffix", [".mp4", ".gif"])
 def test_a_video_is_written_whole_through_a_temporary(tmp_path, capsys, reacher_run, suffix):
-    from creps_gym.cli_policy import check_video_file
+    from creps_gym.cli.policy import check_video_file
 
     target = tmp_path / f"video{suffix}"
     assert main(["evaluate", str(reacher_run), "--contexts", "2", "--video", str(target)]) == 0

@@ -47,13 +47,16 @@ STUDY = Path(__file__).resolve().parent
 SEEDS = {"quick": 3, "full": 20}
 #: The columns: (label, registry name, options). An empty label is the method with its defaults;
 #: ``c-cma-es-former-restarts`` is ``c-cma-es`` with its restart defaults before issue 33 (no kept best,
-#: squared restarts).
+#: squared restarts); the ``-c3r-`` columns shrink the mean fit's step rather than its coefficients (Eq. C3r,
+#: ``ridge_centre="old"``; issue 45).
 COLUMNS: tuple[tuple[str, str, tuple[tuple[str, object], ...]], ...] = (
     ("", "c-cma-es", ()),
     ("c-cma-es-former-restarts", "c-cma-es", FORMER),
     ("c-cma-es-no-restarts", "c-cma-es", (("restarts", 0),)),
     ("", "c-cma-es-surrogate", ()),
     ("c-cma-es-surrogate-no-restarts", "c-cma-es-surrogate", (("restarts", 0),)),
+    ("c-cma-es-c3r-no-restarts", "c-cma-es", (("restarts", 0), ("ridge_centre", "old"))),
+    ("c-cma-es-surrogate-c3r-no-restarts", "c-cma-es-surrogate", (("restarts", 0), ("ridge_centre", "old"))),
 )
 #: Columns run on some functions only (column name -> functions): the surrogate on the Sphere and Rosenbrock,
 #: without restarts on Rosenbrock (where its default restarts replace the converged search; issue 33).

@@ -199,8 +199,13 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         sigma = policy.step_size
         deviations = (params - policy.mean(contexts)) / sigma  # y_k ~ N(0, C)
         try:
-            fit = (self.config.ridge, policy.coefficients, self.config.mean_repulsion)
-            fitted = contextual_mean(policy.mean_map, contexts, params, weights, *fit)  # Eqs. (C3), (C3'')
+            fit = (
+                self.config.ridge,
+                policy.coefficients,
+                self.config.mean_repulsion,
+                self.config.ridge_centre,
+            )
+            fitted = contextual_mean(policy.mean_map, contexts, params, weights, *fit)  # (C3), (C3r), (C3'')
         except linalg.LinAlgError:
             raise RuntimeError(
                 "tell(): the weighted mean regression (C3) is singular for this batch; use a ridge > 0 or "

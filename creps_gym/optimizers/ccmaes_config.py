@@ -20,6 +20,7 @@ from creps_gym.optimizers.policies import initial_coefficients, initial_covarian
 __all__ = [
     "OTHER_LOSS",
     "RESTART_LOSSES",
+    "RIDGE_CENTRES",
     "SIGNALS",
     "UNUSED_BY_LOCAL_BASELINE",
     "CCMAESConfig",
@@ -31,6 +32,8 @@ Array = NDArray[np.float64]
 #: The options of C1's polynomial fit, which the local baseline (C1'') ignores: they must keep their defaults.
 UNUSED_BY_LOCAL_BASELINE = ("standardise_advantages", "baseline_loss", "baseline_degree", "baseline_ridge")
 SIGNALS = ("coefficients", "mean")
+#: What the mean fit's ridge shrinks towards: 0 (C3, the classic ridge) or the old coefficients (C3r).
+RIDGE_CENTRES = ("zero", "old")
 #: ``restart_baseline_loss``'s default: after a restart, the loss of ``LOSSES`` the first search did not use.
 OTHER_LOSS = "other"
 RESTART_LOSSES = (None, *LOSSES, OTHER_LOSS)
@@ -57,6 +60,10 @@ class CCMAESConfig:
     baseline_bandwidth : float      0: the polynomial V above; h > 0: a local V, the kernel-weighted median of
         the recent returns with a Gaussian bandwidth of h context standard deviations (C1'').
     ridge, baseline_ridge : float   relative ridges of the mean fit (C3) and of the baseline (C1).
+    ridge_centre : str              what the mean fit's ridge shrinks towards: ``"zero"`` (C3: the slopes
+        towards 0, a bias of ``ridge`` times the slopes that does not shrink with σ and floors the regret on
+        ill-conditioned functions) or ``"old"`` (C3r: the step towards 0, i.e. the slopes towards the old
+        ones, a bias of ``ridge`` times the step, which shrinks with σ).
     c_sigma, d_sigma, c_c, c_1, c_mu : float or None   learning rates; None = the tutorial's defaults.
     c_m : float                     the mean's learning rate in (0, 1] (C3'): A ← A + c_m (A_fit − A);
         below 1 it averages the regression's noise over about (2 − c_m)/c_m batches.
@@ -95,6 +102,7 @@ class CCMAESConfig:
     step_size_signal: str = "mean"
     ridge: float = 1e-8
     baseline_ridge: float = 1e-10
+    ridge_centre: str = "zero"
     c_sigma: float | None = None
     d_sigma: float | None = None
     c_c: float | None = None
@@ -113,6 +121,13 @@ class CCMAESConfig:
     initial_shape: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        self._check_counts_and_flags()
+        self._check_choices()
+        self._check_reals()
+        self._check_combinations()
+        self._resolve_start()
+
+    def _check_counts_and_flags(self) -> None:
         for name, minimum in (
             ("n_params", 1),
             ("n_context_dims", 0),
@@ -128,6 +143,8 @@ class CCMAESConfig:
         object.__setattr__(self, "keep_best", check_bool(self.keep_best, "keep_best"))
         standardise = check_bool(self.standardise_advantages, "standardise_advantages")
         object.__setattr__(self, "standardise_advantages", standardise)
+
+    def _check_choices(self) -> None:
         if self.baseline_loss not in LOSSES:
             raise ValueError(f"baseline_loss: expected one of {LOSSES}, got {self.baseline_loss!r}")
         loss = self.restart_baseline_loss
@@ -135,8 +152,15 @@ class CCMAESConfig:
             raise ValueError(
                 f"restart_baseline_loss: expected one of {RESTART_LOSSES}, got {self.restart_baseline_loss!r}"
             )
+        if not isinstance(self.ridge_centre, str):
+            got = type(self.ridge_centre).__name__
+            raise TypeError(f"ridge_centre: expected one of {RIDGE_CENTRES}, got {got}")
+        if self.ridge_centre not in RIDGE_CENTRES:
+            raise ValueError(f"ridge_centre: expected one of {RIDGE_CENTRES}, got {self.ridge_centre!r}")
         if self.step_size_signal not in SIGNALS:
             raise ValueError(f"step_size_signal: expected one of {SIGNALS}, got {self.step_size_signal!r}")
+
+    def _check_reals(self) -> None:
         for name, low, high in (
             ("ridge", 0.0, 1.0),
             ("baseline_ridge", 0.0, 1.0),
@@ -152,6 +176,9 @@ class CCMAESConfig:
             if getattr(self, name) is not None:  # None: the tutorial's default; else in (0, high]
                 object.__setattr__(self, name, check_real_in_range(getattr(self, name), name, 0.0, high))
         object.__setattr__(self, "c_m", check_real_in_range(self.c_m, "c_m", 0.0, 1.0))
+
+    def _check_combinations(self) -> None:
+        """The options that constrain each other (checked after each is valid on its own)."""
         if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
             raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
         defaults = {option.name: option.default for option in fields(self)}
@@ -165,6 +192,9 @@ class CCMAESConfig:
             )
         if self.c_1 is not None and self.c_mu is not None and self.c_1 + self.c_mu > 1.0:
             raise ValueError(f"c_1, c_mu: expected c_1 + c_mu <= 1, got {self.c_1} + {self.c_mu}")
+
+    def _resolve_start(self) -> None:
+        """The seed, the mean features and the initial distribution (coefficients, σ and C)."""
         object.__setattr__(self, "seed", check_seed(self.seed))
         mean_map = make_features(self.mean_features, self.n_context_dims, "mean_features")
         object.__setattr__(self, "mean_map", mean_map)

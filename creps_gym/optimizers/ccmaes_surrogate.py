@@ -19,6 +19,12 @@ Every ``tell`` is a true generation: the plain C-CMA-ES update (C1)–(C9) on th
    archive, θ from the policy, scored by the model, and the same C-CMA-ES update. They spend no episode: the
    counters of episodes (``evaluations``, ``true_episodes``) and the stop criteria's histories see only true
    returns.
+5. The true batch after model generations checks them (S7): if its median return is below the smallest return
+   of the true batch before them, the model led the search where most samples are worse (τ ranks θ within a
+   batch, so it cannot see a model that extrapolates); the distribution and paths go back to where the model
+   generations started, the batch updates nothing but the archive and the model, n̂ starts again at 0, and
+   the most model generations per true one (the cap) halves. A true batch after model generations whose
+   median is at least the one before them doubles the cap again (+1, up to ``max_model_generations``).
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ from creps_gym._validation import as_float_array, check_count, check_positive_in
 from creps_gym.optimizers.ccmaes import CCMAES
 from creps_gym.optimizers.ccmaes_config import CCMAESConfig, options_doc, options_signature
 from creps_gym.optimizers.cma_rules import inverse_sqrt
+from creps_gym.optimizers.policies import LinearGaussianPolicy
 from creps_gym.optimizers.surrogate_model import (
     KINDS,
     SurrogateModel,
@@ -102,6 +109,33 @@ def next_model_generations(tau: float | None, previous: int, most: int, min_tau:
     return int(min(target, 2 * previous + 1))  # Eq. (S5)
 
 
+def _median(values: Array) -> float:
+    """The median of ``values`` (n,), as ``np.median`` gives it, without overflowing near the float limit: the
+    two middle values are halved before they are added (halving is exact, so this is ``np.median``'s
+    (a + b)/2 bit for bit wherever that does not overflow or underflow)."""
+    n = values.size
+    middle = np.partition(values, [(n - 1) // 2, n // 2])
+    return float(middle[(n - 1) // 2] / 2 + middle[n // 2] / 2)
+
+
+@dataclass(frozen=True)
+class _Rollback:
+    """The distribution and paths where model generations started, and the true batch before them: its
+    smallest return (the floor) and its median (S7)."""
+
+    policy: LinearGaussianPolicy
+    path_sigma: Array
+    path_cov: Array
+    floor: float
+    median: float
+
+    @classmethod
+    def of(cls, optimizer: CCMAES, returns: Array) -> _Rollback:
+        """The optimiser's distribution and paths now, and the smallest and median of ``returns``."""
+        paths = (optimizer.path_sigma.copy(), optimizer.path_cov.copy())
+        return cls(optimizer.policy.copy(), *paths, float(returns.min()), _median(returns))
+
+
 class CCMAESSurrogate(CCMAES):
     """Contextual CMA-ES with a linear-quadratic surrogate of the return over (s, θ) (S1)–(S6).
 
@@ -126,22 +160,31 @@ class CCMAESSurrogate(CCMAES):
         self.model: SurrogateModel | None = None
         self.planned_generations = 0  # n̂
         self.model_generations_total = 0
+        self.model_rejections = 0  # S7: model generations undone
+
+    def _reset_search(self) -> None:
+        super()._reset_search()
+        self.rollback: _Rollback | None = None  # S7: the distribution before the last model generations
+        self.model_cap = self.config.max_model_generations  # S7: halved by a rejection, reset at a restart
 
     def _update(self, contexts: Array, params: Array, returns: Array) -> None:
+        if self._model_made_worse(returns):  # Eq. (S7): undo the model generations, keep the batch's data
+            self._reject_model_generations(contexts, params, returns)
+            return
+        if self.rollback is not None and _median(returns) >= self.rollback.median:  # Eq. (S7)
+            self.model_cap = min(self.config.max_model_generations, 2 * self.model_cap + 1)  # they helped
         tau = self._fresh_tau(contexts, params, returns)  # before the update: its V is the one C1 fits
         super()._update(contexts, params, returns)  # the true generation; raises with the state unchanged
         true_diagnostics = dict(self._diagnostics)
-        keep = self.config.archive_size
-        self.archive = tuple(  # type: ignore[assignment]
-            np.concatenate([old, new])[-keep:]
-            for old, new in zip(self.archive, (contexts, params, returns), strict=True)
-        )  # Eq. (S1)
+        self._archive(contexts, params, returns)
         config = self.config
         self.planned_generations = next_model_generations(
-            tau, self.planned_generations, config.max_model_generations, config.min_tau
-        )  # Eq. (S5)
+            tau, self.planned_generations, self.model_cap, config.min_tau
+        )  # Eq. (S5), at most the cap of Eq. (S7)
         self.model = self._fit()
+        before, restarts = _Rollback.of(self, returns), self.restarts_done
         ran = self._model_generations(self.planned_generations, contexts.shape[0])
+        self.rollback = before if ran and self.restarts_done == restarts else None  # for Eq. (S7)
         self.model_generations_total += ran
         diagnostics = dict(self._diagnostics) if ran else true_diagnostics
         for key in ("mean_return", "baseline_r2"):  # the true batch's, not a model generation's
@@ -155,7 +198,42 @@ class CCMAESSurrogate(CCMAES):
         )
         if tau is not None:
             diagnostics["kendall_tau"] = tau
+        diagnostics["model_rejections"] = float(self.model_rejections)
         self._diagnostics = diagnostics
+
+    def _archive(self, contexts: Array, params: Array, returns: Array) -> None:
+        """Append a true batch to the archive, keeping its most recent ``archive_size`` episodes (S1)."""
+        keep = self.config.archive_size
+        self.archive = tuple(  # type: ignore[assignment]
+            np.concatenate([old, new])[-keep:]
+            for old, new in zip(self.archive, (contexts, params, returns), strict=True)
+        )  # Eq. (S1)
+
+    def _model_made_worse(self, returns: Array) -> bool:
+        """Eq. (S7): model generations ran before this true batch, and its median return is below the
+        smallest return of the true batch before them."""
+        return self.rollback is not None and _median(returns) < self.rollback.floor
+
+    def _reject_model_generations(self, contexts: Array, params: Array, returns: Array) -> None:
+        """Eq. (S7): the distribution and paths of before the model generations, the batch in the archive and
+        the model refitted on it; n̂ = 0, so the next true generation is plain C-CMA-ES."""
+        rollback = cast(_Rollback, self.rollback)
+        self.policy = rollback.policy.copy()
+        self.path_sigma, self.path_cov = rollback.path_sigma.copy(), rollback.path_cov.copy()
+        self.rollback, self.planned_generations = None, 0
+        self.model_rejections += 1
+        self.model_cap //= 2
+        self._archive(contexts, params, returns)
+        self.model = self._fit()
+        for stale in ("cond_cov", "max_std", "search_scale"):  # they described the abandoned distribution
+            self._diagnostics.pop(stale, None)
+        self._diagnostics.update(
+            step_size=self.step_size,
+            true_episodes=float(self.evaluations + contexts.shape[0]),
+            model_generations=0.0,
+            planned_generations=0.0,
+            model_rejections=float(self.model_rejections),
+        )
 
     def _fresh_tau(self, contexts: Array, params: Array, returns: Array) -> float | None:
         """Kendall τ of the current model's advantages against the true ones on this batch (S4); None
@@ -229,9 +307,20 @@ class CCMAESSurrogate(CCMAES):
             archive_returns=returns.copy(),
             planned_generations=self.planned_generations,
             model_generations_total=self.model_generations_total,
+            model_rejections=self.model_rejections,
+            model_cap=self.model_cap,
         )
         if self.model is not None:
             state.update(self.model.state("model_"))
+        if self.rollback is not None:  # Eq. (S7)
+            rollback = self.rollback
+            state.update({f"rollback_{key}": value for key, value in rollback.policy.state().items()})
+            state.update(
+                rollback_path_sigma=rollback.path_sigma.copy(),
+                rollback_path_cov=rollback.path_cov.copy(),
+                rollback_floor=np.asarray([rollback.floor]),
+                rollback_median=np.asarray([rollback.median]),
+            )
         return state
 
     @classmethod
@@ -249,10 +338,39 @@ class CCMAESSurrogate(CCMAES):
         optimizer.archive = (contexts, params, returns)
         for name in ("planned_generations", "model_generations_total"):
             setattr(optimizer, name, check_count(state[name], f"state[{name!r}]"))
+        rejections = state.get("model_rejections", 0)  # absent before S7
+        optimizer.model_rejections = check_count(rejections, "state['model_rejections']")
+        cap = check_positive_int(
+            state.get("model_cap", config.max_model_generations), "state['model_cap']", 0
+        )
+        if cap > config.max_model_generations:
+            most = config.max_model_generations
+            raise ValueError(f"state['model_cap']: expected an integer <= {most}, got {cap}")
+        optimizer.model_cap = cap
+        if "rollback_coefficients" in state:  # Eq. (S7); absent before it, and when no model generation ran
+            optimizer.rollback = _read_rollback(optimizer, state)
         if "model_kind" in state:
             n_features = config.mean_map.n_features
             optimizer.model = SurrogateModel.from_state(state, "model_", p, z, n_features)
         return optimizer
+
+
+def _read_rollback(optimizer: CCMAESSurrogate, state: Mapping[str, Any]) -> _Rollback:
+    """The rollback of Eq. (S7) from a checkpoint, checked like the running distribution (errors name the
+    ``rollback_`` keys)."""
+    config = optimizer.config
+    entries = {key[len("rollback_") :]: state[key] for key in state if key.startswith("rollback_")}
+    try:
+        policy = LinearGaussianPolicy.from_state(config.mean_map, config.n_params, entries)
+        path_sigma = as_float_array(entries["path_sigma"], "state['path_sigma']", optimizer.path_sigma.shape)
+        path_cov = as_float_array(entries["path_cov"], "state['path_cov']", (config.n_params,))
+        floor = as_float_array(entries["floor"], "state['floor']", (1,))
+        median = as_float_array(entries["median"], "state['median']", (1,))
+    except KeyError as exc:
+        raise ValueError(f"state: expected the key 'rollback_{exc.args[0]}' of the rollback (S7)") from None
+    except (TypeError, ValueError) as exc:
+        raise type(exc)(str(exc).replace("state['", "state['rollback_")) from None
+    return _Rollback(policy, path_sigma.copy(), path_cov.copy(), float(floor[0]), float(median[0]))
 
 
 # help(CCMAESSurrogate) and inspect.signature show every option with its default, from the config.

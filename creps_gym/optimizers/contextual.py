@@ -253,8 +253,14 @@ def contextual_mean(
     ridge: float,
     old_coefficients: Array | None = None,
     repulsion: float = 0.0,
+    ridge_centre: str = "zero",
 ) -> Array:
     """New coefficients A (k, p): weighted least squares of θ on ϕ(s) over the positive weights, Eq. (C3).
+
+    With ``ridge_centre="old"``, Eq. (C3r): the same fit of the shifts θ_k − A_oldᵀϕ(s_k), added to
+    ``old_coefficients``, so the ridge shrinks the step instead of the coefficients. Without a ridge both
+    are the same least-squares fit; with one, C3 biases the slopes by about ``ridge`` times their size,
+    which does not shrink as the search converges, and C3r by ``ridge`` times the step, which does.
 
     With ``repulsion`` α > 0, Eq. (C3''): minus α times the same fit of the negatively weighted samples'
     shifts θ_k − A_oldᵀϕ(s_k) (``old_coefficients`` A_old, weights |w_k| normalised to one), so that the
@@ -262,9 +268,13 @@ def contextual_mean(
     """
     selected = weights > 0
     positive = weights[selected] / weights[selected].sum()
-    fitted = weighted_ml_fit(
-        mean_map(contexts[selected]), params[selected], positive, ridge, mean_map.constant_column
-    )
+    features = mean_map(contexts[selected])
+    if ridge_centre == "old" and old_coefficients is not None:  # Eq. (C3r): the ridge shrinks the step
+        shifts = params[selected] - features @ old_coefficients
+        step = weighted_ml_fit(features, shifts, positive, ridge, mean_map.constant_column)
+        fitted = old_coefficients + step
+    else:  # Eq. (C3)
+        fitted = weighted_ml_fit(features, params[selected], positive, ridge, mean_map.constant_column)
     if repulsion == 0.0 or old_coefficients is None:
         return fitted
     rejected = weights < 0

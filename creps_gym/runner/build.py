@@ -15,7 +15,9 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._validation import config_field
 from creps_gym.envs.base import box_initial_distribution, initial_distribution
+from creps_gym.errors import ConfigError, ConfigTypeError
 from creps_gym.optimizers.registry import make_optimizer
 from creps_gym.optimizers.registry import optimizer_class as registered_class
 from creps_gym.runner.backends import Backend, EnvSource, make_backend
@@ -50,7 +52,8 @@ def make_env(env_id: str, kwargs: dict[str, Any]) -> gym.Env:
             raise
         unknown = re.search(r"(\w+)\.__init__\(\) got an unexpected keyword argument '(\w+)'", message)
         if unknown is not None and unknown.group(2) in kwargs:
-            raise TypeError(_unknown_keyword(env_id, unknown.group(2), unknown.group(1))) from None
+            reason = _unknown_keyword(env_id, unknown.group(2), unknown.group(1))
+            raise ConfigTypeError("env_kwargs", reason) from None
         if message.partition(":")[0] in kwargs:  # e.g. "dim: expected an integer >= 2, got str 'abc'"
             raise TypeError(message) from None
         raise
@@ -75,7 +78,7 @@ def _unknown_keyword(env_id: str, key: str, refused_by: str) -> str:
             continue
         valid |= {p.name for p in parameters if p.kind in plain}
     names = sorted(valid - {"self", "render_mode"})
-    return f"env_kwargs: expected keywords of {env_id} from {names}, got {key!r}{did_you_mean(key, names)}"
+    return f"expected keywords of {env_id} from {names}, got {key!r}{did_you_mean(key, names)}"
 
 
 def default_initial_distribution(action_space: gym.spaces.Box) -> tuple[Array, Array]:
@@ -93,7 +96,7 @@ def uniform_mean(action_space: gym.spaces.Box, seed: int) -> Array:
     """The paper's initialisation: a mean drawn uniformly in the action box from the master ``seed``."""
     low, high = action_space.low, action_space.high
     if not (np.isfinite(low).all() and np.isfinite(high).all()):
-        raise ValueError("initial_mean: expected a number for an unbounded action box, got 'uniform'")
+        raise ConfigError("initial_mean", "expected a number for an unbounded action box, got 'uniform'")
     return np.random.default_rng(seed_child(seed, SeedPlan.INITIAL_MEAN)).uniform(low, high)
 
 
@@ -103,8 +106,8 @@ def per_parameter(given: Any, name: str, default: Array, n_params: int) -> Array
         return default
     values = np.atleast_1d(np.asarray(given, np.float64))
     if values.shape not in ((1,), (n_params,)):
-        raise ValueError(
-            f"{name}: expected a number or {n_params} numbers (one per parameter), got {values.shape[0]}"
+        raise ConfigError(
+            name, f"expected a number or {n_params} numbers (one per parameter), got {values.shape[0]}"
         )
     return np.broadcast_to(values, (n_params,)).copy()
 
@@ -127,14 +130,21 @@ def build_optimizer(config: RunConfig, env: gym.Env, n_context_dims: int, seed: 
     with np.errstate(over="ignore", under="ignore"):
         variances = std**2
     if not (np.isfinite(variances).all() and (variances > 0).all()):  # e.g. an env-declared std of 1e200
-        raise ValueError(f"initial_std: expected standard deviations with finite variances > 0, got {std}")
+        raise ConfigError("initial_std", f"expected standard deviations with finite variances > 0, got {std}")
     options = dict(config.optimizer_options)
     budget_option = getattr(registered_class(config.optimizer), "budget_option", None)
     if budget_option is not None and budget_option not in options:  # e.g. nevergrad's NGOpt needs it
         options[budget_option] = min(config.iterations * config.samples, config.max_episodes or math.inf)
-    return make_optimizer(
-        config.optimizer, n_params, n_context_dims, seed, initial_mean=mean, initial_cov=variances, **options
-    )
+    with config_field("optimizer_options" if config.optimizer_options else None):  # its error about one
+        return make_optimizer(
+            config.optimizer,
+            n_params,
+            n_context_dims,
+            seed,
+            initial_mean=mean,
+            initial_cov=variances,
+            **options,
+        )
 
 
 def build_backend(config: RunConfig, source: EnvSource, env: gym.Env | None = None) -> Backend:

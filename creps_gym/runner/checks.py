@@ -23,7 +23,13 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_generator_state
+from creps_gym._validation import (
+    ConfigError,
+    ConfigTypeError,
+    as_float_array,
+    check_generator_state,
+    config_field,
+)
 from creps_gym.envs.evaluation import contextual_model
 from creps_gym.optimizers.registry import minimum_samples
 from creps_gym.wrappers import FixedContexts, SampleContexts
@@ -103,10 +109,11 @@ def check_minimum_batch(optimizer: Any, runner: Any) -> None:
     smallest = minimum_samples(optimizer, p, z)
     if smallest is not None and config.samples < smallest:
         label = repr(config.optimizer) if config.optimizer else type(optimizer).__name__
-        raise ValueError(
-            f"samples: expected at least {smallest} episodes per iteration for {label} with {p} "
-            f"parameters and {z} context dimension(s) (smaller batches diverge; see docs/optimizers.md, "
-            f"'Batch size'), got {config.samples}"
+        raise ConfigError(
+            "samples",
+            f"expected at least {smallest} episodes per iteration for {label} with {p} parameters and {z} "
+            f"context dimension(s) (smaller batches diverge; see docs/optimizers.md, 'Batch size'), got "
+            f"{config.samples}",
         )
 
 
@@ -117,7 +124,7 @@ def check_optimizer_sizes(optimizer: Any, name: str, runner: Any) -> None:
         expected = getattr(runner, attribute)
         got = getattr(optimizer, attribute, expected)
         if got != expected:
-            raise ValueError(f"{name}: expected {attribute} = {expected} for {runner.env_name}, got {got}")
+            raise ConfigError(name, f"expected {attribute} = {expected} for {runner.env_name}, got {got}")
 
 
 def check_batch_size(
@@ -134,10 +141,10 @@ def check_batch_size(
     if error is None:
         return
     if str(error).partition(":")[0] in options:
-        raise ValueError(str(error)) from None
+        raise ConfigError("optimizer_options", str(error), str(error)) from None
     if _tell_error(make, np.tile(contexts, (4, 1))) is None:
-        raise ValueError(
-            f"samples: expected a batch size that {label} can learn from, got {contexts.shape[0]} ({error})"
+        raise ConfigError(
+            "samples", f"expected a batch size that {label} can learn from, got {contexts.shape[0]} ({error})"
         ) from None
     raise ValueError(
         f"initial_mean, initial_std: expected a start {label} can learn from (a synthetic batch drawn there "
@@ -163,7 +170,7 @@ def check_box_spaces(env: gym.Env) -> None:
     for name in ("observation_space", "action_space"):
         space = getattr(env, name)
         if not isinstance(space, gym.spaces.Box):
-            raise TypeError(f"env: expected a Box {name} (contexts and parameters θ), got {space}")
+            raise ConfigTypeError("env", f"expected a Box {name} (contexts and parameters θ), got {space}")
 
 
 def check_ray_cluster(config: Any) -> None:
@@ -181,7 +188,8 @@ def check_ray_cluster(config: Any) -> None:
 
     address, origin = resolve_address(config.ray_address, os.environ)
     if address is not None and address != "auto":
-        check_reachable(address, origin)
+        with config_field("ray_address" if origin == "ray_address" else None):
+            check_reachable(address, origin)
 
 
 def generator_state(state: Any) -> Any:

@@ -10,7 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from creps_gym._validation import check_positive_int
+from creps_gym._validation import check_positive_int, config_field
+from creps_gym.errors import ConfigError, ConfigTypeError  # re-exported: their home is creps_gym.errors
 
 __all__ = [
     "BACKENDS",
@@ -18,6 +19,8 @@ __all__ = [
     "MAKE_ARGUMENTS",
     "RUN_OWNED_OPTIONS",
     "VECTOR_MODES",
+    "ConfigError",
+    "ConfigTypeError",
     "RunConfig",
     "check_ray_address",
 ]
@@ -83,6 +86,17 @@ def _vector_or_scalar(value: Any, name: str, positive: bool) -> Any:
     return [float(v) for v in items] if isinstance(value, (list, tuple)) else float(value)
 
 
+#: The smallest value of each integer field (``samples``: when given).
+_MINIMA = {
+    "iterations": 1,
+    "samples": 2,
+    "seed": 0,
+    "eval_every": 1,
+    "eval_contexts": 1,
+    "retries": 0,
+    "checkpoint_every": 1,
+}
+
 #: Optimiser keywords that the run sets itself, and the run option (and flag) to use instead.
 RUN_OWNED_OPTIONS = {
     "initial_mean": "--initial-mean (initial_mean= in Python)",
@@ -95,9 +109,9 @@ def _check_run_owned_options(options: Mapping[str, Any]) -> None:
     """Refuse an optimiser option that the run passes itself (a raw "multiple values" TypeError else)."""
     for key, advice in RUN_OWNED_OPTIONS.items():
         if key in options:
-            raise ValueError(
-                f"optimizer_options: expected no {key!r}, which the run sets: use {advice}; "
-                f"got {key}={options[key]!r}"
+            raise ConfigError(
+                "optimizer_options",
+                f"expected no {key!r}, which the run sets: use {advice}; got {key}={options[key]!r}",
             )
 
 
@@ -199,74 +213,86 @@ class RunConfig:
         for name in ("env", "optimizer"):
             value = getattr(self, name)
             if value is not None and (not isinstance(value, str) or not value):
-                raise TypeError(f"{name}: expected a non-empty str or None, got {value!r}")
-        check_positive_int(self.iterations, "iterations")
-        if self.samples is not None:  # None: the optimiser's recommended batch size, resolved by the runner
-            check_positive_int(self.samples, "samples", minimum=2)
-        check_positive_int(self.seed, "seed", minimum=0)
-        check_positive_int(self.eval_every, "eval_every")
-        check_positive_int(self.eval_contexts, "eval_contexts")
-        check_positive_int(self.retries, "retries", minimum=0)
-        check_positive_int(self.checkpoint_every, "checkpoint_every")
+                raise ConfigTypeError(name, f"expected a non-empty str or None, got {value!r}")
+        for name, minimum in _MINIMA.items():
+            if name != "samples" or self.samples is not None:  # None: the optimiser's recommended batch size
+                with config_field(name):
+                    check_positive_int(getattr(self, name), name, minimum=minimum)
+        self._check_options()
+        self._check_backend()
+        self._check_selector()
+        for name in ("workers", "max_episodes"):
+            with config_field(name):
+                _optional_positive(getattr(self, name), name, integer=True)
+        for name in ("target_regret", "max_time", "divergence"):
+            with config_field(name):
+                object.__setattr__(self, name, _optional_positive(getattr(self, name), name, integer=False))
+        with config_field("initial_mean"):
+            if not (isinstance(self.initial_mean, str) and self.initial_mean == "uniform"):
+                object.__setattr__(
+                    self, "initial_mean", _vector_or_scalar(self.initial_mean, "initial_mean", False)
+                )
+        with config_field("initial_std"):
+            object.__setattr__(self, "initial_std", _vector_or_scalar(self.initial_std, "initial_std", True))
+        if self.max_episodes is not None and self.samples and self.max_episodes < self.samples:
+            raise ConfigError(
+                "max_episodes",
+                f"expected at least one iteration's samples ({self.samples}), got {self.max_episodes}",
+            )
+
+    def _check_options(self) -> None:
         for name in ("env_kwargs", "optimizer_options"):
             if not isinstance(getattr(self, name), Mapping):
-                raise TypeError(f"{name}: expected a dict, got {type(getattr(self, name)).__name__}")
+                raise ConfigTypeError(name, f"expected a dict, got {type(getattr(self, name)).__name__}")
             object.__setattr__(self, name, dict(getattr(self, name)))
         _check_run_owned_options(self.optimizer_options)
         taken = sorted(set(self.env_kwargs) & set(MAKE_ARGUMENTS))
         if taken:
-            raise ValueError(
-                f"env_kwargs: expected keyword arguments of the env, got {taken[0]!r} (an argument of "
-                "gymnasium.make itself, which the runner sets; the vector backends would pass it to the env)"
+            raise ConfigError(
+                "env_kwargs",
+                f"expected keyword arguments of the env, got {taken[0]!r} (an argument of "
+                "gymnasium.make itself, which the runner sets; the vector backends would pass it to the env)",
             )
+
+    def _check_backend(self) -> None:
         if self.backend not in BACKENDS:
-            raise ValueError(f"backend: expected one of {list(BACKENDS)}, got {self.backend!r}")
+            raise ConfigError("backend", f"expected one of {list(BACKENDS)}, got {self.backend!r}")
         if self.context_draws not in CONTEXT_DRAWS:
-            raise ValueError(
-                f"context_draws: expected one of {list(CONTEXT_DRAWS)}, got {self.context_draws!r}"
+            raise ConfigError(
+                "context_draws", f"expected one of {list(CONTEXT_DRAWS)}, got {self.context_draws!r}"
             )
         if self.vector_mode not in VECTOR_MODES:
-            raise ValueError(f"vector_mode: expected one of {list(VECTOR_MODES)}, got {self.vector_mode!r}")
+            raise ConfigError(
+                "vector_mode", f"expected one of {list(VECTOR_MODES)}, got {self.vector_mode!r}"
+            )
         if self.ray_address is not None:
-            check_ray_address(self.ray_address)
+            with config_field("ray_address"):
+                check_ray_address(self.ray_address)
             if self.backend != "ray":
-                raise ValueError(
-                    f"ray_address: expected None unless backend='ray' (backend is {self.backend!r}), "
-                    f"got {self.ray_address!r}"
+                raise ConfigError(
+                    "ray_address",
+                    f"expected None unless backend='ray' (backend is {self.backend!r}), "
+                    f"got {self.ray_address!r}",
                 )
-        self._check_selector()
-        _optional_positive(self.workers, "workers", integer=True)
-        _optional_positive(self.max_episodes, "max_episodes", integer=True)
-        for name in ("target_regret", "max_time", "divergence"):
-            object.__setattr__(self, name, _optional_positive(getattr(self, name), name, integer=False))
-        if not (isinstance(self.initial_mean, str) and self.initial_mean == "uniform"):
-            object.__setattr__(
-                self, "initial_mean", _vector_or_scalar(self.initial_mean, "initial_mean", False)
-            )
-        object.__setattr__(self, "initial_std", _vector_or_scalar(self.initial_std, "initial_std", True))
-        if self.max_episodes is not None and self.samples and self.max_episodes < self.samples:
-            raise ValueError(
-                f"max_episodes: expected at least one iteration's samples ({self.samples}), "
-                f"got {self.max_episodes}"
-            )
 
     def _check_selector(self) -> None:
         if self.context_selector is None:
             if self.context_selector_options:
-                raise ValueError(
-                    "context_selector_options: expected none without a context_selector, got "
-                    f"{self.context_selector_options!r}"
+                raise ConfigError(
+                    "context_selector_options",
+                    f"expected none without a context_selector, got {self.context_selector_options!r}",
                 )
             object.__setattr__(self, "context_selector_options", dict(self.context_selector_options))
             return
         from creps_gym.selectors.registry import check_options
 
-        options = check_options(self.context_selector, self.context_selector_options)
+        options = check_options(self.context_selector, self.context_selector_options)  # its ConfigErrors
         object.__setattr__(self, "context_selector_options", options)
         if self.context_draws != "batch":
-            raise ValueError(
-                f"context_draws: expected 'batch' with a context_selector (it sets every context), "
-                f"got {self.context_draws!r}"
+            raise ConfigError(
+                "context_draws",
+                "expected 'batch' with a context_selector (it sets every context), "
+                f"got {self.context_draws!r}",
             )
 
     def to_dict(self) -> dict[str, Any]:

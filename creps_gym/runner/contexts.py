@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym.envs.base import ContextualEpisodicEnv
+from creps_gym.errors import ConfigError
 from creps_gym.runner.backends import reset_context
 from creps_gym.runner.config import CONTEXT_DRAWS, RunConfig
 from creps_gym.runner.selection import Selection
@@ -88,11 +89,12 @@ class ContextDraws:
         self._sample = None if layer is None else layer.sample_contexts
         if self.selector is not None:
             if layer is None:
-                raise ValueError(
-                    "context_selector: expected an env whose contexts the runner sets (a creps_gym model, "
-                    "possibly under FixedContexts, SampleContexts, TimeLimit, action or reward wrappers) "
-                    f"and context_draws='batch', got {env} with context_draws={mode!r}; where the world "
-                    "picks the context, no selector can choose it"
+                raise ConfigError(
+                    "context_selector",
+                    "expected an env whose contexts the runner sets (a creps_gym model, possibly under "
+                    "FixedContexts, SampleContexts, TimeLimit, action or reward wrappers) and "
+                    f"context_draws='batch', got {env} with context_draws={mode!r}; where the world picks "
+                    "the context, no selector can choose it",
                 )
             space = env.observation_space
             self.low, self.high = space.low.astype(np.float64), space.high.astype(np.float64)

@@ -36,8 +36,9 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._validation import config_field
 from creps_gym.envs.evaluation import finite_mean, test_contexts
-from creps_gym.errors import EpisodeError, RunDirError
+from creps_gym.errors import ConfigError, EpisodeError, RunDirError
 from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
 from creps_gym.runner import build, checks
 from creps_gym.runner.backends import Backend, EnvSource, retry
@@ -105,7 +106,8 @@ class Runner:
             raise TypeError("env: expected an env id in the config or an env object (exactly one)")
         if (config.optimizer is None) == (optimizer is None) and optimizer_class is None:
             raise TypeError("optimizer: expected a registry name or an optimiser object (exactly one)")
-        self.env = env if env is not None else build.make_env(config.env, config.env_kwargs)
+        with config_field("env_kwargs" if config.env_kwargs else None):  # the env's error about one of them
+            self.env = env if env is not None else build.make_env(config.env, config.env_kwargs)
         checks.check_box_spaces(self.env)
         self.env_rng, optimizer_seed, eval_seed = split_seed(config.seed)
         self.n_context_dims = int(np.prod(self.env.observation_space.shape))
@@ -114,15 +116,16 @@ class Runner:
             batch = recommended_samples(config.optimizer or optimizer, self.n_params, self.n_context_dims)
             self.config = config = replace(config, samples=batch)
         check_run_memory(config, self.n_params, self.n_context_dims, covariance=config.optimizer is not None)
-        self.draws = ContextDraws.for_run(self.env, config, context_selector)
+        with config_field("context_selector_options" if config.context_selector_options else None):
+            self.draws = ContextDraws.for_run(self.env, config, context_selector)
         obj = None if config.env else self.env
         self.source = EnvSource(config.env, dict(config.env_kwargs), obj, set_context=self.draws.batched)
         self._model = checks.unwrapped_model(self.env)
         self.test_contexts = self._test_contexts(eval_seed)
         if config.target_regret is not None and not self.has_regret:
-            raise ValueError(
-                f"target_regret: expected None for {self.env_name}, which has no regret, "
-                f"got {config.target_regret}"
+            raise ConfigError(
+                "target_regret",
+                f"expected None for {self.env_name}, which has no regret, got {config.target_regret}",
             )
         self.callbacks = [as_callback(c) for c in callbacks]
         self.policies = RunPolicies(config, self.env)  # the best evaluated mean policy

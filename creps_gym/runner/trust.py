@@ -31,7 +31,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from creps_gym._validation import check_fits_in_memory
+from creps_gym._validation import check_fits_in_memory, config_field
 from creps_gym.errors import RunDirError
 from creps_gym.optimizers.registry import optimizer_names
 from creps_gym.runner.checks import CRITERION
@@ -182,7 +182,8 @@ def check_run_memory(config: RunConfig, n_params: int, n_context_dims: int, *, c
     else:
         name, value = "env", config.env
     what = f"the covariance (p x p, p = {p}), the batch (samples x p) and the evaluation (eval_contexts x p)"
-    check_fits_in_memory(8.0 * (square + batch + evaluation), name, value, what)
+    with config_field(name):
+        check_fits_in_memory(8.0 * (square + batch + evaluation), name, value, what)
 
 
 def config_fingerprint(config: RunConfig, checkpoint_format: str = CHECKPOINT_FORMAT) -> str:

@@ -12,6 +12,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from creps_gym._validation import config_field
+from creps_gym.errors import ConfigError, ConfigTypeError
 from creps_gym.selectors.bandit import LearningProgressBandit
 from creps_gym.selectors.base import BetaSelector, EnvSelector, FixedSelector, UniformSelector
 from creps_gym.selectors.progress import KernelProgressSelector
@@ -68,24 +70,25 @@ def _check_data(value: Any, where: str) -> None:
 def check_options(name: Any, options: Any) -> dict[str, Any]:
     """``options`` as a dict if ``name`` is registered and every option is one of its keywords, as data."""
     if not isinstance(name, str) or name not in SELECTORS:
-        raise ValueError(f"context_selector: expected one of {selector_names()}, got {name!r}")
+        raise ConfigError("context_selector", f"expected one of {selector_names()}, got {name!r}")
     if not isinstance(options, Mapping):
-        raise TypeError(f"context_selector_options: expected a dict, got {type(options).__name__}")
+        raise ConfigTypeError("context_selector_options", f"expected a dict, got {type(options).__name__}")
     parameters = inspect.signature(SELECTORS[name]).parameters
     accepted = [p for p in parameters if p != "self"]
     missing = [p for p in accepted if parameters[p].default is inspect.Parameter.empty and p not in options]
     if missing:
         example = OPTION_EXAMPLES.get((name, missing[0]), f"{missing[0]}=VALUE")
-        raise ValueError(
-            f"context_selector_options: expected the option {missing[0]!r} of {name!r}, got none "
-            f"(e.g. --selector-opt {example})"
+        raise ConfigError(
+            "context_selector_options",
+            f"expected the option {missing[0]!r} of {name!r}, got none (e.g. --selector-opt {example})",
         )
     for key, value in options.items():
         if key not in accepted:
-            raise ValueError(
-                f"context_selector_options: expected options of {name!r} from {accepted}, got {key!r}"
+            raise ConfigError(
+                "context_selector_options", f"expected options of {name!r} from {accepted}, got {key!r}"
             )
-        _check_data(value, f"context_selector_options.{key}")
+        with config_field("context_selector_options"):
+            _check_data(value, f"context_selector_options.{key}")
     return dict(options)
 
 

@@ -42,7 +42,7 @@ from creps_gym.errors import ConfigError, EpisodeError, RunDirError
 from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
 from creps_gym.runner import build, checks
 from creps_gym.runner.backends import Backend, EnvSource, retry
-from creps_gym.runner.build import build_backend, build_optimizer, default_initial_distribution
+from creps_gym.runner.build import build_backend, build_optimizer, default_initial_distribution, split_seed
 from creps_gym.runner.callbacks import as_callback
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
@@ -51,11 +51,10 @@ from creps_gym.runner.history import History, IterationRecord
 from creps_gym.runner.policy_store import RunPolicies, evaluate_contexts, evaluated_policy
 from creps_gym.runner.recovery import REBUILD, chain_crc, checkpoint_history, history_crc
 from creps_gym.runner.rundir import RESTART, RunDir
-from creps_gym.runner.seeds import split_seed
 from creps_gym.runner.session import DeferredInterrupt
 from creps_gym.runner.trust import check_run_memory
 
-__all__ = ["Runner", "default_initial_distribution", "split_seed"]  # re-exported from .build and .seeds
+__all__ = ["Runner", "default_initial_distribution", "split_seed"]  # the last two re-exported from .build
 
 Array = NDArray[np.float64]
 

@@ -30,6 +30,7 @@ from creps_gym.envs.functions import SPECS
 from creps_gym.envs.functions.specs import UNBOUNDED_TARGET
 from creps_gym.optimizers import optimizer_names
 from creps_gym.runner import default_initial_distribution, resume, run
+from creps_gym.runner.seeds import SeedPlan, seed_child
 
 __all__ = [
     "CHECKPOINT_EVERY",
@@ -188,13 +189,13 @@ def initial_distribution(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Initial mean and standard deviations (p,) of a run: for ``"centre"`` the runner's default, the centre
     and a quarter of the width of ``action_space`` (the env's, required then); for ``"uniform5"`` a mean drawn
-    from U[-5, 5]^p (the fourth child of the seed's ``SeedSequence``, the runner's stream for initial means)
-    and σ0 = 1."""
+    from U[-5, 5]^p (the seed's ``SeedSequence`` child ``SeedPlan.INITIAL_MEAN``, the runner's stream for
+    initial means) and σ0 = 1."""
     if spec.initial == "centre":
         if action_space is None:
             raise ValueError("action_space: expected the env's action space for initial 'centre', got None")
         return default_initial_distribution(action_space)
-    stream = np.random.SeedSequence(spec.seed).spawn(4)[3]
+    stream = seed_child(spec.seed, SeedPlan.INITIAL_MEAN)
     return np.random.default_rng(stream).uniform(-5.0, 5.0, spec.dim), np.ones(spec.dim)
 
 

@@ -14,6 +14,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym.errors import ConfigError, ConfigTypeError  # re-exported: their home is creps_gym.errors
+
 __all__ = [
     "MAX_COUNT",
     "ConfigError",
@@ -32,26 +34,6 @@ __all__ = [
     "config_field",
     "load_json",
 ]
-
-
-class ConfigError(ValueError):
-    """A bad value of one field of a run's configuration (a ``RunConfig`` field, e.g. ``samples``).
-
-    ``field`` names the field (the command line names the flag that sets it), ``reason`` says what was
-    expected and what was given; the message is ``"field: reason"`` unless given (a component's own error
-    about the field, e.g. an optimiser's about one of ``optimizer_options``, keeps its message).
-    """
-
-    def __init__(self, field: str, reason: str, message: str | None = None) -> None:
-        super().__init__(f"{field}: {reason}" if message is None else message)
-        self.field, self.reason = field, reason
-
-    def __reduce__(self) -> Any:  # pickled with its field (e.g. across processes)
-        return type(self), (self.field, self.reason, str(self))
-
-
-class ConfigTypeError(ConfigError, TypeError):
-    """A :class:`ConfigError` about a value of the wrong type (also a ``TypeError``)."""
 
 
 @contextmanager

@@ -9,7 +9,8 @@ import pytest
 from helpers import SPHERE
 
 from creps_gym.cli import main
-from creps_gym.runner.config import ConfigError, ConfigTypeError, RunConfig
+from creps_gym.errors import ConfigError, ConfigTypeError
+from creps_gym.runner.config import RunConfig
 
 BASE = {"env": SPHERE, "optimizer": "creps", "iterations": 2, "samples": 10, "seed": 0}
 

@@ -16,8 +16,9 @@ from helpers import SPHERE, make_or_skip
 
 from creps_gym import registered_ids
 from creps_gym.envs.evaluation import evaluate_policy
+from creps_gym.errors import EpisodeError
 from creps_gym.optimizers import CREPSCMA
-from creps_gym.runner import EpisodeError, run
+from creps_gym.runner import run
 
 HUGE = (1e200, -1e200, 1e300, -1e300)
 

@@ -12,8 +12,9 @@ from flaky_envs import OddReward, flaky, register
 from gymnasium.wrappers import TransformReward
 from helpers import SPHERE
 
+from creps_gym.errors import EpisodeError
 from creps_gym.optimizers import CREPSCMA
-from creps_gym.runner import EpisodeError, RunConfig, Runner, run
+from creps_gym.runner import RunConfig, Runner, run
 from creps_gym.runner.backends import episode_return
 
 BACKENDS = {

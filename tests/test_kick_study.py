@@ -17,7 +17,7 @@ pytest.importorskip("cma")
 
 from benchmarks import provenance
 from benchmarks.kick import oracle, report, run, selector_table, study
-from creps_gym.runner.errors import RunDirError
+from creps_gym.errors import RunDirError
 from creps_gym.wrappers import BetaContexts
 
 pytestmark = pytest.mark.extras

@@ -13,10 +13,11 @@ import zipfile
 import numpy as np
 import pytest
 
+from creps_gym.errors import RunDirError
 from creps_gym.optimizers import CREPSCMA, load_state, make_optimizer, optimizer_names, save_state
 from creps_gym.optimizers.policies import PolicyAccess
 from creps_gym.optimizers.registry import optimizer_class, restore_optimizer
-from creps_gym.runner import RunDirError, resume, run
+from creps_gym.runner import resume, run
 
 NATIVE = [name for name in optimizer_names() if ".adapters." not in optimizer_class(name).__module__]
 #: The native optimisers that keep a linear-Gaussian search distribution (its covariance, coefficients, mean

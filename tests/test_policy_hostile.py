@@ -19,9 +19,9 @@ import pytest
 from helpers import EXTRAS, SPHERE, cli_command
 
 from creps_gym.cli import main
+from creps_gym.errors import RunDirError
 from creps_gym.optimizers import Policy
 from creps_gym.runner import RunDir, resume, run
-from creps_gym.runner.errors import RunDirError
 
 LINUX = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="sets process limits")
 REACHER = "creps_gym/PlanarReacher-v1"

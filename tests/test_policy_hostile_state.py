@@ -21,9 +21,9 @@ from helpers import SPHERE, cli_command, crash_at, forge
 
 import creps_gym
 from creps_gym.cli import main
+from creps_gym.errors import RunDirError
 from creps_gym.optimizers import Policy, load_state, restore_optimizer, save_state
 from creps_gym.runner import RunDir, resume, run
-from creps_gym.runner.errors import RunDirError
 from creps_gym.selectors.progress import KernelProgressSelector
 
 

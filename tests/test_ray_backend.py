@@ -15,8 +15,9 @@ import flaky_envs  # noqa: E402
 from helpers import SPHERE  # noqa: E402
 
 from creps_gym.envs.base import ContextualEpisodicEnv  # noqa: E402
+from creps_gym.errors import EpisodeError  # noqa: E402
 from creps_gym.optimizers import CREPSCMA  # noqa: E402
-from creps_gym.runner import EpisodeError, run  # noqa: E402
+from creps_gym.runner import run  # noqa: E402
 
 
 class Target(ContextualEpisodicEnv):

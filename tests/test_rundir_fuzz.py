@@ -21,8 +21,9 @@ hypothesis = pytest.importorskip("hypothesis")
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
+from creps_gym.errors import RunDirError, RunDirWarning  # noqa: E402
 from creps_gym.optimizers.base import load_state, save_state  # noqa: E402
-from creps_gym.runner import History, RunDir, RunDirError, RunDirWarning, load_history, resume, run  # noqa: E402
+from creps_gym.runner import History, RunDir, load_history, resume, run  # noqa: E402
 
 SETTINGS = {"iterations": 4, "samples_per_iteration": 10, "env_kwargs": {"dim": 2}, "eval_every": 2,
             "checkpoint_every": 2}  # fmt: skip

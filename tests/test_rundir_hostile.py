@@ -27,10 +27,11 @@ import pytest
 from helpers import SPHERE, cli_command
 
 from creps_gym.cli import main
+from creps_gym.errors import RunDirError, RunDirWarning
 from creps_gym.optimizers import CREPSCMA
 from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.optimizers.state_files import JSON_KEY
-from creps_gym.runner import History, RunDir, RunDirError, RunDirWarning, load_history, resume, run
+from creps_gym.runner import History, RunDir, load_history, resume, run
 from creps_gym.runner.export import write_iohanalyzer
 from creps_gym.runner.watchdog import child_pids
 

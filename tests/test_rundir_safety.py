@@ -15,7 +15,8 @@ import pytest
 from helpers import SPHERE, cli_command, cli_in_process
 
 from creps_gym.cli import main
-from creps_gym.runner import History, RunDir, RunDirError, RunDirWarning, load_history, resume, run
+from creps_gym.errors import RunDirError, RunDirWarning
+from creps_gym.runner import History, RunDir, load_history, resume, run
 
 NO_STAGNATION = 10**9  # iterations: the optimiser's stagnation stop never fires
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from helpers import SPHERE
 
-from creps_gym.runner import RunConfig, RunDir, RunDirError, Runner, resume, run
+from creps_gym.errors import RunDirError
+from creps_gym.runner import RunConfig, RunDir, Runner, resume, run
 from creps_gym.runner.trust import FINGERPRINT_FIELDS, config_fingerprint
 from creps_gym.selectors import (
     SELECTORS,

@@ -15,6 +15,8 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from creps_gym.errors import UsageError  # re-exported: its home is creps_gym.errors
+
 __all__ = [
     "UsageError",
     "add_import",
@@ -28,10 +30,6 @@ __all__ = [
     "positive_or_none",
     "selector_name",
 ]
-
-
-class UsageError(Exception):
-    """A bad command line (exit code 2); here so that every command module raises the same class."""
 
 
 def import_user_modules(modules: Sequence[str]) -> None:

@@ -6,15 +6,14 @@ bounded and strict: a regular file opened without following a symbolic link, at 
 declare far more than the file holds) and read to at most its declared size, each array's header checked
 (dtype float64, shape matching its bytes) before anything is allocated; the JSON document at most
 :data:`MAX_JSON_BYTES`, nested at most 100 levels deep, without NaN or infinity. Every failure is a
-``ValueError`` naming the file.
+``ValueError`` naming the file. The no-follow bounded read and the atomic write are the package's
+ground floor, :mod:`creps_gym._files`.
 """
 
 from __future__ import annotations
 
 import io
 import json
-import os
-import stat
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -22,8 +21,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._files import Bound, output_target, read_bounded, replace_atomically
 from creps_gym._validation import MAX_JSON_DEPTH
-from creps_gym.optimizers.state_files import replace_atomically
 
 __all__ = ["MAX_JSON_BYTES", "MAX_POLICY_BYTES", "policy_bytes", "read_policy_file", "write_policy_file"]
 
@@ -58,58 +57,33 @@ def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]],
     a failed write is an ``OSError`` naming it. The temporary file is ``.NAME.PID.tmp`` in the target's
     folder, created new (never through a link). Returns the file written.
     """
-    target = Path(os.path.realpath(path))
-    try:
-        mode: int | None = os.stat(target).st_mode
-    except FileNotFoundError:
-        mode = None
-    except OSError as exc:
-        raise OSError(exc.errno, exc.strerror, str(path)) from None
-    if mode is not None and not stat.S_ISREG(mode):
-        via = "" if target == Path(os.path.abspath(path)) else f" (the target of {path})"
-        raise ValueError(f"path: expected a regular file or a new file, got {_kind(mode)} {target}{via}")
+    target = output_target(path)
     data = policy_bytes(document, arrays)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
-        if os.path.lexists(tmp):  # our own temporary, left by a killed process of this id
-            os.unlink(tmp)
-        handle = os.open(tmp, flags, 0o644)
-        return replace_atomically(handle, tmp, target, lambda stream: stream.write(data))
+        return replace_atomically(target, lambda stream: stream.write(data))
     except OSError as exc:
         raise OSError(exc.errno, exc.strerror, str(target)) from None
 
 
-def _kind(mode: int) -> str:
-    if stat.S_ISDIR(mode):
-        return "a directory"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    return "a socket" if stat.S_ISSOCK(mode) else "a special file"
+def _not_regular(path: Path, kind: str) -> ValueError:
+    return ValueError(f"path: expected a regular policy file, got {kind}: {path} (not a regular file)")
+
+
+def _too_large(path: Path, limit: int, size: int | None) -> ValueError:
+    got = "more" if size is None else size
+    return ValueError(f"path: expected a policy file of at most {limit} bytes, got {got}: {path}")
 
 
 def _read_bytes(path: Path) -> bytes:
     """The bytes of a regular file (no symbolic link followed, no FIFO opened for good), bounded."""
-    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
     try:
-        handle = os.open(path, flags)
+        return read_bounded(path, Bound(MAX_POLICY_BYTES, _not_regular, _too_large))
     except FileNotFoundError:
         raise
-    except OSError as exc:  # ELOOP: a symbolic link
-        kind = "a symbolic link" if path.is_symlink() else f"a file that cannot be opened ({exc.strerror})"
-        raise ValueError(f"path: expected a regular policy file, got {kind}: {path}") from None
-    with os.fdopen(handle, "rb") as stream:
-        info = os.fstat(stream.fileno())
-        if not stat.S_ISREG(info.st_mode):
-            raise ValueError(f"path: expected a regular policy file, got {path} (not a regular file)")
-        data = b"" if info.st_size > MAX_POLICY_BYTES else stream.read(MAX_POLICY_BYTES + 1)
-    if info.st_size > MAX_POLICY_BYTES or len(data) > MAX_POLICY_BYTES:
-        size = max(info.st_size, len(data))
-        limit = MAX_POLICY_BYTES
-        raise ValueError(f"path: expected a policy file of at most {limit} bytes, got {size}: {path}")
-    return data
+    except OSError as exc:
+        raise ValueError(
+            f"path: expected a regular policy file, got a file that cannot be read: {path} ({exc.strerror})"
+        ) from None
 
 
 def _array(raw: bytes, name: str) -> NDArray[Any]:

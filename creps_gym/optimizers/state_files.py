@@ -16,17 +16,17 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import zipfile
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
 
+from creps_gym._files import replace_atomically
 from creps_gym._validation import check_fits_in_memory, load_json
 
-__all__ = ["ARRAY_KINDS", "JSON_KEY", "MANIFEST_KEY", "load_state", "replace_atomically", "save_state"]
+__all__ = ["ARRAY_KINDS", "JSON_KEY", "MANIFEST_KEY", "load_state", "save_state"]
 
 JSON_KEY = "__state__.json"
 #: The document's key listing the array entries (files written before it existed have none).
@@ -99,9 +99,10 @@ def _checked_arrays(state: Mapping[str, Any]) -> dict[str, np.ndarray]:
 def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
     """Write a state dict atomically to ``path`` (``.npz``): arrays as entries, the rest as one JSON document.
 
-    The file is written to a temporary name in the same folder and renamed, so a crash never leaves a
-    half-written checkpoint behind. A state that would need pickle raises ``TypeError`` naming the key
-    before anything is written (see the module docstring).
+    The file is written to a new temporary file in the same folder and renamed
+    (:func:`creps_gym._files.replace_atomically`), so a crash never leaves a half-written checkpoint
+    behind. A state that would need pickle raises ``TypeError`` naming the key before anything is written
+    (see the module docstring).
     """
     path = Path(path)
     arrays = _checked_arrays(state)
@@ -113,27 +114,7 @@ def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
     payload = json.dumps(meta, sort_keys=True, allow_nan=False).encode()
     arrays[JSON_KEY] = np.frombuffer(payload, dtype=np.uint8)
     path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    return replace_atomically(handle, tmp, path, lambda stream: np.savez(stream, **arrays))
-
-
-def replace_atomically(
-    handle: int, tmp: str | os.PathLike[str], path: Path, write: Callable[[BinaryIO], Any]
-) -> Path:
-    """``write`` the open temporary file ``handle`` (named ``tmp``), sync it and rename it to ``path``.
-
-    A crash never leaves a half-written ``path``; the temporary is removed whatever happens.
-    """
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            write(stream)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, path)
-    finally:
-        if os.path.lexists(tmp):
-            os.unlink(tmp)
-    return path
+    return replace_atomically(path, lambda stream: np.savez(stream, **arrays))
 
 
 def _entries(stream: BinaryIO, name: Any) -> dict[str, int]:

@@ -14,8 +14,9 @@ Modules: :mod:`.config` (RunConfig), :mod:`.loop` (the Runner), :mod:`.build` (w
 :mod:`.export` (IOHanalyzer CSV), :mod:`.plots` (matplotlib).
 """
 
+from creps_gym.errors import EpisodeError, RunDirError, RunDirWarning
 from creps_gym.runner.api import resume, run
-from creps_gym.runner.backends import EnvSource, EpisodeError, make_backend
+from creps_gym.runner.backends import EnvSource, make_backend
 from creps_gym.runner.callbacks import Callback, ProgressBar
 from creps_gym.runner.config import BACKENDS, CONTEXT_DRAWS, VECTOR_MODES, RunConfig
 from creps_gym.runner.export import write_iohanalyzer
@@ -23,7 +24,6 @@ from creps_gym.runner.history import History, IterationRecord
 from creps_gym.runner.loop import Runner, default_initial_distribution, split_seed
 from creps_gym.runner.plots import load_history, plot_histories, plot_run_dirs
 from creps_gym.runner.rundir import RunDir, package_versions
-from creps_gym.runner.session import RunDirError, RunDirWarning
 
 __all__ = [
     "BACKENDS",

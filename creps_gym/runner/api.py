@@ -6,11 +6,11 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
+from creps_gym.errors import RunDirError
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History
 from creps_gym.runner.loop import Runner
 from creps_gym.runner.rundir import RunDir
-from creps_gym.runner.session import RunDirError
 
 __all__ = ["resume", "resumed_runner", "run"]
 
@@ -50,7 +50,7 @@ def run(
     run_dir : path-like, optional
         A new or empty directory for the config, log, checkpoints and final history (see
         :mod:`creps_gym.runner.rundir`). ``FileExistsError`` if it holds other files, or a run (unless
-        ``overwrite``); :class:`~creps_gym.runner.session.RunDirError` while another process writes it.
+        ``overwrite``); :class:`~creps_gym.errors.RunDirError` while another process writes it.
     overwrite : bool
         Replace a run already in ``run_dir`` (only the run's own files are deleted), like ``--overwrite``.
     callbacks : sequence of Callback or callables ``f(record, history) -> bool | None``
@@ -116,7 +116,7 @@ def resume(
 
     A run directory is untrusted input: its ``config.json`` never makes this import a module (see
     :mod:`creps_gym.runner.trust`; import the module that registers the env first), and a damaged file,
-    a checkpoint of another run or a live writer raise :class:`~creps_gym.runner.session.RunDirError`.
+    a checkpoint of another run or a live writer raise :class:`~creps_gym.errors.RunDirError`.
 
     Parameters
     ----------
@@ -161,7 +161,7 @@ def resumed_runner(
     """The :class:`Runner` that continues ``directory`` (its ``config``, already checked for trust).
 
     Values of ``config.json`` that the env or the optimiser refuse (a ``TypeError`` or ``ValueError`` while
-    building them) raise :class:`~creps_gym.runner.session.RunDirError` when ``config.json`` names both
+    building them) raise :class:`~creps_gym.errors.RunDirError` when ``config.json`` names both
     the env and the optimiser: the run directory is untrusted input, and a config that cannot run is a
     damaged one. With an env or optimiser object of the caller's, the error is raised as it is.
     """

@@ -40,11 +40,11 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym.errors import EpisodeError
 from creps_gym.runner.episodes import (
     Array,
     Backend,
     EnvSource,
-    EpisodeError,
     check_context,
     episode_return,
     reset_context,

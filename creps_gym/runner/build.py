@@ -15,12 +15,14 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import ConfigError, ConfigTypeError, config_field
+from creps_gym._validation import config_field
 from creps_gym.envs.base import box_initial_distribution, initial_distribution
+from creps_gym.errors import ConfigError, ConfigTypeError
 from creps_gym.optimizers.registry import make_optimizer
 from creps_gym.optimizers.registry import optimizer_class as registered_class
 from creps_gym.runner.backends import Backend, EnvSource, make_backend
 from creps_gym.runner.config import RunConfig
+from creps_gym.runner.seeds import SeedPlan, seed_child, split_seed
 
 __all__ = [
     "build_backend",
@@ -28,7 +30,7 @@ __all__ = [
     "default_initial_distribution",
     "make_env",
     "per_parameter",
-    "split_seed",
+    "split_seed",  # re-exported from .seeds
     "uniform_mean",
 ]
 
@@ -79,16 +81,6 @@ def _unknown_keyword(env_id: str, key: str, refused_by: str) -> str:
     return f"expected keywords of {env_id} from {names}, got {key!r}{did_you_mean(key, names)}"
 
 
-def split_seed(seed: int) -> tuple[np.random.Generator, int, int]:
-    """The env stream (a Generator), the optimiser's seed and the test contexts' seed from a master seed."""
-    env_seq, optimizer_seq, eval_seq = np.random.SeedSequence(seed).spawn(3)
-    return (
-        np.random.default_rng(env_seq),
-        int(optimizer_seq.generate_state(1)[0]),
-        int(eval_seq.generate_state(1)[0]),
-    )
-
-
 def default_initial_distribution(action_space: gym.spaces.Box) -> tuple[Array, Array]:
     """Mean and standard deviations (p,) of the box rule, the runner's start for an env that declares none.
 
@@ -105,8 +97,7 @@ def uniform_mean(action_space: gym.spaces.Box, seed: int) -> Array:
     low, high = action_space.low, action_space.high
     if not (np.isfinite(low).all() and np.isfinite(high).all()):
         raise ConfigError("initial_mean", "expected a number for an unbounded action box, got 'uniform'")
-    init_seq = np.random.SeedSequence(seed).spawn(4)[3]  # children 0-2: split_seed
-    return np.random.default_rng(init_seq).uniform(low, high)
+    return np.random.default_rng(seed_child(seed, SeedPlan.INITIAL_MEAN)).uniform(low, high)
 
 
 def per_parameter(given: Any, name: str, default: Array, n_params: int) -> Array:

@@ -10,12 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from creps_gym._validation import (
-    ConfigError,
-    ConfigTypeError,
-    check_positive_int,
-    config_field,
-)
+from creps_gym._validation import check_positive_int, config_field
+from creps_gym.errors import ConfigError, ConfigTypeError  # re-exported: their home is creps_gym.errors
 
 __all__ = [
     "BACKENDS",
@@ -169,7 +165,8 @@ class RunConfig:
         (:func:`~creps_gym.envs.base.initial_distribution`: an env's own start, else the action box's centre
         and a quarter of its width).
         ``initial_mean="uniform"`` draws the mean uniformly in the action box from the master seed (the
-        paper's initialisation), from a fourth ``SeedSequence`` child that no other stream uses.
+        paper's initialisation), from its own ``SeedSequence`` child
+        (:class:`~creps_gym.runner.seeds.SeedPlan`).
     ray_address : str or None
         ``backend="ray"`` only: join the running Ray cluster at ``"HOST:PORT"`` (or ``"auto"``, the
         cluster last started on this machine) and leave it running. None: the ``RAY_ADDRESS`` environment

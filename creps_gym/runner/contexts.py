@@ -17,8 +17,8 @@ contexts, in one of two ways (``RunConfig.context_draws``):
 The stream is the same on every backend, so every backend gives the same history bit for bit.
 
 With a context selector (:mod:`creps_gym.selectors`; ``RunConfig.context_selector`` or an object), the
-contexts come from ``selector.select(selector_rng, n)`` instead, ``selector_rng`` being the run's fifth
-``SeedSequence`` child (:func:`~creps_gym.runner.selection.selector_stream`; no other stream uses it, so
+contexts come from ``selector.select(selector_rng, n)`` instead, ``selector_rng`` being the run's
+``SeedSequence`` child :attr:`~creps_gym.runner.seeds.SeedPlan.SELECTOR` (no other stream uses it, so
 runs without a selector draw what they drew before), and the reset seeds still from the env stream. It
 needs ``"batch"`` draws on an env that accepts ``reset(options={"context": s})`` as above; any other env
 is refused.
@@ -32,8 +32,8 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import ConfigError
 from creps_gym.envs.base import ContextualEpisodicEnv
+from creps_gym.errors import ConfigError
 from creps_gym.runner.backends import reset_context
 from creps_gym.runner.config import CONTEXT_DRAWS, RunConfig
 from creps_gym.runner.selection import Selection

@@ -21,6 +21,8 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym.errors import EpisodeError  # re-exported: its home is creps_gym.errors
+
 __all__ = [
     "Array",
     "Backend",
@@ -34,10 +36,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-
-
-class EpisodeError(RuntimeError):
-    """An episode failed after all retries (the message names it); the run cannot continue."""
 
 
 @dataclass

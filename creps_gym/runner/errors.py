@@ -1,13 +1,7 @@
-"""The run directory's error and warning classes (a module of their own: every runner module uses them)."""
+"""The run directory's error and warning classes, re-exported from :mod:`creps_gym.errors`, their home."""
 
 from __future__ import annotations
 
+from creps_gym.errors import RunDirError, RunDirWarning
+
 __all__ = ["RunDirError", "RunDirWarning"]
-
-
-class RunDirError(ValueError):
-    """A run directory that cannot be used as it is: a damaged, foreign or locked file (CLI exit code 3)."""
-
-
-class RunDirWarning(UserWarning):
-    """Something in a run directory was repaired or recovered (what and how is in the message)."""

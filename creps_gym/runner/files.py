@@ -3,11 +3,13 @@
 **Run-directory files** (:func:`read_run_file`, :func:`open_run_file`, :func:`append_run_file`,
 :func:`write_run_file`). A run directory is untrusted input, so each of its files is either absent or a
 regular file: a symbolic link, a FIFO, a device, a socket or a directory in a file's place raises
-:class:`~creps_gym.runner.errors.RunDirError` naming the file (CLI exit code 3). Files are opened with
+:class:`~creps_gym.errors.RunDirError` naming the file (CLI exit code 3). Files are opened with
 ``O_NOFOLLOW`` and ``O_NONBLOCK`` and checked again on the open descriptor, so a link planted in a run
 directory never makes the runner read or write anything outside it, and a FIFO never blocks it. Reads are
 bounded: a file larger than its limit (:data:`LIMITS`, :data:`DEFAULT_LIMIT`) is refused before it is
-read. Writes are atomic (a new temporary file in the same folder, then a rename) or appends. An
+read. Writes are atomic (a new temporary file in the same folder, then a rename) or appends. The safe
+opening, the bounded read and the atomic write are the package's ground floor, :mod:`creps_gym._files`;
+this module words their refusals for a run directory. An
 operating-system error (disk full, read-only file system, file size limit, name too long) is a
 :class:`RunDirError` naming the file and the cause.
 
@@ -30,9 +32,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, BinaryIO
 
+from creps_gym import _files
+from creps_gym._files import file_kind, output_target
 from creps_gym._validation import MAX_JSON_DEPTH as MAX_DEPTH
 from creps_gym._validation import load_json
-from creps_gym.runner.errors import RunDirError
+from creps_gym.errors import RunDirError
 
 __all__ = [
     "DEFAULT_LIMIT",
@@ -57,22 +61,6 @@ MiB = 1 << 20
 #: Generous for real runs: a log line is about 0.5 kB, so 1 GiB holds about two million iterations.
 LIMITS = {"config.json": 16 * MiB, "versions.json": 16 * MiB, "run.lock": 4096}
 DEFAULT_LIMIT = 1024 * MiB
-
-_KINDS = (
-    (stat.S_ISLNK, "a symbolic link"),
-    (stat.S_ISDIR, "a directory"),
-    (stat.S_ISFIFO, "a FIFO"),
-    (stat.S_ISCHR, "a character device"),
-    (stat.S_ISBLK, "a block device"),
-    (stat.S_ISSOCK, "a socket"),
-)
-
-
-def file_kind(mode: int) -> str:
-    """What an ``st_mode`` is, in words ("a regular file", "a symbolic link", "a FIFO", ...)."""
-    if stat.S_ISREG(mode):
-        return "a regular file"
-    return next((text for test, text in _KINDS if test(mode)), "a special file")
 
 
 def _refuse(path: Path, kind: str) -> RunDirError:
@@ -117,54 +105,50 @@ def open_run_file(path: str | os.PathLike[str], flags: int = os.O_RDONLY, mode: 
     """
     path = Path(path)
     check_regular(path)
-    nofollow = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
-        fd = os.open(path, flags | nofollow, mode)
+        return _files.open_regular(path, flags, mode, refuse=_refuse)  # a link or FIFO planted since
     except FileNotFoundError:
         raise
     except OSError as exc:
-        if exc.errno in (errno.ELOOP, errno.ENXIO, errno.EISDIR):  # a link, FIFO or folder planted since
-            raise _refuse(path, "a symbolic link or special file") from None
         raise os_failure(path, exc, "open it") from None
-    found = os.fstat(fd).st_mode
-    if not stat.S_ISREG(found):
-        os.close(fd)
-        raise _refuse(path, file_kind(found))
-    return fd
 
 
-def _limit(path: Path, limit: int | None) -> int:
-    return LIMITS.get(path.name, DEFAULT_LIMIT) if limit is None else limit
+def _too_large(path: Path, most: int, size: int | None) -> RunDirError:
+    if size is None:  # grown while it was read
+        return RunDirError(f"{path}: expected at most {most} bytes, got more")
+    return RunDirError(
+        f"{path}: expected at most {most} bytes, got {size} (not written by a creps_gym run); remove "
+        "it, or restore the run directory from a backup"
+    )
+
+
+def _bound(path: Path, limit: int | None) -> _files.Bound:
+    """A run directory file's read bound: ``limit``, else its own (:data:`LIMITS`), refused as damage."""
+    return _files.Bound(LIMITS.get(path.name, DEFAULT_LIMIT) if limit is None else limit, _refuse, _too_large)
 
 
 def open_binary(path: str | os.PathLike[str], limit: int | None = None) -> BinaryIO:
     """A run directory's regular file opened for reading, its size checked against its limit."""
     path = Path(path)
-    fd = open_run_file(path)
-    size, most = os.fstat(fd).st_size, _limit(path, limit)
-    if size > most:
-        os.close(fd)
-        raise RunDirError(
-            f"{path}: expected at most {most} bytes, got {size} (not written by a creps_gym run); remove "
-            "it, or restore the run directory from a backup"
-        )
-    return os.fdopen(fd, "rb")
+    check_regular(path)
+    try:
+        return _files.open_bounded(path, _bound(path, limit))
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise os_failure(path, exc, "open it") from None
 
 
 def read_run_file(path: str | os.PathLike[str], limit: int | None = None) -> bytes:
     """The content of a run directory's regular file, at most its limit (:data:`LIMITS`) in bytes."""
-    path, most = Path(path), _limit(Path(path), limit)
-    chunks, total = [], 0
-    with open_binary(path, limit) as stream:  # read in chunks: a live run's log may grow meanwhile
-        try:
-            while total <= most and (chunk := stream.read(min(most + 1 - total, 16 * MiB))):
-                chunks.append(chunk)
-                total += len(chunk)
-        except OSError as exc:
-            raise os_failure(path, exc, "read it") from None
-    if total > most:
-        raise RunDirError(f"{path}: expected at most {most} bytes, got more")
-    return b"".join(chunks)
+    path = Path(path)
+    check_regular(path)
+    try:  # read in chunks: a live run's log may grow meanwhile
+        return _files.read_bounded(path, _bound(path, limit))
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise os_failure(path, exc, "read it") from None
 
 
 def _write_all(fd: int, data: bytes) -> None:
@@ -190,23 +174,10 @@ def append_run_file(path: str | os.PathLike[str], data: bytes) -> None:
 
 def _atomic_write(path: Path, data: bytes, failure: Callable[[Path, OSError], Exception]) -> Path:
     """Write ``data`` to ``path`` through a new temporary file in its folder and a rename."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
-        if os.path.lexists(tmp):  # our own temporary, left by a killed process of this id
-            os.unlink(tmp)
-        fd = os.open(tmp, flags, 0o644)
-        try:
-            _write_all(fd, data)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, path)
+        return _files.write_atomically(path, data)
     except OSError as exc:
-        if os.path.lexists(tmp):
-            os.unlink(tmp)
         raise failure(path, exc) from None
-    return path
 
 
 def atomic_write(path: str | os.PathLike[str], data: bytes) -> Path:
@@ -223,29 +194,6 @@ def write_run_file(path: str | os.PathLike[str], data: bytes) -> Path:
     path = Path(path)
     check_regular(path)
     return _atomic_write(path, data, lambda p, exc: os_failure(p, exc, "write it"))
-
-
-def output_target(
-    path: str | os.PathLike[str], *, name: str = "path", protected: Callable[[Path], bool] | None = None
-) -> Path:
-    """The file :func:`write_output` would replace (a link's target); ``ValueError`` if it must not."""
-    target = Path(os.path.realpath(path))
-    try:
-        mode = os.stat(target).st_mode
-    except FileNotFoundError:
-        mode = None
-    except OSError as exc:
-        raise ValueError(f"{name}: cannot write {path} ({exc.strerror})") from None
-    via = "" if target == Path(os.path.abspath(path)) else f" (the target of {path})"
-    if mode is not None and not stat.S_ISREG(mode):
-        kind = file_kind(mode)
-        raise ValueError(f"{name}: expected a regular file or a new file, got {kind} {target}{via}")
-    if protected is not None and protected(target):
-        raise ValueError(
-            f"{name}: expected a file outside a run directory's own files, got {target}{via}; choose "
-            "another name"
-        )
-    return target
 
 
 def write_output(

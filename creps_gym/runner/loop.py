@@ -10,13 +10,13 @@ that may change what the agent sees, sends or gets (e.g. ``TransformReward``, ``
 :func:`creps_gym.runner.checks.unwrapped_model`), the evaluation runs test episodes of the env itself
 with seeded resets, so it sees what training sees.
 **Failures.** Resets that read contexts and the evaluation are retried like episodes (``config.retries``
-times, then :class:`~creps_gym.runner.backends.EpisodeError`); episodes follow the backends' policy.
-**Seeds.** :func:`~creps_gym.runner.build.split_seed` splits the master seed into the env stream (episode
-seeds and contexts), the optimiser's seed and the test contexts' seed (a context selector has its own, see
-:mod:`creps_gym.runner.selection`). The same seed gives a bit-identical History (wall times aside) on
-every backend and after any resume. **Checkpoints** hold the optimiser's and the loop's state (env stream,
-counts, wall time, stop reason, a checksum of the records, the best evaluated policy:
-:mod:`~creps_gym.runner.policy_store`): O(1). A resume rebuilds the history from the log.
+times, then :class:`~creps_gym.errors.EpisodeError`); episodes follow the backends' policy.
+**Seeds.** :func:`~creps_gym.runner.seeds.split_seed` splits the master seed into the env stream (episode
+seeds and contexts), the optimiser's seed and the test contexts' seed (a context selector has its own;
+:class:`~creps_gym.runner.seeds.SeedPlan` names every stream's child). The same seed gives a bit-identical
+History (wall times aside) on every backend and after any resume. **Checkpoints** hold the optimiser's and
+the loop's state (env stream, counts, wall time, stop reason, a checksum of the records, the best evaluated
+policy: :mod:`~creps_gym.runner.policy_store`): O(1). A resume rebuilds the history from the log.
 **Stop reasons** (``History.stop_reason``): ``"iterations"``, ``"max_episodes"`` (the next iteration would
 exceed the budget), ``"target_regret"``, ``"max_time"``, ``"divergence"`` (see
 :mod:`~creps_gym.runner.divergence`), ``"optimizer: <criteria>"`` (its own ``stop()``), ``"callback"``.
@@ -36,11 +36,12 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import ConfigError, config_field
+from creps_gym._validation import config_field
 from creps_gym.envs.evaluation import finite_mean, test_contexts
+from creps_gym.errors import ConfigError, EpisodeError, RunDirError
 from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
 from creps_gym.runner import build, checks
-from creps_gym.runner.backends import Backend, EnvSource, EpisodeError, retry
+from creps_gym.runner.backends import Backend, EnvSource, retry
 from creps_gym.runner.build import build_backend, build_optimizer, default_initial_distribution, split_seed
 from creps_gym.runner.callbacks import as_callback
 from creps_gym.runner.config import RunConfig
@@ -49,7 +50,7 @@ from creps_gym.runner.divergence import DivergenceWatch, evaluation_loss
 from creps_gym.runner.history import History, IterationRecord
 from creps_gym.runner.policy_store import RunPolicies, evaluate_contexts, evaluated_policy
 from creps_gym.runner.recovery import REBUILD, chain_crc, checkpoint_history, history_crc
-from creps_gym.runner.rundir import RESTART, RunDir, RunDirError
+from creps_gym.runner.rundir import RESTART, RunDir
 from creps_gym.runner.session import DeferredInterrupt
 from creps_gym.runner.trust import check_run_memory
 

@@ -5,8 +5,8 @@
 target that is not a regular file (a FIFO, a device, a folder) and a run directory's own file
 (``checkpoint.npz``, ``log.jsonl``, ... of any run folder) are refused with a ``ValueError`` naming the
 option (CLI exit code 2). :func:`write_output_with` writes a file that a library writes by name (a video)
-through a new temporary file beside the target and a rename, and never reports a file that was not
-written: an error names the file.
+through a new temporary file beside the target and a rename (:func:`creps_gym._files.replace_atomically`),
+and never reports a file that was not written: an error names the file.
 """
 
 from __future__ import annotations
@@ -15,8 +15,9 @@ import errno
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
+from creps_gym._files import replace_atomically, temporary_beside
 from creps_gym.runner.files import output_target
 from creps_gym.runner.rundir import RunDir
 
@@ -70,23 +71,18 @@ def write_output_with(
         ``OSError`` or ``RuntimeError``, or left the temporary empty. Nothing is left behind.
     """
     target = check_output_path(path, flag, suffixes)
-    tmp = target.with_name(f".{target.stem}.{os.getpid()}.tmp{target.suffix}")
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
-    try:
-        if os.path.lexists(tmp):  # our own temporary, left by a killed process of this id
-            os.unlink(tmp)
-        os.close(os.open(tmp, flags, 0o644))
+    tmp = temporary_beside(target, keep_suffix=True)
+
+    def write_by_name(_: BinaryIO) -> None:
         write(tmp)
         if os.lstat(tmp).st_size == 0:
             raise OSError(errno.EIO, "nothing was written")
-        os.replace(tmp, target)
+
+    try:
+        return replace_atomically(target, write_by_name, temporary=tmp)
     except (OSError, RuntimeError) as exc:
         cause = (exc.strerror if isinstance(exc, OSError) else None) or str(exc) or type(exc).__name__
         code = errno.errorcode.get(exc.errno or 0, "") if isinstance(exc, OSError) else ""
         raise OSError(
             getattr(exc, "errno", None) or errno.EIO, f"{cause}{', ' + code if code else ''}", str(target)
         ) from None
-    finally:
-        if os.path.lexists(tmp):
-            os.unlink(tmp)
-    return target

@@ -33,13 +33,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import evaluate_policy, finite_mean, test_contexts
+from creps_gym.errors import RunDirError
 from creps_gym.optimizers.policy_file import Policy
 from creps_gym.optimizers.policy_io import policy_bytes
 from creps_gym.runner.backends import run_episodes
 from creps_gym.runner.checks import real_params, unwrapped_model
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
-from creps_gym.runner.errors import RunDirError
 from creps_gym.runner.files import os_failure, write_run_file
 from creps_gym.runner.history import History, encode_float
 from creps_gym.runner.rundir import RunDir

@@ -24,7 +24,7 @@ instead. The history does not depend on the chunks (each episode replays its own
 
 **Losing a node.** A task whose worker process or node dies is re-submitted by Ray (``retries`` times)
 on the nodes still alive, so no sample is lost and the history stays bit-identical; a run whose head
-node dies stops with an :class:`~creps_gym.runner.backends.EpisodeError`.
+node dies stops with an :class:`~creps_gym.errors.EpisodeError`.
 
 **A hard kill of the run.** ``ray.init`` starts its services (GCS server, raylet, log monitor, and the
 raylet's dashboard and runtime-env agents and workers) as processes of their own. After a ``kill -9`` of
@@ -50,9 +50,10 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym.errors import EpisodeError
 from creps_gym.optimizers.adapters.base import import_optional
 from creps_gym.runner.config import check_ray_address
-from creps_gym.runner.episodes import Array, Backend, EnvSource, EpisodeError, run_episodes
+from creps_gym.runner.episodes import Array, Backend, EnvSource, run_episodes
 from creps_gym.runner.watchdog import Watchdog, child_pids
 
 __all__ = [

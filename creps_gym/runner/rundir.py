@@ -43,6 +43,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
+from creps_gym.errors import RunDirError, RunDirWarning
 from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.runner import files
 from creps_gym.runner.config import RunConfig
@@ -51,7 +52,7 @@ from creps_gym.runner.ioh import iohanalyzer_text
 from creps_gym.runner.recovery import RESTART, read_history
 from creps_gym.runner.runlog import entry_crc as _crc
 from creps_gym.runner.runlog import log_line, parse_log, record_chain
-from creps_gym.runner.session import RunDirError, RunDirWarning, RunLock
+from creps_gym.runner.session import RunLock
 from creps_gym.runner.trust import (
     CHECKPOINT_FORMAT,
     LEGACY_FORMATS,
@@ -92,8 +93,9 @@ class RunDir:
     LOCK = "run.lock"
     BEST_POLICY, POLICY = "best_policy.npz", "policy.npz"
     FILES = (CONFIG, VERSIONS, LOG, CHECKPOINT, HISTORY_JSON, HISTORY_CSV, IOH, PLOT, BEST_POLICY, POLICY)
-    #: The run's own temporary files: ``atomic_write_text``'s ``.NAME.PID.tmp`` and ``save_state``'s
-    #: ``checkpoint.npzXXXXXXXX.tmp``. Other ``*.tmp`` files are the user's and are never touched.
+    #: The run's own temporary files: ``.NAME.PID.tmp`` (:func:`creps_gym._files.replace_atomically`) and
+    #: ``checkpoint.npzXXXXXXXX.tmp`` (``save_state``'s before it used it). Other ``*.tmp`` files are the
+    #: user's and are never touched.
     TEMPORARY = re.compile(
         r"^(\.(" + "|".join(map(re.escape, FILES)) + r")\.\d+|" + re.escape(CHECKPOINT) + r"\w+)\.tmp$"
     )

@@ -17,6 +17,7 @@ import numpy as np
 
 from creps_gym._validation import check_generator_state
 from creps_gym.runner.config import RunConfig
+from creps_gym.runner.seeds import SeedPlan, seed_child
 from creps_gym.selectors.base import ContextSelector
 from creps_gym.selectors.registry import make_selector
 
@@ -27,9 +28,9 @@ STATE_KEYS = ("selector_rng", "selector")
 
 
 def selector_stream(seed: int) -> np.random.Generator:
-    """The selector's Generator: child 4 of the master seed's ``SeedSequence`` (0-2: split_seed, 3: the
-    uniform initial mean), a stream no other draw uses."""
-    return np.random.default_rng(np.random.SeedSequence(seed).spawn(5)[4])
+    """The selector's Generator: the master seed's child :attr:`~creps_gym.runner.seeds.SeedPlan.SELECTOR`,
+    a stream no other draw uses."""
+    return np.random.default_rng(seed_child(seed, SeedPlan.SELECTOR))
 
 
 class Selection:

@@ -9,7 +9,7 @@ the configuration read back from ``config.json`` may only name
   imported;
 * a registered optimiser name (the registry never imports a ``"module:Class"`` read from a file).
 
-Anything else raises :class:`~creps_gym.runner.session.RunDirError`. The user imports the module
+Anything else raises :class:`~creps_gym.errors.RunDirError`. The user imports the module
 (``creps-gym resume --import MODULE``, the same for every command, or ``import MODULE`` before
 :func:`creps_gym.runner.resume`).
 
@@ -32,10 +32,10 @@ from typing import Any
 import gymnasium as gym
 
 from creps_gym._validation import check_fits_in_memory, config_field
+from creps_gym.errors import RunDirError
 from creps_gym.optimizers.registry import optimizer_names
 from creps_gym.runner.checks import CRITERION
 from creps_gym.runner.config import RunConfig
-from creps_gym.runner.session import RunDirError
 from creps_gym.selectors.registry import selector_names
 
 __all__ = [

@@ -12,7 +12,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from creps_gym._validation import ConfigError, ConfigTypeError, config_field
+from creps_gym._validation import config_field
+from creps_gym.errors import ConfigError, ConfigTypeError
 from creps_gym.selectors.bandit import LearningProgressBandit
 from creps_gym.selectors.base import BetaSelector, EnvSelector, FixedSelector, UniformSelector
 from creps_gym.selectors.progress import KernelProgressSelector

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import SPHERE, cli_command, crash_at, forge
+from helpers import EXTRAS, SPHERE, cli_command, crash_at, forge
 
 import creps_gym
 from creps_gym.cli import main
@@ -375,6 +375,7 @@ def test_a_meta_that_is_not_an_object_is_damage_not_a_crash(tmp_path, capsys, na
         assert code == 0 and "meta: expected a JSON object, got list" in err
 
 
+@EXTRAS  # `plot` needs matplotlib
 def test_a_plot_title_with_bad_mathtext_is_a_usage_error(tmp_path, capsys, unfinished):
     args = ["plot", str(unfinished), "-o", str(tmp_path / "p.png"), "--title", r"$\frac{$"]
     assert main(args) == 2

@@ -1,0 +1,13 @@
+"""The low-budget studies (issue 44): ``compare.py`` (regret after a fixed episode budget) and
+``gp_backends.py`` (the GP's cost against scikit-learn's)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--out`` (the results' JSON) and ``--render-only`` (redraw the table from it), as both take."""
+    parser.add_argument("--out", type=Path, required=True, help="the results' JSON (read with --render-only)")
+    parser.add_argument("--render-only", action="store_true", help="only write the table next to --out")

@@ -29,6 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 import creps_gym  # noqa: F401  (registers the ids)
+from benchmarks.low_budget import add_output_arguments
 from benchmarks.provenance import provenance
 from creps_gym.envs.evaluation import test_contexts
 from creps_gym.optimizers import make_optimizer, recommended_samples
@@ -113,8 +114,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--z", type=int, default=1)
     parser.add_argument("--budget", type=int, default=200)
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--out", type=Path, required=True, help="the results' JSON (read with --render-only)")
-    parser.add_argument("--render-only", action="store_true", help="only write the table next to --out")
+    add_output_arguments(parser)
     args = parser.parse_args(argv)
     if args.render_only:
         render(args.out)

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.low_budget import add_output_arguments
 from benchmarks.provenance import provenance
 from creps_gym.optimizers import make_optimizer
 from creps_gym.optimizers.gp_model import default_start, fit_gp, fit_hyperparameters
@@ -96,8 +97,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", nargs="+", type=int, default=[200, 500])
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", type=Path, required=True, help="the results' JSON (read with --render-only)")
-    parser.add_argument("--render-only", action="store_true", help="only write the table next to --out")
+    add_output_arguments(parser)
     args = parser.parse_args(argv)
     if args.render_only:
         render(args.out)

@@ -148,3 +148,12 @@ def test_the_committed_results_are_rendered_from_the_committed_runs(tmp_path, mo
         document = load_document(STUDY / "runs" / ("quick" if mode == "quick" else "") / f"{spec.key}.json")
         assert document is not None, spec.key  # every run of the mode is committed
         assert {"numpy", "scipy", "python", "cpu"} <= set(document["environment"])
+
+
+def test_the_floor_table_of_the_docs_is_rendered_from_the_committed_floor_runs():
+    """docs/algorithms.md's floor table (issue 45): each option's row is the mean protocol measure of its
+    ``results/floor`` file, as ``floor_probe.floor_table`` renders it."""
+    from benchmarks.contextual_bbo.floor_probe import floor_table
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "algorithms.md").read_text(encoding="utf-8")
+    assert floor_table() in doc

@@ -38,7 +38,16 @@ from benchmarks.contextual_bbo.protocol import ProtocolSpec, run_protocol
 from benchmarks.provenance import provenance
 from creps_gym.optimizers import make_optimizer
 
-__all__ = ["advantage_rows", "cell_rows", "main"]
+__all__ = ["FLOOR_TABLE", "advantage_rows", "cell_rows", "floor_table", "main"]
+
+#: The rows of docs/algorithms.md's floor table: its label and the ``results/floor`` file it is read from.
+FLOOR_TABLE = (
+    ("defaults (C3, ridge 1e−8)", "c3.json"),
+    ("`baseline_ridge=1e-16`", "c3-baseline-ridge1e-16.json"),
+    ("`ridge=1e-14`", "c3-ridge1e-14.json"),
+    ("`ridge_centre=\"old\"` (C3r)", "c3r.json"),
+)
+FLOOR_FOLDER = Path(__file__).resolve().parent / "results" / "floor"
 
 
 def cell_rows(functions: Sequence[str], method: str, seeds: int, options: dict[str, Any]) -> list[dict]:
@@ -116,6 +125,22 @@ def _advantage_row(optimizer, draw, contexts, returns, generation, draws, rng) -
         "tau_advantages_theta": float(kendalltau(advantages, theta_part).statistic),
         "baseline_r2": explained,
     }
+
+
+def _cell(values: list[float]) -> str:
+    """A mean as the docs print it: two significant digits, typographic minus signs (blank: no runs)."""
+    return f"{np.mean(values):.1e}".replace("-", "−").replace("e−0", "e−").replace("e+0", "e") if values else ""
+
+
+def floor_table(folder: Path = FLOOR_FOLDER) -> str:
+    """The body rows of docs/algorithms.md's floor table (mean protocol measure over each file's runs, per
+    function in the study's order), rendered from the committed ``results/floor`` files."""
+    lines = []
+    for label, name in FLOOR_TABLE:
+        rows = json.loads((folder / name).read_text(encoding="utf-8"))["rows"]
+        cells = [_cell([r["protocol_last"] for r in rows if r["function"] == f]) for f in PROBLEMS]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

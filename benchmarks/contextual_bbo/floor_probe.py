@@ -45,7 +45,7 @@ FLOOR_TABLE = (
     ("defaults (C3, ridge 1e−8)", "c3.json"),
     ("`baseline_ridge=1e-16`", "c3-baseline-ridge1e-16.json"),
     ("`ridge=1e-14`", "c3-ridge1e-14.json"),
-    ("`ridge_centre=\"old\"` (C3r)", "c3r.json"),
+    ('`ridge_centre="old"` (C3r)', "c3r.json"),
 )
 FLOOR_FOLDER = Path(__file__).resolve().parent / "results" / "floor"
 
@@ -129,7 +129,9 @@ def _advantage_row(optimizer, draw, contexts, returns, generation, draws, rng) -
 
 def _cell(values: list[float]) -> str:
     """A mean as the docs print it: two significant digits, typographic minus signs (blank: no runs)."""
-    return f"{np.mean(values):.1e}".replace("-", "−").replace("e−0", "e−").replace("e+0", "e") if values else ""
+    if not values:
+        return ""
+    return f"{np.mean(values):.1e}".replace("-", "−").replace("e−0", "e−").replace("e+0", "e")
 
 
 def floor_table(folder: Path = FLOOR_FOLDER) -> str:

@@ -65,7 +65,7 @@ __all__ = ["Policy", "__version__", "load_policy", "registered_ids"]
 _LAZY = {
     "registered_ids": "creps_gym.envs.registration",
     "Policy": "creps_gym.optimizers.policy_file",  # the learned policy, loadable anywhere
-    "load_policy": "creps_gym.runner.policy_store",
+    "load_policy": "creps_gym.runner.rundir.policies",
 }
 _SUBPACKAGES = ("envs", "movement", "optimizers", "runner", "selectors", "wrappers")
 

@@ -1,7 +1,7 @@
 """Safe file IO, the ground floor under every file the package reads or writes (standard library only).
 
-Two operations, written once and used by the runner's run directories (:mod:`creps_gym.runner.files`,
-:mod:`creps_gym.runner.outputs`) and the optimisers' files (:mod:`creps_gym.optimizers.policy_io`,
+Two operations, written once and used by the runner's run directories (:mod:`creps_gym.runner.rundir.files`,
+:mod:`creps_gym.runner.results.outputs`) and the optimisers' files (:mod:`creps_gym.optimizers.policy_io`,
 :mod:`creps_gym.optimizers.state_files`):
 
 * **A bounded read that follows no link** (:func:`open_regular`, :func:`open_bounded`,

@@ -14,12 +14,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym.errors import ConfigError, ConfigTypeError  # re-exported: their home is creps_gym.errors
+from creps_gym.errors import ConfigError, ConfigTypeError
 
 __all__ = [
     "MAX_COUNT",
-    "ConfigError",
-    "ConfigTypeError",
     "as_float_array",
     "check_bool",
     "check_count",

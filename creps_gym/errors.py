@@ -11,10 +11,7 @@ these classes mark what a caller may want to catch on its own:
   named by ``.field`` (the command line maps it to its flag; CLI exit code 2).
 * :class:`UsageError`: a bad command line (CLI exit code 2).
 
-The modules that defined them before re-export them (``creps_gym.runner``, ``creps_gym.runner.errors``,
-``creps_gym.runner.session``, ``creps_gym.runner.rundir``, ``creps_gym.runner.episodes``,
-``creps_gym.runner.backends``, ``creps_gym._validation`` and ``creps_gym.cli.types``): the same classes, so
-``except`` clauses written against any of them match.
+This is their only address: no other module re-exports them (``tests/test_errors.py`` checks).
 """
 
 from __future__ import annotations

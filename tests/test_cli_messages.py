@@ -299,7 +299,7 @@ def test_ctrl_c_while_the_results_are_written_lets_the_run_finish(tmp_path, caps
 
 @EXTRAS  # the plot needs matplotlib
 def test_ctrl_c_while_the_plot_is_drawn_exits_0_with_the_plot(tmp_path, capsys, monkeypatch):
-    from creps_gym.runner import plots
+    from creps_gym.runner.results import plots
 
     monkeypatch.setattr(plots, "plot_run_dirs", _interrupt_first(plots.plot_run_dirs))
     args = [a for a in run_args(tmp_path / "r") if a != "--no-plot"]

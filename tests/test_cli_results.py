@@ -13,8 +13,8 @@ from helpers import EXTRAS, SPHERE, cli_in_process
 from creps_gym.cli import main
 from creps_gym.listing import available_env_rows, box_text
 from creps_gym.runner import run
-from creps_gym.runner.groups import group_runs, load_runs
-from creps_gym.runner.plots import plot_run_dirs
+from creps_gym.runner.results.groups import group_runs, load_runs
+from creps_gym.runner.results.plots import plot_run_dirs
 
 SMALL = {"eval_every": 1, "eval_contexts": 4, "env_kwargs": {"dim": 3}}
 

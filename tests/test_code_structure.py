@@ -115,10 +115,10 @@ def test_the_runner_has_no_import_cycle() -> None:
     ``rundir`` imports ``recovery``, which needs ``RunDir`` for annotations only."""
     graph = import_graph()
     assert graph["creps_gym.runner.backends"] >= {
-        "creps_gym.runner.vector_backend",
-        "creps_gym.runner.ray_backend",
+        "creps_gym.runner.backends.vector",
+        "creps_gym.runner.backends.ray",
     }
-    assert "creps_gym.runner.recovery" in graph["creps_gym.runner.rundir"]
+    assert "creps_gym.runner.rundir.recovery" in graph["creps_gym.runner.rundir"]
     assert find_cycle(graph, "creps_gym.runner") is None
 
 

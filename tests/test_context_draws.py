@@ -11,8 +11,8 @@ from creps_gym.envs.functions.env import ContextualFunctionEnv as FunctionEnv
 from creps_gym.optimizers import CREPSCMA
 from creps_gym.runner import RunConfig, RunDir, Runner, run
 from creps_gym.runner.backends import SerialBackend
+from creps_gym.runner.backends.vector import VectorBackend
 from creps_gym.runner.contexts import ContextDraws
-from creps_gym.runner.vector_backend import VectorBackend
 from creps_gym.wrappers import FixedContexts, HideContext, NormalizeParams, SampleContexts, UniformContexts
 
 SMALL = {"env_kwargs": {"dim": 3}}

@@ -207,7 +207,7 @@ def test_a_run_stopped_by_divergence_reads_back_and_its_factor_is_part_of_the_ru
     """The checkpoint's stop reason ``divergence`` is one the loop can write (it reloads), and a factor
     other than the default is fingerprinted (a run folder edited to another factor is another run)."""
     from creps_gym.runner import resume
-    from creps_gym.runner.trust import config_fingerprint
+    from creps_gym.runner.rundir.checkpoint import config_fingerprint
 
     options = {"env_kwargs": DIVERGING["env_kwargs"], "checkpoint_every": 1}
     options["optimizer_options"] = {"restarts": 0}
@@ -217,7 +217,7 @@ def test_a_run_stopped_by_divergence_reads_back_and_its_factor_is_part_of_the_ru
     assert resume(tmp_path / "run").equals(finished)
     import hashlib
 
-    from creps_gym.runner.trust import CHECKPOINT_FORMAT, FINGERPRINT_FIELDS
+    from creps_gym.runner.rundir.checkpoint import CHECKPOINT_FORMAT, FINGERPRINT_FIELDS
 
     settings = {"env": "creps_gym/Sphere-v0", "optimizer": "creps", "seed": 0, "samples": 10, "iterations": 3}
     default, changed = RunConfig(**settings), RunConfig(**settings, divergence=10.0)

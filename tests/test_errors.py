@@ -1,36 +1,59 @@
-"""The project's exceptions have one home, :mod:`creps_gym.errors`; the old addresses re-export them."""
+"""The project's exceptions have one address, :mod:`creps_gym.errors`: no other module re-exports them."""
 
 from __future__ import annotations
 
 import ast
-import importlib
 from pathlib import Path
-
-import pytest
 
 from creps_gym import errors
 
 PACKAGE = Path(errors.__file__).resolve().parent
-#: Re-exports kept so that code importing from the old addresses keeps working (the same class objects).
-OLD_ADDRESSES = {
-    "creps_gym.runner": ("EpisodeError", "RunDirError", "RunDirWarning"),
-    "creps_gym.runner.errors": ("RunDirError", "RunDirWarning"),
-    "creps_gym.runner.session": ("RunDirError", "RunDirWarning"),
-    "creps_gym.runner.rundir": ("RunDirError", "RunDirWarning"),
-    "creps_gym.runner.episodes": ("EpisodeError",),
-    "creps_gym.runner.backends": ("EpisodeError",),
-    "creps_gym.runner.config": ("ConfigError", "ConfigTypeError"),
-    "creps_gym._validation": ("ConfigError", "ConfigTypeError"),
-    "creps_gym.cli.types": ("UsageError",),
-}
+ROOT = PACKAGE.parent
 
 
-@pytest.mark.parametrize("module", sorted(OLD_ADDRESSES))
-def test_an_old_address_re_exports_the_same_class(module: str) -> None:
-    imported = importlib.import_module(module)
-    for name in OLD_ADDRESSES[module]:
-        assert getattr(imported, name) is getattr(errors, name), (module, name)
-        assert name in imported.__all__, (module, name)
+def _imports_elsewhere(path: Path) -> list[str]:
+    """``from MODULE import NAME`` of a project exception from a module other than ``creps_gym.errors``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    return [
+        f"{path.relative_to(ROOT)}:{node.lineno}: from {node.module} import {alias.name}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("creps_gym")
+        for alias in node.names
+        if alias.name in errors.__all__ and node.module != "creps_gym.errors"
+    ]
+
+
+def _exported_elsewhere(path: Path) -> list[str]:
+    """A project exception named in the ``__all__`` of a module other than ``creps_gym/errors.py``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    return [
+        f"{path.relative_to(ROOT)}: __all__ names {element.value}"
+        for node in tree.body
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", "") == "__all__" for t in node.targets)
+        for element in getattr(node.value, "elts", [])
+        if getattr(element, "value", None) in errors.__all__
+    ]
+
+
+def test_no_other_module_re_exports_an_exception() -> None:
+    found = [
+        line
+        for path in sorted(PACKAGE.rglob("*.py"))
+        if path != PACKAGE / "errors.py"
+        for line in _exported_elsewhere(path)
+    ]
+    assert not found, "exceptions exported outside creps_gym/errors.py:\n" + "\n".join(found)
+
+
+def test_every_import_of_an_exception_is_from_creps_gym_errors() -> None:
+    folders = ("creps_gym", "tests", "benchmarks", "examples", "scripts")
+    found = [
+        line
+        for folder in folders
+        for path in sorted((ROOT / folder).rglob("*.py"))
+        for line in _imports_elsewhere(path)
+    ]
+    assert not found, "exceptions imported from another address:\n" + "\n".join(found)
 
 
 def test_errors_are_what_callers_catch_them_as() -> None:

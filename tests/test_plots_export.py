@@ -13,8 +13,8 @@ from helpers import EXTRAS, SPHERE
 
 from creps_gym.cli import main
 from creps_gym.runner import RunDir, run
-from creps_gym.runner.export import IOH_COLUMNS, write_iohanalyzer
-from creps_gym.runner.plots import load_history, plot_run_dirs
+from creps_gym.runner.results.export import IOH_COLUMNS, write_iohanalyzer
+from creps_gym.runner.results.plots import load_history, plot_run_dirs
 
 pytestmark = EXTRAS  # matplotlib
 

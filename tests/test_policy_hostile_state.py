@@ -386,7 +386,7 @@ def test_a_plot_title_with_bad_mathtext_is_a_usage_error(tmp_path, capsys, unfin
 
 
 def test_an_integer_reward_beyond_the_float_range_is_named():
-    from creps_gym.runner.episodes import episode_return
+    from creps_gym.runner.backends.episodes import episode_return
     from creps_gym.wrappers.episodic import _real_reward
 
     with pytest.raises(

@@ -17,7 +17,7 @@ import creps_gym
 from creps_gym.optimizers import Policy
 from creps_gym.runner import History, RunDir, resume, run
 from creps_gym.runner.build import split_seed
-from creps_gym.runner.policy_store import evaluate_on_env
+from creps_gym.runner.rundir.policies import evaluate_on_env
 
 # c-cma-es restarts at iteration 24 with these options (its stagnation criterion after 5 iterations), and
 # its evaluations get worse after that (``keep_best=False``: its recommendation restarts with the search): the
@@ -132,11 +132,11 @@ def test_a_damaged_or_linked_policy_file_in_a_run_folder_is_a_run_dir_error(tmp_
     _run(tmp_path / "run")
     best = tmp_path / "run" / RunDir.BEST_POLICY
     best.write_bytes(b"PK\x03\x04 not a zip")
-    with pytest.raises(creps_gym.runner.RunDirError, match=r"best_policy\.npz"):
+    with pytest.raises(creps_gym.errors.RunDirError, match=r"best_policy\.npz"):
         creps_gym.load_policy(tmp_path / "run")
     best.unlink()
     best.symlink_to(tmp_path / "run" / RunDir.POLICY)
-    with pytest.raises(creps_gym.runner.RunDirError, match="symbolic link"):
+    with pytest.raises(creps_gym.errors.RunDirError, match="symbolic link"):
         creps_gym.load_policy(tmp_path / "run")
 
 

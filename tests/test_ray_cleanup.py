@@ -1,7 +1,7 @@
 """A run that started its own Ray leaves no process behind after a kill -9 (issue 15, item 19).
 
-The watchdog (:mod:`creps_gym.runner.watchdog`) is tested on plain processes, then on a real Ray started
-by a real driver process that is killed with SIGKILL.
+The watchdog (:mod:`creps_gym.runner.backends.watchdog`) is tested on plain processes, then on a real Ray
+started by a real driver process that is killed with SIGKILL.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from creps_gym.runner.watchdog import Watchdog, process_stat, process_tree
+from creps_gym.runner.backends.watchdog import Watchdog, process_stat, process_tree
 
 pytestmark = pytest.mark.skipif(not os.path.isdir("/proc"), reason="the watchdog needs Linux's /proc")
 ROOT = Path(__file__).resolve().parent.parent
@@ -65,7 +65,7 @@ def test_the_watchdog_stops_the_watched_tree_when_the_driver_is_killed(tmp_path)
         tmp_path,
         """
         import subprocess, time
-        from creps_gym.runner.watchdog import Watchdog
+        from creps_gym.runner.backends.watchdog import Watchdog
         shell = subprocess.Popen(["sh", "-c", "sleep 60 & wait"])
         watchdog = Watchdog.start([shell.pid])
         time.sleep(1.0)  # the watchdog records the shell's child
@@ -107,7 +107,8 @@ def test_a_killed_driver_leaves_no_ray_process_behind(tmp_path):
         tracked = process_tree([driver.pid])
         del tracked[driver.pid]
         names = [Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ") for pid in tracked]
-        assert any(b"raylet" in n for n in names) and any(b"creps_gym/runner/watchdog.py" in n for n in names)
+        watchdog = b"creps_gym/runner/backends/watchdog.py"
+        assert any(b"raylet" in n for n in names) and any(watchdog in n for n in names)
         assert any(n.startswith(b"ray::") for n in names)  # the raylet's agents (DashboardAgent, ...)
     finally:
         driver.kill()
@@ -125,7 +126,7 @@ def test_a_local_ray_is_started_once_per_process_and_stopped_at_its_exit(tmp_pat
         import json, os
         import ray
         from creps_gym.runner import run
-        from creps_gym.runner.watchdog import child_pids
+        from creps_gym.runner.backends.watchdog import child_pids
 
         def cluster(path):
             return next(e for e in map(json.loads, open(path + "/log.jsonl")) if e["event"] == "ray")

@@ -9,10 +9,12 @@ this private cluster (``RAY_AUTH_MODE=disabled``), so the test needs no token; t
 the same mode while the cluster runs (a local ``ray.init`` of an earlier test turns token mode on).
 
 Clean-up never uses ``ray stop``, which stops every Ray on the machine: the fixture stops exactly the
-process trees of the two ``ray start`` processes it launched (:func:`creps_gym.runner.watchdog.process_tree`
-and :func:`~creps_gym.runner.watchdog.terminate`), backed by a :class:`~creps_gym.runner.watchdog.Watchdog`
-that does the same if the test process itself is killed. Ray's worker processes lead process groups of
-their own, so killing the ``ray start`` process groups would not be enough.
+process trees of the two ``ray start`` processes it launched
+(:func:`creps_gym.runner.backends.watchdog.process_tree` and
+:func:`~creps_gym.runner.backends.watchdog.terminate`), backed by a
+:class:`~creps_gym.runner.backends.watchdog.Watchdog` that does the same if the test process itself is
+killed. Ray's worker processes lead process groups of their own, so killing the ``ray start`` process
+groups would not be enough.
 """
 
 from __future__ import annotations
@@ -37,10 +39,10 @@ from creps_gym.cli import main
 from creps_gym.envs.base import ContextualEpisodicEnv
 from creps_gym.optimizers import CREPSCMA
 from creps_gym.runner import RunDir, resume, run
+from creps_gym.runner.backends.ray import cluster_cpus, plan_chunks, resolve_address
+from creps_gym.runner.backends.watchdog import Watchdog, process_tree, terminate
 from creps_gym.runner.config import RunConfig, check_ray_address
-from creps_gym.runner.ray_backend import cluster_cpus, plan_chunks, resolve_address
-from creps_gym.runner.trust import config_fingerprint
-from creps_gym.runner.watchdog import Watchdog, process_tree, terminate
+from creps_gym.runner.rundir.checkpoint import config_fingerprint
 
 ROOT = Path(__file__).resolve().parent.parent
 # A killed node is declared dead after 3 refused health checks 1 s apart (Ray's default: 5 checks 3 s apart);
@@ -401,7 +403,7 @@ def _listener(reply: bytes | None):
 
 
 def test_a_listener_that_is_not_ray_is_refused_within_seconds(http_server):
-    from creps_gym.runner.ray_backend import check_reachable
+    from creps_gym.runner.backends.ray import check_reachable
 
     start = time.monotonic()
     with pytest.raises(

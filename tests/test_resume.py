@@ -105,7 +105,7 @@ def test_a_format_2_run_directory_resumes_with_its_own_context_stream(tmp_path):
     out = tmp_path / "run"
     shutil.copytree(golden / "run", out)
     directory = RunDir.open(out)
-    assert directory.load_checkpoint()[0]["history"]  # a legacy checkpoint: it holds the history
+    assert directory.load_checkpoint()[0]["held_history"]  # a legacy checkpoint: it holds the history
     assert directory.config().context_draws == "reset"  # its config.json predates the field
     expected = History.from_json(golden / "expected_history.json")  # the old code's uninterrupted run
     resumed = resume(out)

@@ -18,7 +18,7 @@ from creps_gym.cli import main
 from creps_gym.errors import RunDirError
 from creps_gym.optimizers import load_state, save_state
 from creps_gym.runner import resume, run
-from creps_gym.runner.trust import escape_text
+from creps_gym.runner.rundir.references import escape_text
 
 SPHERE = "creps_gym/Sphere-v0"
 

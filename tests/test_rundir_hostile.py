@@ -32,8 +32,8 @@ from creps_gym.optimizers import CREPSCMA
 from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.optimizers.state_files import JSON_KEY
 from creps_gym.runner import History, RunDir, load_history, resume, run
-from creps_gym.runner.export import write_iohanalyzer
-from creps_gym.runner.watchdog import child_pids
+from creps_gym.runner.backends.watchdog import child_pids
+from creps_gym.runner.results.export import write_iohanalyzer
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="POSIX files, /proc, rlimits")
 
@@ -209,7 +209,7 @@ def test_a_log_linked_to_dev_zero_is_not_read_until_memory_runs_out(place, tmp_p
 
 
 def test_devices_and_oversized_files_are_refused_before_reading(tmp_path):
-    from creps_gym.runner import files
+    from creps_gym.runner.rundir import files
 
     with pytest.raises(RunDirError, match="got a character device"):
         files.read_run_file("/dev/zero")
@@ -222,7 +222,7 @@ def test_devices_and_oversized_files_are_refused_before_reading(tmp_path):
 
 
 def test_an_oversized_log_is_refused_with_exit_code_3(place, tmp_path, capsys):
-    from creps_gym.runner import files
+    from creps_gym.runner.rundir import files
 
     out = place("crashed")
     with open(out / RunDir.LOG, "r+b") as stream:
@@ -360,7 +360,7 @@ def test_a_write_that_fails_stops_the_run_with_exit_3_and_resume_is_bit_identica
     out = tmp_path / "run"
     calls = {"n": 0}
     if failing == "log":
-        from creps_gym.runner import files
+        from creps_gym.runner.rundir import files
 
         real = files._write_all
 
@@ -493,7 +493,7 @@ def test_a_generator_state_out_of_range_gives_exit_3_naming_the_checkpoint(place
 
 def test_the_threat_model_in_the_runner_guide_quotes_the_limits_the_code_applies():
     from creps_gym._validation import MAX_JSON_DEPTH
-    from creps_gym.runner import files
+    from creps_gym.runner.rundir import files
 
     guide = (Path(__file__).resolve().parent.parent / "docs" / "runner.md").read_text(encoding="utf-8")
     section = guide[guide.index("### Threat model") : guide.index("- **No code from a run directory.**")]

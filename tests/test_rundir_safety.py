@@ -144,7 +144,7 @@ def test_no_string_in_the_env_kwargs_imports_a_module(tmp_path, monkeypatch, mod
 
 
 def test_a_module_reference_is_any_text_before_the_first_colon():
-    from creps_gym.runner.trust import module_reference
+    from creps_gym.runner.rundir.references import module_reference
 
     assert module_reference("1evil:creps_gym/Sphere-v0") == "1evil"
     assert module_reference("évil:X:Y") == "évil"

@@ -17,10 +17,10 @@ from helpers import EXTRAS, SPHERE, marked, python_blocks
 from creps_gym import registered_ids
 from creps_gym.envs.base import ContextualEpisodicEnv, SupportsRegret
 from creps_gym.envs.evaluation import contextual_model
+from creps_gym.errors import EpisodeError
 from creps_gym.optimizers import CREPSCMA, minimum_samples
 from creps_gym.runner import (
     Callback,
-    EpisodeError,
     History,
     IterationRecord,
     ProgressBar,
@@ -34,7 +34,7 @@ from creps_gym.runner import (
     split_seed,
     write_iohanalyzer,
 )
-from creps_gym.runner.recovery import history_crc
+from creps_gym.runner.rundir.log_chain import history_crc
 
 SMALL = {"env_kwargs": {"dim": 4}}
 
@@ -471,7 +471,7 @@ def test_a_module_prefixed_id_runs_as_gymnasium_make_takes_it():
 
 def test_a_start_no_batch_size_can_learn_from_names_the_initial_distribution():
     """check_batch_size blames ``samples`` only if a batch four times as large is learnt from."""
-    from creps_gym.runner.checks import check_batch_size
+    from creps_gym.runner.protocol import check_batch_size
 
     class Refusing:
         def __init__(self, smallest):

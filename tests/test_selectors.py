@@ -12,7 +12,7 @@ from helpers import SPHERE
 
 from creps_gym.errors import RunDirError
 from creps_gym.runner import RunConfig, RunDir, Runner, resume, run
-from creps_gym.runner.trust import FINGERPRINT_FIELDS, config_fingerprint
+from creps_gym.runner.rundir.checkpoint import FINGERPRINT_FIELDS, config_fingerprint
 from creps_gym.selectors import (
     SELECTORS,
     ContextSelector,

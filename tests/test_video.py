@@ -1,5 +1,5 @@
 """Videos of evaluated episodes: frames through the whole motion, drawn when read, with progress, of only the
-contexts asked for (``creps-gym evaluate RUN --video FILE``, :mod:`creps_gym.runner.video`)."""
+contexts asked for (``creps-gym evaluate RUN --video FILE``, :mod:`creps_gym.runner.results.video`)."""
 
 from __future__ import annotations
 

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from creps_gym.optimizers.state_files import load_state
-from creps_gym.runner import files
+from creps_gym.runner.rundir import files
 
 __all__ = [
     "COLUMNS",

@@ -35,7 +35,7 @@ from benchmarks.provenance import provenance
 from creps_gym.envs.base import initial_distribution
 from creps_gym.optimizers.features import RBFFeatures
 from creps_gym.optimizers.registry import make_optimizer, optimizer_class
-from creps_gym.runner.files import json_document, read_run_file
+from creps_gym.runner.rundir.files import json_document, read_run_file
 from creps_gym.selectors import make_selector
 from creps_gym.wrappers import BetaContexts, OffsetParams
 

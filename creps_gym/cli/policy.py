@@ -20,7 +20,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from creps_gym.cli.types import UsageError, add_import, import_user_modules, integer
+from creps_gym.cli.types import add_import, import_user_modules, integer
+from creps_gym.errors import UsageError
 
 __all__ = ["COMMANDS", "VIDEO_SUFFIXES", "add_commands", "check_video_file"]
 
@@ -81,8 +82,8 @@ def add_commands(commands: Any) -> None:
 
 def _load(args: argparse.Namespace) -> Any:
     """The policy asked for (a damaged or foreign file is a run-folder error, exit 3)."""
-    from creps_gym.runner.policy_store import load_policy
-    from creps_gym.runner.session import RunDirError
+    from creps_gym.errors import RunDirError
+    from creps_gym.runner.rundir.policies import load_policy
 
     import_user_modules(args.imports)  # the current directory is searched too, as for `run`
     try:
@@ -101,7 +102,7 @@ VIDEO_SUFFIXES = (".mp4", ".gif")
 
 def _output(path: str | None, flag: str, suffixes: tuple[str, ...] | None = None) -> Any:
     """The file ``flag`` will write, checked like ``-o`` before anything is computed (exit 2 if refused)."""
-    from creps_gym.runner.outputs import check_output_path
+    from creps_gym.runner.results.outputs import check_output_path
 
     if path is None:
         return None
@@ -154,9 +155,9 @@ def _cmd_policy(args: argparse.Namespace) -> int:
 
 def _environment(args: argparse.Namespace, policy: Any) -> tuple[str, dict[str, Any], Any]:
     """The env id and keywords to evaluate on, and the run's config (None for a policy file)."""
+    from creps_gym.errors import RunDirError
     from creps_gym.runner.rundir import RunDir
-    from creps_gym.runner.session import RunDirError
-    from creps_gym.runner.trust import module_reference
+    from creps_gym.runner.rundir.references import module_reference
 
     if Path(args.run).is_dir():
         config = RunDir.open(args.run).config()  # checked: names no module that is not imported
@@ -189,7 +190,7 @@ def _strings(value: Any) -> list[str]:
 def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     from creps_gym.runner.build import split_seed
-    from creps_gym.runner.policy_store import evaluate_on_env
+    from creps_gym.runner.rundir.policies import evaluate_on_env
 
     _output(args.video, "--video", VIDEO_SUFFIXES)
     policy = _load(args)
@@ -223,8 +224,8 @@ def _make(run: str, env_id: str, kwargs: dict[str, Any], render_mode: str | None
     the file's fault (exit 3), its text escaped (a file may hold terminal control characters)."""
     import gymnasium as gym
 
-    from creps_gym.runner.session import RunDirError
-    from creps_gym.runner.trust import escape_text
+    from creps_gym.errors import RunDirError
+    from creps_gym.runner.rundir.references import escape_text
 
     extra = {} if render_mode is None else {"render_mode": render_mode}
     try:
@@ -237,7 +238,7 @@ def _make(run: str, env_id: str, kwargs: dict[str, Any], render_mode: str | None
 def _render_mode(env: Any, env_id: str) -> str:
     """The render mode that records an episode (the whole of it where the env can); checks the extra."""
     from creps_gym.optimizers.adapters.base import import_optional
-    from creps_gym.runner.trust import escape_text
+    from creps_gym.runner.rundir.references import escape_text
 
     modes = list(env.metadata.get("render_modes", []))
     mode = next((m for m in ("rgb_array_list", "rgb_array") if m in modes), None)
@@ -255,9 +256,9 @@ def _record(env: Any, policy: Any, n: int, seed: int, path: str) -> str:
     to ``path``, each frame rendered as it is written, with progress on stderr, through a temporary that is
     checked whole before it is renamed (exit 2 naming the file if it cannot be written, see
     :func:`write_output_with`); returns the path as printed."""
-    from creps_gym.runner.outputs import write_output_with
-    from creps_gym.runner.policy_store import evaluation_draws
-    from creps_gym.runner.video import EpisodeVideo, write_video
+    from creps_gym.runner.results.outputs import write_output_with
+    from creps_gym.runner.results.video import EpisodeVideo, write_video
+    from creps_gym.runner.rundir.policies import evaluation_draws
 
     try:
         _, contexts, seeds = evaluation_draws(env, n, seed)

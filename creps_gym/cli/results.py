@@ -2,7 +2,7 @@
 
 ``list`` prints the static table :mod:`creps_gym.cli.table` (generated from the registries), so it starts
 without importing numpy, Gymnasium or any env. ``plot`` and ``export`` group their run directories by
-setting (:mod:`creps_gym.runner.groups`: everything fingerprinted but the seed) and take ``--label``.
+setting (:mod:`creps_gym.runner.results.groups`: everything fingerprinted but the seed) and take ``--label``.
 """
 
 from __future__ import annotations
@@ -11,7 +11,8 @@ import argparse
 import os
 from typing import Any
 
-from creps_gym.cli.types import UsageError, add_import, import_user_modules
+from creps_gym.cli.types import add_import, import_user_modules
+from creps_gym.errors import UsageError
 
 __all__ = ["COMMANDS", "add_commands"]
 
@@ -71,8 +72,8 @@ def _import(args: argparse.Namespace) -> None:
 def _grouped(args: argparse.Namespace) -> tuple[list[Any], dict, list[str]]:
     """The runs of ``args.run_dirs`` (read before anything may turn a ``RunDirError`` into a usage
     error), their groups and each run's label."""
-    from creps_gym.runner.export import check_one_env
-    from creps_gym.runner.groups import group_runs, load_runs
+    from creps_gym.runner.results.export import check_one_env
+    from creps_gym.runner.results.groups import group_runs, load_runs
 
     runs = load_runs(args.run_dirs)
     try:
@@ -99,7 +100,7 @@ def _write_output(write: Any, args: argparse.Namespace, what: str) -> int:
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
-    from creps_gym.runner.plots import check_title, plot_histories, save_figure
+    from creps_gym.runner.results.plots import check_title, plot_histories, save_figure
 
     _import(args)
 
@@ -116,7 +117,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from creps_gym.runner.export import write_iohanalyzer
+    from creps_gym.runner.results.export import write_iohanalyzer
 
     _import(args)
 

@@ -11,7 +11,6 @@ import sys
 from typing import Any
 
 from creps_gym.cli.types import (
-    UsageError,
     add_import,
     import_modules_and_check_names,
     initial_mean,
@@ -22,6 +21,7 @@ from creps_gym.cli.types import (
     positive_or_none,
     selector_name,
 )
+from creps_gym.errors import UsageError
 
 __all__ = ["COMMANDS", "OPT_EXAMPLE", "add_commands", "add_progress"]
 
@@ -177,7 +177,7 @@ _FLAGS = {
 def _as_usage_error(exc: Exception) -> UsageError:
     """A configuration error as a usage error naming the flag that sets its field (``ConfigError.field``:
     ``eval_every`` -> ``--eval-every``, ``optimizer_options`` -> ``--opt``); any other as it is."""
-    from creps_gym.runner.config import ConfigError
+    from creps_gym.errors import ConfigError
 
     if isinstance(exc, ConfigError):
         flag = _FLAGS.get(exc.field, "--" + exc.field.replace("_", "-"))
@@ -186,7 +186,7 @@ def _as_usage_error(exc: Exception) -> UsageError:
 
 
 def _finish(runner: Any, args: argparse.Namespace) -> int:
-    from creps_gym.runner.session import DeferredInterrupt
+    from creps_gym.runner.rundir.session import DeferredInterrupt
 
     history = runner.run()
     # The run has finished: a first Ctrl-C from here on still gets its summary and plot, and exit code 0.
@@ -208,7 +208,7 @@ def _write_plot(run_dir: Any) -> None:
     from creps_gym.runner.rundir import RunDir
 
     try:
-        from creps_gym.runner.plots import figure_bytes, plot_run_dirs
+        from creps_gym.runner.results.plots import figure_bytes, plot_run_dirs
 
         figure = plot_run_dirs([run_dir.path])
         run_dir.write_file(RunDir.PLOT, figure_bytes(figure))  # never through a link
@@ -220,10 +220,10 @@ def _write_plot(run_dir: Any) -> None:
 def _cmd_run(args: argparse.Namespace) -> int:
     from dataclasses import fields
 
+    from creps_gym.errors import RunDirError
     from creps_gym.runner.callbacks import ProgressBar
     from creps_gym.runner.config import RunConfig
     from creps_gym.runner.loop import Runner
-    from creps_gym.runner.session import RunDirError
 
     import_modules_and_check_names(args)
     options = {f.name: getattr(args, f.name) for f in fields(RunConfig) if hasattr(args, f.name)}
@@ -243,8 +243,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _cmd_resume(args: argparse.Namespace) -> int:
     from creps_gym.runner.api import resumed_runner
+    from creps_gym.runner.backends.ray import check_ray_cluster
     from creps_gym.runner.callbacks import ProgressBar
-    from creps_gym.runner.checks import check_ray_cluster
     from creps_gym.runner.rundir import RunDir
 
     import_modules_and_check_names(args)

@@ -15,10 +15,9 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from creps_gym.errors import UsageError  # re-exported: its home is creps_gym.errors
+from creps_gym.errors import UsageError
 
 __all__ = [
-    "UsageError",
     "add_import",
     "import_modules_and_check_names",
     "import_user_modules",
@@ -38,7 +37,7 @@ def import_user_modules(modules: Sequence[str]) -> None:
     The current directory goes last on ``sys.path`` (so a file there never shadows an installed module),
     and only when ``--import`` names a module; nothing is ever imported from a run directory.
     """
-    from creps_gym.runner.trust import import_modules
+    from creps_gym.runner.rundir.references import import_modules
 
     if modules and os.getcwd() not in sys.path:
         sys.path.append(os.getcwd())
@@ -68,7 +67,7 @@ def import_modules_and_check_names(args: argparse.Namespace) -> None:
     The current directory is searched for an ``--import`` module, after every other path entry (so it
     never shadows an installed module); nothing is ever imported from a run directory.
     """
-    from creps_gym.runner.trust import registered_env_id
+    from creps_gym.runner.rundir.references import registered_env_id
 
     import_user_modules(args.imports)
     if getattr(args, "env", None) is not None:

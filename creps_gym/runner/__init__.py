@@ -5,24 +5,32 @@ ask, evaluate, tell), evaluates the recommended policy on fixed test contexts, a
 directory (config, JSONL log, versions, atomic ``.npz`` checkpoints) that :func:`resume` continues. See
 ``docs/runner.md``.
 
-Modules: :mod:`.config` (RunConfig), :mod:`.loop` (the Runner), :mod:`.build` (what a new run builds),
-:mod:`.contexts` (how contexts are drawn), :mod:`.api` (run, resume), :mod:`.history` (History),
-:mod:`.backends` (failure policy, serial; :mod:`.vector_backend`, :mod:`.ray_backend`), :mod:`.callbacks`
-(callbacks, progress bar), :mod:`.rundir` (run directory), :mod:`.recovery` (the history from the log),
-:mod:`.session` (lock file, Ctrl-C), :mod:`.trust` (what a run directory may name, memory limits),
-:mod:`.policy_store` (the best and final policies a run keeps, ``load_policy``),
-:mod:`.export` (IOHanalyzer CSV), :mod:`.plots` (matplotlib).
+The loop's core is flat: :mod:`.api` (run, resume), :mod:`.config` (RunConfig), :mod:`.build` (what a
+new run builds), :mod:`.loop` (the Runner), :mod:`.seeds` (the seed plan), :mod:`.contexts` (how contexts
+are drawn), :mod:`.selection` (the context selector), :mod:`.protocol` (an optimiser checked against the
+ask/tell protocol), :mod:`.env_model` (the model behind an env's wrappers), :mod:`.divergence`,
+:mod:`.callbacks` (callbacks, progress bar), :mod:`.history` (History). Three wings:
+
+* :mod:`.backends`: where episodes run (failure policy, serial; :mod:`.backends.episodes` what every
+  backend shares, :mod:`.backends.vector`, :mod:`.backends.ray`, :mod:`.backends.watchdog`);
+* :mod:`.rundir`: the run directory (:class:`RunDir`; :mod:`.rundir.files` its files, :mod:`.rundir.session`
+  the lock file and Ctrl-C, :mod:`.rundir.log_chain` the log's lines, :mod:`.rundir.recovery` the history
+  from the log, :mod:`.rundir.checkpoint` what a checkpoint may hold and its formats,
+  :mod:`.rundir.references` what a run directory may name, :mod:`.rundir.policies` the policies a run
+  keeps, ``load_policy``);
+* :mod:`.results`: what is made of finished runs (:mod:`.results.plots`, :mod:`.results.export` and
+  :mod:`.results.ioh` IOHanalyzer CSV, :mod:`.results.groups` seeds of one setting, :mod:`.results.video`,
+  :mod:`.results.outputs` the output paths a user names).
 """
 
-from creps_gym.errors import EpisodeError, RunDirError, RunDirWarning
 from creps_gym.runner.api import resume, run
 from creps_gym.runner.backends import EnvSource, make_backend
 from creps_gym.runner.callbacks import Callback, ProgressBar
 from creps_gym.runner.config import BACKENDS, CONTEXT_DRAWS, VECTOR_MODES, RunConfig
-from creps_gym.runner.export import write_iohanalyzer
 from creps_gym.runner.history import History, IterationRecord
 from creps_gym.runner.loop import Runner, default_initial_distribution, split_seed
-from creps_gym.runner.plots import load_history, plot_histories, plot_run_dirs
+from creps_gym.runner.results.export import write_iohanalyzer
+from creps_gym.runner.results.plots import load_history, plot_histories, plot_run_dirs
 from creps_gym.runner.rundir import RunDir, package_versions
 
 __all__ = [
@@ -31,14 +39,11 @@ __all__ = [
     "VECTOR_MODES",
     "Callback",
     "EnvSource",
-    "EpisodeError",
     "History",
     "IterationRecord",
     "ProgressBar",
     "RunConfig",
     "RunDir",
-    "RunDirError",
-    "RunDirWarning",
     "Runner",
     "default_initial_distribution",
     "load_history",

@@ -115,7 +115,8 @@ def resume(
     finished run is returned as is (its missing or damaged result files are rewritten first).
 
     A run directory is untrusted input: its ``config.json`` never makes this import a module (see
-    :mod:`creps_gym.runner.trust`; import the module that registers the env first), and a damaged file,
+    :mod:`creps_gym.runner.rundir.references`; import the module that registers the env first), and a
+    damaged file,
     a checkpoint of another run or a live writer raise :class:`~creps_gym.errors.RunDirError`.
 
     Parameters

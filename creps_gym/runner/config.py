@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from creps_gym._validation import check_positive_int, config_field
-from creps_gym.errors import ConfigError, ConfigTypeError  # re-exported: their home is creps_gym.errors
+from creps_gym.errors import ConfigError, ConfigTypeError
 
 __all__ = [
     "BACKENDS",
@@ -19,8 +19,6 @@ __all__ = [
     "MAKE_ARGUMENTS",
     "RUN_OWNED_OPTIONS",
     "VECTOR_MODES",
-    "ConfigError",
-    "ConfigTypeError",
     "RunConfig",
     "check_ray_address",
 ]
@@ -171,7 +169,7 @@ class RunConfig:
         ``backend="ray"`` only: join the running Ray cluster at ``"HOST:PORT"`` (or ``"auto"``, the
         cluster last started on this machine) and leave it running. None: the ``RAY_ADDRESS`` environment
         variable's cluster if set, else a local Ray started and stopped by the run (see
-        :mod:`creps_gym.runner.ray_backend`). Not part of the run's identity: a resumed run never joins
+        :mod:`creps_gym.runner.backends.ray`). Not part of the run's identity: a resumed run never joins
         the address its ``config.json`` records.
     context_selector : str or None
         A registered context selector (:func:`creps_gym.selectors.selector_names`) that chooses the

@@ -49,7 +49,7 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
 
     ``path`` itself is replaced (a link there is not followed); ``OSError`` naming it if it cannot be.
     """
-    from creps_gym.runner.files import atomic_write
+    from creps_gym.runner.rundir.files import atomic_write
 
     return atomic_write(path, text.encode("utf-8"))
 

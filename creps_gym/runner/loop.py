@@ -7,7 +7,7 @@ the configured interval (and at the last iteration) the recommended (mean) polic
 seeded set of test contexts with :func:`creps_gym.envs.evaluation.evaluate_policy` (mean regret where the
 env supports it, mean return otherwise). For envs that are not creps_gym models, or models under wrappers
 that may change what the agent sees, sends or gets (e.g. ``TransformReward``, ``NormalizeParams``; see
-:func:`creps_gym.runner.checks.unwrapped_model`), the evaluation runs test episodes of the env itself
+:func:`creps_gym.runner.env_model.unwrapped_model`), the evaluation runs test episodes of the env itself
 with seeded resets, so it sees what training sees.
 **Failures.** Resets that read contexts and the evaluation are retried like episodes (``config.retries``
 times, then :class:`~creps_gym.errors.EpisodeError`); episodes follow the backends' policy.
@@ -16,7 +16,7 @@ seeds and contexts), the optimiser's seed and the test contexts' seed (a context
 :class:`~creps_gym.runner.seeds.SeedPlan` names every stream's child). The same seed gives a bit-identical
 History (wall times aside) on every backend and after any resume. **Checkpoints** hold the optimiser's and
 the loop's state (env stream, counts, wall time, stop reason, a checksum of the records, the best evaluated
-policy: :mod:`~creps_gym.runner.policy_store`): O(1). A resume rebuilds the history from the log.
+policy: :mod:`~creps_gym.runner.rundir.policies`): O(1). A resume rebuilds the history from the log.
 **Stop reasons** (``History.stop_reason``): ``"iterations"``, ``"max_episodes"`` (the next iteration would
 exceed the budget), ``"target_regret"``, ``"max_time"``, ``"divergence"`` (see
 :mod:`~creps_gym.runner.divergence`), ``"optimizer: <criteria>"`` (its own ``stop()``), ``"callback"``.
@@ -38,21 +38,23 @@ from numpy.typing import NDArray
 
 from creps_gym._validation import config_field
 from creps_gym.envs.evaluation import finite_mean, test_contexts
-from creps_gym.errors import ConfigError, EpisodeError, RunDirError
-from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
-from creps_gym.runner import build, checks
+from creps_gym.errors import ConfigError, EpisodeError
+from creps_gym.optimizers.registry import recommended_samples
+from creps_gym.runner import build, env_model, protocol
 from creps_gym.runner.backends import Backend, EnvSource, retry
+from creps_gym.runner.backends.ray import check_ray_cluster
 from creps_gym.runner.build import build_backend, build_optimizer, default_initial_distribution, split_seed
 from creps_gym.runner.callbacks import as_callback
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
 from creps_gym.runner.divergence import DivergenceWatch, evaluation_loss
 from creps_gym.runner.history import History, IterationRecord
-from creps_gym.runner.policy_store import RunPolicies, evaluate_contexts, evaluated_policy
-from creps_gym.runner.recovery import REBUILD, chain_crc, checkpoint_history, history_crc
-from creps_gym.runner.rundir import RESTART, RunDir
-from creps_gym.runner.session import DeferredInterrupt
-from creps_gym.runner.trust import check_run_memory
+from creps_gym.runner.loop_state import loop_state, restore
+from creps_gym.runner.rundir import RunDir
+from creps_gym.runner.rundir.checkpoint import check_run_memory
+from creps_gym.runner.rundir.log_chain import chain_crc
+from creps_gym.runner.rundir.policies import RunPolicies, evaluate_contexts, evaluated_policy
+from creps_gym.runner.rundir.session import DeferredInterrupt
 
 __all__ = ["Runner", "default_initial_distribution", "split_seed"]  # the last two re-exported from .build
 
@@ -107,7 +109,7 @@ class Runner:
             raise TypeError("optimizer: expected a registry name or an optimiser object (exactly one)")
         with config_field("env_kwargs" if config.env_kwargs else None):  # the env's error about one of them
             self.env = env if env is not None else build.make_env(config.env, config.env_kwargs)
-        checks.check_box_spaces(self.env)
+        env_model.check_box_spaces(self.env)
         self.env_rng, optimizer_seed, eval_seed = split_seed(config.seed)
         self.n_context_dims = int(np.prod(self.env.observation_space.shape))
         self.n_params = int(np.prod(self.env.action_space.shape))
@@ -119,7 +121,7 @@ class Runner:
             self.draws = ContextDraws.for_run(self.env, config, context_selector)
         obj = None if config.env else self.env
         self.source = EnvSource(config.env, dict(config.env_kwargs), obj, set_context=self.draws.batched)
-        self._model = checks.unwrapped_model(self.env)
+        self._model = env_model.unwrapped_model(self.env)
         self.test_contexts = self._test_contexts(eval_seed)
         if config.target_regret is not None and not self.has_regret:
             raise ConfigError(
@@ -136,12 +138,12 @@ class Runner:
             self.optimizer = self._new_optimizer(optimizer, optimizer_seed, check=True)
             self.history = History(meta=self._meta())
             if run_dir is not None:
-                checks.check_ray_cluster(self.config)  # a wrong address fails before the folder is created
+                check_ray_cluster(self.config)  # a wrong address fails before the folder is created
                 self.run_dir = RunDir.create(run_dir, self.config, self.history.meta, overwrite=overwrite)
             return
         self.run_dir.lock.acquire()  # held until run() ends: one writer per run directory
         try:
-            self._continue(self.run_dir, optimizer, optimizer_class, optimizer_seed)
+            restore(self, self.run_dir, optimizer, optimizer_class, optimizer_seed)
         except BaseException:
             self.run_dir.lock.release()
             raise
@@ -156,19 +158,19 @@ class Runner:
     def _new_optimizer(self, optimizer: Any, seed: int, check: bool) -> Any:
         """The optimiser object as given, or the registered one built (batch size checked if ``check``)."""
         if optimizer is not None:
-            checks.check_optimizer(optimizer)
+            protocol.check_optimizer(optimizer)
         else:
             make = functools.partial(build_optimizer, self.config, self.env, self.n_context_dims, seed)
             optimizer = make()
-        checks.check_optimizer_sizes(optimizer, "optimizer", self)
+        protocol.check_optimizer_sizes(optimizer, "optimizer", self)
         if check:  # a new run: below the optimiser's minimum batch, the search diverges
-            checks.check_minimum_batch(optimizer, self)
+            protocol.check_minimum_batch(optimizer, self)
         if check and self.config.optimizer is not None:  # and a named optimiser must accept the batch
             n, contexts, options = self.config.samples, self.test_contexts, self.config.optimizer_options
             if self._model is not None:
                 contexts = self._model.sample_contexts(np.random.default_rng(seed), n)
             contexts = contexts[np.arange(n) % len(contexts)]
-            checks.check_batch_size(make, contexts, options, repr(self.config.optimizer))
+            protocol.check_batch_size(make, contexts, options, repr(self.config.optimizer))
         return optimizer
 
     @property
@@ -199,66 +201,11 @@ class Runner:
         return build_backend(self.config, self.source, self.env)
 
     # -- checkpoints -----------------------------------------------------------------------------------------
-    def _continue(self, run_dir: RunDir, optimizer: Any, optimizer_class: Any, seed: int) -> None:
-        """Restore the run's checkpoint (read once), or start it afresh if it has none."""
-        loaded = run_dir.load_checkpoint(self.config)
-        if loaded is None:
-            if self.config.optimizer is None and optimizer is None:
-                raise ValueError(f"run_dir: expected a checkpoint in {run_dir.path}, got none")
-            self.optimizer = self._new_optimizer(optimizer, seed, check=False)
-            self.history = History(meta=self._meta())
-            return
-        state, optimizer_state = loaded
-        try:
-            if self.config.optimizer is not None:
-                self.optimizer = restore_optimizer(self.config.optimizer, optimizer_state)
-            else:
-                self.optimizer = (optimizer_class or type(optimizer)).from_state_dict(optimizer_state)
-            checks.check_optimizer_sizes(self.optimizer, "optimizer state", self)
-            self.env_rng.bit_generator.state = checks.generator_state(state["env_rng"])
-            self.draws.selection.load(state)
-            self.history = self._checkpoint_history(run_dir, state)
-            self.policies.restore(state.get("best_policy"), self.history)  # None in older checkpoints
-            self.iteration, self.episodes = int(state["iteration"]), int(state["episodes"])
-            self._elapsed_before = float(state["elapsed"])
-        except RunDirError:
-            raise
-        except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
-            raise run_dir.damaged(RunDir.CHECKPOINT, exc, RESTART) from None
-
-    def _checkpoint_history(self, run_dir: RunDir, state: dict[str, Any]) -> History:
-        """The history up to the checkpoint: rebuilt from the log (a legacy checkpoint holds it)."""
-        if "history" in state:  # format creps_gym.run/2 or /1
-            history = History.from_dict(state["history"])
-            self._log_crc = history_crc(history.records)
-            return history
-        damaged: list[int] = []
-        records, _ = run_dir.read_log(damaged)
-        history = checkpoint_history(run_dir, state, records, self._meta())
-        if history is None:
-            found = f"damaged lines {damaged}" if damaged else "a truncated log"
-            count = state["iteration"]
-            raise run_dir.damaged(
-                RunDir.LOG, f"iterations 1 to {count} are not all intact ({found})", REBUILD
-            )
-        self._log_crc = int(state["log_crc"])
-        return history
-
     def checkpoint(self) -> None:
         """Write the optimiser's and the loop's state (no-op without a run directory); O(1) in the run."""
-        if self.run_dir is None:
-            return
-        state = {
-            "env_rng": self.env_rng.bit_generator.state,
-            "iteration": self.iteration,
-            "episodes": self.episodes,
-            "elapsed": self.elapsed,
-            "stop_reason": self.history.stop_reason,
-            "log_crc": self._log_crc,
-            "best_policy": self.policies.checkpoint_state(self.run_dir),
-            **self.draws.selection.state(),
-        }
-        self.run_dir.save_checkpoint(state, self.optimizer.state_dict(), self.config)
+        if self.run_dir is not None:
+            state = loop_state(self, self.run_dir)
+            self.run_dir.save_checkpoint(state, self.optimizer.state_dict(), self.config)
 
     @property
     def elapsed(self) -> float:
@@ -291,7 +238,7 @@ class Runner:
             return "max_episodes"
         if config.max_time is not None and self.elapsed >= config.max_time:
             return "max_time"
-        met = checks.stop_criteria(self.optimizer.stop())
+        met = protocol.stop_criteria(self.optimizer.stop())
         return f"optimizer: {', '.join(met)}" if met else None
 
     def step(self, backend: Backend) -> tuple[IterationRecord, str | None]:
@@ -299,7 +246,7 @@ class Runner:
         self._watch = self._watch or DivergenceWatch.of_history(self.config.divergence, self.history.records)
         n, label = self.config.samples, f"iteration {self.iteration + 1}"
         seeds, contexts = self.draws.draw(self.env_rng, n, label)
-        params = checks.real_params(self.optimizer.ask(contexts), "ask", (n, self.n_params))
+        params = protocol.real_params(self.optimizer.ask(contexts), "ask", (n, self.n_params))
         returns = backend.evaluate(seeds, contexts, params, label)
         self.optimizer.tell(contexts, params, returns)
         self.draws.tell(contexts, returns, self.optimizer)

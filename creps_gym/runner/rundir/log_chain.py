@@ -6,7 +6,8 @@ CRC-32 of the record after the run's fingerprint after the checksum of the itera
 after the last checkpoint (which the checkpoint's ``log_crc`` does not cover) are read as this run's only
 if their chain matches, so a line copied from another run or written by hand is left out. (It is a
 checksum, not a signature: it tells copies and hand-made lines apart, it does not stop a forger who
-recomputes it.) Logs written before the chain existed have none: their iterations up to the last
+recomputes it.) A checkpoint keeps :func:`history_crc`, the checksum of records 1..k (:func:`chain_crc`
+extends it by one record). Logs written before the chain existed have none: their iterations up to the last
 checkpoint are read as before, the ones after it are left out (``resume`` redoes them anyway).
 """
 
@@ -19,7 +20,7 @@ from typing import Any
 from creps_gym._validation import load_json
 from creps_gym.runner.history import IterationRecord
 
-__all__ = ["entry_crc", "log_line", "parse_log", "record_chain"]
+__all__ = ["chain_crc", "entry_crc", "history_crc", "log_line", "parse_log", "record_chain"]
 
 
 def entry_crc(entry: dict[str, Any], *, sort_keys: bool = False) -> int:
@@ -30,7 +31,7 @@ def entry_crc(entry: dict[str, Any], *, sort_keys: bool = False) -> int:
 def record_chain(fingerprint: str, log_crc: int, entry: dict[str, Any]) -> int:
     """The ``"chain"`` of an iteration's line: the CRC-32 of ``entry`` (its record's ``to_dict()``) after
     the run's ``fingerprint`` after ``log_crc``, the checksum of the iterations before it (as a
-    checkpoint keeps it, :func:`creps_gym.runner.recovery.history_crc`)."""
+    checkpoint keeps it, :func:`creps_gym.runner.rundir.log_chain.history_crc`)."""
     seed = zlib.crc32(fingerprint.encode(), log_crc)
     return zlib.crc32(json.dumps(entry, allow_nan=False).encode(), seed)
 
@@ -64,3 +65,16 @@ def parse_log(
         except (ValueError, KeyError, TypeError, AttributeError):
             bad.append(number)
     return records, events, bad, chains
+
+
+def chain_crc(crc: int, entry: dict[str, Any]) -> int:
+    """``crc`` (the checksum of a history's records so far) extended by one record's ``to_dict()``."""
+    return zlib.crc32(json.dumps(entry, allow_nan=False).encode(), crc)
+
+
+def history_crc(records: list[IterationRecord]) -> int:
+    """The checksum a checkpoint keeps of the records 1..k of its history (see :func:`chain_crc`)."""
+    crc = 0
+    for record in records:
+        crc = chain_crc(crc, record.to_dict())
+    return crc

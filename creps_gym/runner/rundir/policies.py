@@ -37,13 +37,14 @@ from creps_gym.errors import RunDirError
 from creps_gym.optimizers.policy_file import Policy
 from creps_gym.optimizers.policy_io import policy_bytes
 from creps_gym.runner.backends import run_episodes
-from creps_gym.runner.checks import real_params, unwrapped_model
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
-from creps_gym.runner.files import os_failure, write_run_file
+from creps_gym.runner.env_model import unwrapped_model
 from creps_gym.runner.history import History, encode_float
+from creps_gym.runner.protocol import real_params
 from creps_gym.runner.rundir import RunDir
-from creps_gym.runner.trust import config_fingerprint
+from creps_gym.runner.rundir.checkpoint import config_fingerprint
+from creps_gym.runner.rundir.files import os_failure, write_run_file
 
 __all__ = [
     "WHICH",

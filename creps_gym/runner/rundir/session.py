@@ -33,10 +33,9 @@ except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 
 from creps_gym.errors import RunDirError, RunDirWarning
-from creps_gym.runner.files import open_run_file, os_failure
+from creps_gym.runner.rundir.files import open_run_file, os_failure
 
-#: RunDirError and RunDirWarning are re-exported from :mod:`creps_gym.errors`, their one home.
-__all__ = ["DeferredInterrupt", "RunDirError", "RunDirWarning", "RunLock"]
+__all__ = ["DeferredInterrupt", "RunLock"]
 
 
 class RunLock:

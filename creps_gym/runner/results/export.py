@@ -2,7 +2,7 @@
 
 One row per evaluation of the recommended policy, with the columns ``evaluations`` (training episodes so
 far), ``value``, ``function_id`` (env id), ``algorithm_id`` (the optimiser, or the run's label: ``creps-gym
-export`` labels each run by its setting group, see :mod:`creps_gym.runner.groups`), ``dimension``
+export`` labels each run by its setting group, see :mod:`creps_gym.runner.results.groups`), ``dimension``
 (parameters p) and ``run_id`` (the master seed). ``value`` is the mean regret when every history has one
 (minimised), else the mean evaluation return (maximised). Load the file in IOHanalyzer's R package with::
 
@@ -24,10 +24,16 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from creps_gym.runner.files import write_output
 from creps_gym.runner.history import History
-from creps_gym.runner.ioh import IOH_COLUMNS, check_one_env, env_key, iohanalyzer_rows, iohanalyzer_text
+from creps_gym.runner.results.ioh import (
+    IOH_COLUMNS,
+    check_one_env,
+    env_key,
+    iohanalyzer_rows,
+    iohanalyzer_text,
+)
 from creps_gym.runner.rundir import RunDir
+from creps_gym.runner.rundir.files import write_output
 
 __all__ = [
     "IOH_COLUMNS",
@@ -49,7 +55,7 @@ def write_iohanalyzer(
     """Write the rows of :func:`iohanalyzer_rows` to ``path`` (atomically); returns the file written.
 
     A link is followed (its target is replaced); a target that is not a regular file, or that is a run
-    directory's own file, raises ``ValueError`` (:func:`creps_gym.runner.files.write_output`).
+    directory's own file, raises ``ValueError`` (:func:`creps_gym.runner.rundir.files.write_output`).
     """
     text = iohanalyzer_text(histories, mix_envs, labels)
     return write_output(path, text.encode("utf-8"), protected=RunDir.owns)

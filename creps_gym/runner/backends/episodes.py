@@ -3,7 +3,7 @@ checks and the :class:`Backend` base class.
 
 The failure policy is described in :mod:`creps_gym.runner.backends`, which builds the backends
 (:func:`~creps_gym.runner.backends.make_backend`) and re-exports these names; the concrete backends
-(:mod:`.backends`' serial one, :mod:`.vector_backend`, :mod:`.ray_backend`) import them from here, so that
+(:mod:`creps_gym.runner.backends`' serial one, :mod:`.vector`, :mod:`.ray`) import them from here, so that
 no backend module imports the module that builds it.
 """
 
@@ -21,13 +21,12 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym.errors import EpisodeError  # re-exported: its home is creps_gym.errors
+from creps_gym.errors import EpisodeError
 
 __all__ = [
     "Array",
     "Backend",
     "EnvSource",
-    "EpisodeError",
     "check_context",
     "episode_return",
     "reset_context",

@@ -29,7 +29,7 @@ node dies stops with an :class:`~creps_gym.errors.EpisodeError`.
 **A hard kill of the run.** ``ray.init`` starts its services (GCS server, raylet, log monitor, and the
 raylet's dashboard and runtime-env agents and workers) as processes of their own. After a ``kill -9`` of
 the run's process, the GCS server, raylet and workers exit by themselves, but Ray's agents stay alive. So
-a run that starts its own Ray also starts a small watchdog process (:mod:`creps_gym.runner.watchdog`,
+a run that starts its own Ray also starts a small watchdog process (:mod:`creps_gym.runner.backends.watchdog`,
 Linux ``/proc`` only). It records the processes Ray started and their descendants, and when the run's
 process dies without shutting Ray down it terminates them (SIGTERM, then SIGKILL after 2 s) and exits.
 Ray's session files under its temporary directory (``/tmp/ray/session_*``) are left, as after any Ray
@@ -50,14 +50,16 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._validation import config_field
 from creps_gym.errors import EpisodeError
 from creps_gym.optimizers.adapters.base import import_optional
+from creps_gym.runner.backends.episodes import Array, Backend, EnvSource, run_episodes
+from creps_gym.runner.backends.watchdog import Watchdog, child_pids
 from creps_gym.runner.config import check_ray_address
-from creps_gym.runner.episodes import Array, Backend, EnvSource, run_episodes
-from creps_gym.runner.watchdog import Watchdog, child_pids
 
 __all__ = [
     "RayBackend",
+    "check_ray_cluster",
     "check_reachable",
     "cluster_cpus",
     "plan_chunks",
@@ -303,3 +305,19 @@ class RayBackend(Backend):
         if self._shutdown and self._ray.is_initialized():
             self._ray.shutdown()
         self._shutdown = False
+
+
+def check_ray_cluster(config: Any) -> None:
+    """For the Ray backend: ``ImportError`` without Ray, and, joining a cluster, ``ValueError`` naming the
+    address unless Ray answers there.
+
+    Called before a new run directory is created, so a wrong address leaves nothing behind.
+    """
+    if config.backend != "ray":
+        return
+    import_optional("ray", "ray")  # a missing Ray (exit 4) leaves no run folder behind either
+
+    address, origin = resolve_address(config.ray_address, os.environ)
+    if address is not None and address != "auto":
+        with config_field("ray_address" if origin == "ray_address" else None):
+            check_reachable(address, origin)

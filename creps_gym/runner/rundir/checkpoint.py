@@ -1,17 +1,13 @@
-"""A run directory is untrusted input: what it may name, and how big a run may be.
+"""A checkpoint is untrusted input: its formats, the run it belongs to, the state a run can have written.
 
-**No imports from a run directory.** Gymnasium imports ``module`` for an env id ``"module:Env-v0"``, and
-envs that wrap another env (e.g. ``creps_gym/PointMazeGoal-v0``'s ``env`` keyword) pass such ids on. So
-the configuration read back from ``config.json`` may only name
-
-* a registered env id, or ``"module:Env-v0"`` whose ``module`` is already imported;
-* strings of the form ``"module:..."`` (in the env keywords and optimiser options) whose module is already
-  imported;
-* a registered optimiser name (the registry never imports a ``"module:Class"`` read from a file).
-
-Anything else raises :class:`~creps_gym.errors.RunDirError`. The user imports the module
-(``creps-gym resume --import MODULE``, the same for every command, or ``import MODULE`` before
-:func:`creps_gym.runner.resume`).
+**Formats.** A checkpoint is written in the current format, :data:`CHECKPOINT_FORMAT` (``creps_gym.run/3``:
+the loop's state with the checksum ``log_crc`` of the history's records, which are in the log). Two older
+formats are still read (:data:`LEGACY_FORMATS`): ``/2`` holds the whole history (and drew contexts by
+seeded resets), ``/1`` also has no fingerprint (it is matched on its history's seed, samples and env).
+This module is the only one that knows them: :func:`open_checkpoint` checks a checkpoint as its format
+was written and upgrades an older one, once, to the current form (``stop_reason`` and ``log_crc`` from
+its history, which it keeps as ``state["held_history"]``, a :class:`~creps_gym.runner.history.History`),
+so the loop and the recovery of a history read one form.
 
 **Checkpoints.** A checkpoint records the :func:`config_fingerprint` of its run; :func:`check_checkpoint`
 refuses one written under another configuration, and runner state that no run can have written.
@@ -23,34 +19,28 @@ arrays would not fit in memory (:func:`creps_gym._validation.check_fits_in_memor
 from __future__ import annotations
 
 import hashlib
-import importlib
 import json
-import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable
 from typing import Any
-
-import gymnasium as gym
 
 from creps_gym._validation import check_fits_in_memory, config_field
 from creps_gym.errors import RunDirError
-from creps_gym.optimizers.registry import optimizer_names
-from creps_gym.runner.checks import CRITERION
 from creps_gym.runner.config import RunConfig
-from creps_gym.selectors.registry import selector_names
+from creps_gym.runner.history import History
+from creps_gym.runner.protocol import CRITERION
+from creps_gym.runner.rundir.log_chain import entry_crc, history_crc
 
 __all__ = [
     "CHECKPOINT_FORMAT",
+    "FINGERPRINT_FIELDS",
     "FINGERPRINT_FIELDS_IF_SET",
-    "IMPORT_ADVICE",
+    "LEGACY_FORMATS",
     "check_checkpoint",
     "check_run_memory",
-    "check_trusted",
+    "checkpoint_document",
     "config_fingerprint",
-    "escape_text",
-    "import_modules",
-    "module_reference",
+    "open_checkpoint",
     "possible_stop_reason",
-    "registered_env_id",
 ]
 
 CHECKPOINT_FORMAT = "creps_gym.run/3"
@@ -66,103 +56,11 @@ FINGERPRINT_FIELDS = ("env", "env_kwargs", "optimizer", "optimizer_options", "se
 FINGERPRINT_FIELDS_IF_SET = ("context_selector", "context_selector_options")
 #: ``divergence`` is fingerprinted only when it is not the default, for the same reason.
 DEFAULT_DIVERGENCE = RunConfig.divergence
+#: A checkpoint's own keys around the loop's state; the optimiser's state keys start with ``optimizer.``.
+_CHECKPOINT_KEYS = ("format", "fingerprint", "state_crc")
+_OPTIMIZER = "optimizer."
 #: The fields format ``creps_gym.run/2`` fingerprinted (it had no ``context_draws``: always ``"reset"``).
 FINGERPRINT_FIELDS_2 = tuple(name for name in FINGERPRINT_FIELDS if name != "context_draws")
-
-
-#: What to do about a module a run directory names; the CLI puts its command in place of ``COMMAND``.
-IMPORT_ADVICE = (
-    "import the module yourself if you trust it (`creps-gym COMMAND --import MODULE`, or `import MODULE` "
-    "in Python first)"
-)
-
-
-def module_reference(text: str) -> str | None:
-    """The module a ``"module:name"`` string makes Gymnasium (or a registry) import, or None.
-
-    Gymnasium imports *any* text before the first ``:`` of an env id (``"1evil:X-v0"``, ``"my-evil:X"``,
-    ``"évil:X"``, ``" os :X"``), whether or not it is a Python identifier, so every such text counts as
-    a module reference, unchanged (no stripping: ``" os"`` is not the module ``os``).
-    """
-    module, colon, _ = text.partition(":")
-    return module if colon else None
-
-
-def import_modules(modules: Sequence[str]) -> None:
-    """Import the modules a user names (``--import``): the only code imported on a user's word."""
-    for module in modules:
-        try:
-            importlib.import_module(module)
-        except ImportError as exc:
-            raise ValueError(f"expected an importable module, got {module!r} ({exc})") from None
-
-
-def registered_env_id(env_id: str, *, import_module: bool = False) -> str:
-    """``env_id`` if registered (a ``module:Env-v0``'s module imported first with ``import_module``)."""
-    import creps_gym
-
-    module = module_reference(env_id)
-    if module is not None and import_module:
-        import_modules([module])
-    if env_id.split(":", 1)[-1] not in gym.registry:
-        raise ValueError(f"expected one of {creps_gym.registered_ids()}, got {env_id!r}")
-    return env_id
-
-
-def _strings(value: Any, where: str) -> Iterator[tuple[str, str]]:
-    """Every string in a JSON value (keys included), with where it is."""
-    if isinstance(value, str):
-        yield where, value
-    elif isinstance(value, dict):
-        for key, item in value.items():
-            yield f"{where}.{key}", str(key)
-            yield from _strings(item, f"{where}.{key}")
-    elif isinstance(value, (list, tuple)):
-        for index, item in enumerate(value):
-            yield from _strings(item, f"{where}[{index}]")
-
-
-def check_trusted(config: RunConfig, source: str) -> None:
-    """Refuse a configuration read from ``source`` that would import code (see the module docstring)."""
-
-    def refuse(field: str, value: str, why: str) -> RunDirError:
-        return RunDirError(
-            f"{source}: {field}: expected {why}, got {value!r}; a run directory never makes the runner "
-            f"import code: {IMPORT_ADVICE}"
-        )
-
-    if config.optimizer is not None and config.optimizer not in optimizer_names():
-        raise refuse("optimizer", config.optimizer, f"a registered optimiser name {optimizer_names()}")
-    if config.context_selector is not None and config.context_selector not in selector_names():
-        raise refuse("context_selector", config.context_selector, f"a registered selector {selector_names()}")
-    found = [("env", config.env)] if config.env is not None else []
-    found += _strings(config.env_kwargs, "env_kwargs")
-    found += _strings(config.optimizer_options, "optimizer_options")
-    found += _strings(config.context_selector_options, "context_selector_options")
-    for field, text in found:
-        module = module_reference(text)
-        if module is not None and module not in sys.modules:
-            raise refuse(field, text, f"no reference to a module that is not imported (here {module!r})")
-    if config.env is not None and config.env.split(":", 1)[-1] not in gym.registry:  # module imported above
-        raise refuse("env", config.env, "a registered env id")
-    _check_options_are_data(config, source)
-
-
-def _check_options_are_data(config: RunConfig, source: str) -> None:
-    """Refuse ``cma`` options that pycma would evaluate as code (``{"tolfun": "9**9**9"}``)."""
-    if config.optimizer != "cma":  # nevergrad and optuna accept only names from their allow-lists
-        return
-    from creps_gym.optimizers.adapters.pycma import check_option_value
-
-    options = dict(config.optimizer_options)
-    nested = options.pop("cma_options", {})
-    for key, value in {**(nested if isinstance(nested, dict) else {}), **options}.items():
-        try:
-            check_option_value(str(key), value)
-        except ValueError as exc:
-            raise RunDirError(
-                f"{source}: optimizer_options: {exc}; a run directory holds data only"
-            ) from None
 
 
 def check_run_memory(config: RunConfig, n_params: int, n_context_dims: int, *, covariance: bool) -> None:
@@ -238,14 +136,6 @@ def possible_stop_reason(stop: Any, config: RunConfig, iteration: int) -> bool:
     return iteration > 0 and named and criteria == sorted(set(criteria))
 
 
-def escape_text(text: Any) -> str:
-    """``str(text)`` safe to print: control characters (ANSI escapes, newlines) as Python escapes."""
-    text = str(text)
-    if text.isprintable():
-        return text
-    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
-
-
 def _consistent(flat: dict[str, Any], config: RunConfig) -> bool:
     """Counts, types and records that a run of ``config`` can have written."""
     iteration, episodes, elapsed = flat["iteration"], flat["episodes"], flat["elapsed"]
@@ -286,3 +176,55 @@ def check_checkpoint(flat: dict[str, Any], config: RunConfig, path: str, advice:
         raise RunDirError(
             f"{path}: damaged or not written by creps_gym (inconsistent runner state {found}); {advice}"
         )
+
+
+def checkpoint_document(
+    state: dict[str, Any], optimizer_state: dict[str, Any], config: RunConfig
+) -> dict[str, Any]:
+    """What a checkpoint holds (``save_state`` content): the loop's ``state`` and its checksum, the
+    optimiser's state (keys prefixed ``optimizer.``), the format and ``config``'s fingerprint."""
+    flat = {"format": CHECKPOINT_FORMAT, "fingerprint": config_fingerprint(config), **state}
+    flat["state_crc"] = entry_crc(state, sort_keys=True)  # the loop's state is checked as a whole
+    flat.update({f"{_OPTIMIZER}{key}": value for key, value in optimizer_state.items()})
+    return flat
+
+
+def _loop_state(flat: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in flat.items() if not k.startswith(_OPTIMIZER) and k not in _CHECKPOINT_KEYS}
+
+
+def open_checkpoint(
+    flat: dict[str, Any],
+    config: RunConfig | None,
+    path: str,
+    advice: str,
+    damaged: Callable[[Any], RunDirError],
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``(loop state, optimiser state)`` of the checkpoint ``flat`` (``load_state`` content), upgraded.
+
+    Checked as its format was written (the loop state's checksum; with ``config``,
+    :func:`check_checkpoint`), then an older format is upgraded to the current form (see the module
+    docstring). ``damaged(why)`` is the error for a damaged checkpoint (it names the file ``path`` and
+    what to do, ``advice``).
+    """
+    found = flat.get("format")
+    if found not in (CHECKPOINT_FORMAT, *LEGACY_FORMATS):
+        raise damaged(f"format {found!r}, expected {CHECKPOINT_FORMAT!r}")
+    state = _loop_state(flat)
+    if found == CHECKPOINT_FORMAT:
+        try:
+            intact = flat.get("state_crc") == entry_crc(state, sort_keys=True)
+        except (TypeError, ValueError):
+            intact = False
+        if not intact:
+            raise damaged("the loop state does not match its checksum")
+    if config is not None:
+        check_checkpoint(flat, config, path, advice)
+    optimizer_state = {k[len(_OPTIMIZER) :]: v for k, v in flat.items() if k.startswith(_OPTIMIZER)}
+    if found != CHECKPOINT_FORMAT:
+        try:
+            held = History.from_dict(state.pop("history"))
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise damaged(exc) from None
+        state.update(stop_reason=held.stop_reason, log_crc=history_crc(held.records), held_history=held)
+    return state, optimizer_state

@@ -18,7 +18,7 @@ from gymnasium.vector import AutoresetMode
 from numpy.typing import NDArray
 
 from creps_gym.envs.base import ContextualEpisodicVectorEnv
-from creps_gym.runner.episodes import (
+from creps_gym.runner.backends.episodes import (
     Array,
     Backend,
     EnvSource,

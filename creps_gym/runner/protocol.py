@@ -1,4 +1,5 @@
-"""Checks the runner makes before a run starts, so that bad set-ups fail at once with a clear error.
+"""The ask/tell protocol as the runner checks an optimiser against it: before a run starts, so that bad
+set-ups fail at once with a clear error, and at each call.
 
 * :func:`check_optimizer`: an optimiser object follows the ask/tell protocol of
   :class:`creps_gym.optimizers.AskTellOptimizer`; raw pycma, nevergrad and optuna objects are refused
@@ -8,45 +9,32 @@
 * :func:`check_batch_size`: one ask/tell of a fresh copy of a named optimiser on a synthetic batch of
   the run's size, so options that only fail at the first ``tell`` (``epsilon >= log N``, a batch too
   small for the features) fail before anything is written.
-* :func:`unwrapped_model`: the creps_gym model behind an env, when the wrappers around it change nothing
-  the evaluation computes (so the runner may evaluate the model's batched ``evaluate`` directly).
+* :func:`real_params`, :func:`stop_criteria`: what an optimiser's ``ask``/``recommend`` and ``stop``
+  return, checked at each iteration; :func:`generator_state`: a checkpointed generator state.
 """
 
 from __future__ import annotations
 
-import os
 import re
 from collections.abc import Callable, Mapping
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import (
-    ConfigError,
-    ConfigTypeError,
-    as_float_array,
-    check_generator_state,
-    config_field,
-)
-from creps_gym.envs.evaluation import contextual_model
+from creps_gym._validation import as_float_array, check_generator_state
+from creps_gym.errors import ConfigError
 from creps_gym.optimizers.registry import minimum_samples
-from creps_gym.wrappers import FixedContexts, SampleContexts
 
 __all__ = [
     "CRITERION",
-    "MODEL_PRESERVING_WRAPPERS",
     "check_batch_size",
-    "check_box_spaces",
     "check_minimum_batch",
     "check_optimizer",
     "check_optimizer_sizes",
-    "check_ray_cluster",
     "generator_state",
     "real_params",
     "stop_criteria",
-    "unwrapped_model",
 ]
 
 PROTOCOL_METHODS = ("ask", "tell", "recommend", "stop", "state_dict")
@@ -59,15 +47,6 @@ _ADAPTERS = {
 #: A stop criterion's name, as ``stop()`` may report it (pycma's ``tolfun``, ``max_std_growth``, ...):
 #: letters, digits, ``_``, ``.``, ``+`` and ``-``, so that a stop reason is plain text wherever it is shown.
 CRITERION = re.compile(r"[\w.+-]{1,100}")
-
-# Wrappers that change neither the observation, the action nor the reward of a one-step episode.
-MODEL_PRESERVING_WRAPPERS: tuple[type, ...] = (
-    gym.wrappers.OrderEnforcing,
-    gym.wrappers.PassiveEnvChecker,
-    gym.wrappers.TimeLimit,
-    FixedContexts,  # they choose the training contexts; the test contexts come from the model
-    SampleContexts,
-)
 
 
 def check_optimizer(optimizer: Any) -> None:
@@ -165,33 +144,6 @@ def _tell_error(make: Callable[[], Any], contexts: NDArray[np.float64]) -> Value
     return None
 
 
-def check_box_spaces(env: gym.Env) -> None:
-    """``TypeError`` unless the env's observation and action spaces are Boxes (contexts and θ)."""
-    for name in ("observation_space", "action_space"):
-        space = getattr(env, name)
-        if not isinstance(space, gym.spaces.Box):
-            raise ConfigTypeError("env", f"expected a Box {name} (contexts and parameters θ), got {space}")
-
-
-def check_ray_cluster(config: Any) -> None:
-    """For the Ray backend: ``ImportError`` without Ray, and, joining a cluster, ``ValueError`` naming the
-    address unless Ray answers there.
-
-    Called before a new run directory is created, so a wrong address leaves nothing behind.
-    """
-    if config.backend != "ray":
-        return
-    from creps_gym.optimizers.adapters.base import import_optional
-    from creps_gym.runner.ray_backend import check_reachable, resolve_address
-
-    import_optional("ray", "ray")  # a missing Ray (exit 4) leaves no run folder behind either
-
-    address, origin = resolve_address(config.ray_address, os.environ)
-    if address is not None and address != "auto":
-        with config_field("ray_address" if origin == "ray_address" else None):
-            check_reachable(address, origin)
-
-
 def generator_state(state: Any) -> Any:
     """``state`` if it is a PCG64 state a Generator can have written, else ``ValueError``.
 
@@ -235,22 +187,3 @@ def stop_criteria(met: Any) -> list[str]:
                 f"most 100), got {name[:120]!r}"
             )
     return sorted(met)
-
-
-def unwrapped_model(env: gym.Env) -> Any:
-    """The creps_gym model behind ``env`` if every wrapper around it is in ``MODEL_PRESERVING_WRAPPERS``.
-
-    None otherwise (an env that is not a creps_gym model, or a wrapper that may change the reward, the
-    observation or the action, e.g. ``TransformReward`` or ``NormalizeParams``): then the runner evaluates
-    through episodes of the env itself, which see what training sees.
-    """
-    try:
-        model = contextual_model(env)
-    except TypeError:
-        return None
-    layer = env
-    while layer is not model:
-        if not isinstance(layer, MODEL_PRESERVING_WRAPPERS):
-            return None
-        layer = layer.env
-    return model

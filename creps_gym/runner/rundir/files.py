@@ -16,8 +16,8 @@ operating-system error (disk full, read-only file system, file size limit, name 
 **Outputs** (:func:`write_output`: ``plot -o``, ``export -o``, :func:`~creps_gym.runner.plot_histories`'s
 path). The user names them, so a symbolic link is followed and its target is replaced (atomically); a
 target that is not a regular file (a FIFO, a device, a directory) and a run directory's own file are
-refused with a ``ValueError`` (CLI exit code 2). :mod:`creps_gym.runner.outputs` applies these rules to
-every output option (``-o``, ``policy --save``, ``evaluate --video``).
+refused with a ``ValueError`` (CLI exit code 2). :mod:`creps_gym.runner.results.outputs` applies these
+rules to every output option (``-o``, ``policy --save``, ``evaluate --video``).
 
 **JSON** (:func:`json_document`): a document nested deeper than :data:`MAX_DEPTH` is a ``ValueError``,
 never a ``RecursionError``.

@@ -20,10 +20,10 @@ from collections.abc import Sequence
 from typing import Any
 
 from creps_gym.runner.config import RunConfig
-from creps_gym.runner.export import env_key
 from creps_gym.runner.history import History
+from creps_gym.runner.results.export import env_key
 from creps_gym.runner.rundir import RunDir
-from creps_gym.runner.trust import FINGERPRINT_FIELDS
+from creps_gym.runner.rundir.checkpoint import FINGERPRINT_FIELDS
 
 __all__ = ["SETTING_FIELDS", "group_runs", "load_runs", "setting"]
 

@@ -1,4 +1,4 @@
-"""The IOHanalyzer CSV text of histories (see :mod:`creps_gym.runner.export`, which writes it to a file).
+"""The IOHanalyzer CSV text of histories (:mod:`creps_gym.runner.results.export` writes it to a file).
 
 A module of its own so that the run directory (:mod:`creps_gym.runner.rundir`), which writes its own
 ``iohanalyzer.csv``, and the export, which refuses to write into a run directory, do not import each other.

@@ -6,7 +6,7 @@ regret of the recommended policy on a log axis with the target regret as a dashe
 return (symlog axis) when the env has no regret. The x axis is the number of training episodes; the legend,
 below both panels (it never covers a curve: the figure grows with it), gives each group's size and stop
 reasons, and the title names the env and its dimensions. :func:`plot_run_dirs` does the same from run
-directories, one group per setting (:mod:`creps_gym.runner.groups`: everything fingerprinted but the
+directories, one group per setting (:mod:`creps_gym.runner.results.groups`: everything fingerprinted but the
 seed), or as ``labels`` say. Runs of different envs are refused unless ``mix_envs=True``.
 """
 
@@ -23,11 +23,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym.optimizers.adapters.base import import_optional
-from creps_gym.runner.export import check_one_env
-from creps_gym.runner.files import output_target, write_output
 from creps_gym.runner.history import History
+from creps_gym.runner.results.export import check_one_env
 from creps_gym.runner.rundir import RunDir
-from creps_gym.runner.trust import escape_text
+from creps_gym.runner.rundir.files import output_target, write_output
+from creps_gym.runner.rundir.references import escape_text
 
 __all__ = ["check_title", "figure_bytes", "load_history", "plot_histories", "plot_run_dirs", "save_figure"]
 
@@ -194,7 +194,7 @@ def save_figure(figure: Any, path: str | os.PathLike[str]) -> Path:
     """Write ``figure`` to exactly ``path``, in the format of its extension (PNG without one).
 
     A link is followed (its target is replaced); a target that is not a regular file, or that is a run
-    directory's own file, raises ``ValueError`` (:func:`creps_gym.runner.files.write_output`), and so
+    directory's own file, raises ``ValueError`` (:func:`creps_gym.runner.rundir.files.write_output`), and so
     does an extension matplotlib cannot write. Returns the file written.
     """
     output_target(path, protected=RunDir.owns)  # refused before drawing
@@ -218,12 +218,12 @@ def plot_run_dirs(
     labels: Sequence[str] | None = None,
     **kwargs: Any,
 ) -> Any:
-    """Plot run directories, one group per setting (see :mod:`creps_gym.runner.groups`).
+    """Plot run directories, one group per setting (see :mod:`creps_gym.runner.results.groups`).
 
     ``labels``: one per run directory (same label, same group) or one per setting group. The target
     regret line is drawn when every run has the same ``target_regret``.
     """
-    from creps_gym.runner.groups import group_runs, load_runs
+    from creps_gym.runner.results.groups import group_runs, load_runs
 
     runs = load_runs(paths)
     check_one_env([history for _, history in runs], mix_envs)

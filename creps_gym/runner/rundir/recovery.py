@@ -1,27 +1,26 @@
 """The history of a run directory, rebuilt from its append-only log.
 
-Checkpoints (format ``creps_gym.run/3``) hold no history: the records are in ``log.jsonl``, and a
-checkpoint keeps the checksum :func:`history_crc` of records 1..k, so the history at a checkpoint is
-rebuilt from the log and checked (:func:`checkpoint_history`). Legacy checkpoints (``/2``, ``/1``) hold the
-whole history. :func:`read_history` serves plots and exports, also of unfinished or damaged runs.
+A checkpoint holds no history: the records are in ``log.jsonl``, and a checkpoint keeps the checksum
+:func:`~creps_gym.runner.rundir.log_chain.history_crc` of records 1..k, so the history at a checkpoint is
+rebuilt from the log and checked (:func:`checkpoint_history`). A checkpoint of an older format holds its
+history itself (upgraded on load: :mod:`creps_gym.runner.rundir.checkpoint`). :func:`read_history` serves
+plots and exports, also of unfinished or damaged runs.
 """
 
 from __future__ import annotations
 
-import json
 import warnings
-import zlib
 from typing import TYPE_CHECKING, Any
 
-from creps_gym.runner import files
+from creps_gym.errors import RunDirWarning
 from creps_gym.runner.history import History, IterationRecord
-from creps_gym.runner.runlog import record_chain
-from creps_gym.runner.session import RunDirWarning
+from creps_gym.runner.rundir import files
+from creps_gym.runner.rundir.log_chain import chain_crc, history_crc, record_chain
 
 if TYPE_CHECKING:  # for annotations only: rundir imports this module
     from creps_gym.runner.rundir import RunDir
 
-__all__ = ["REBUILD", "RESTART", "chain_crc", "checkpoint_history", "history_crc", "read_history"]
+__all__ = ["REBUILD", "RESTART", "checkpoint_history", "read_history"]
 
 RESTART = "delete it to restart the run from its first iteration, or restore it from a backup"
 REBUILD = (
@@ -30,24 +29,11 @@ REBUILD = (
 )
 
 
-def chain_crc(crc: int, entry: dict[str, Any]) -> int:
-    """``crc`` (the checksum of a history's records so far) extended by one record's ``to_dict()``."""
-    return zlib.crc32(json.dumps(entry, allow_nan=False).encode(), crc)
-
-
-def history_crc(records: list[IterationRecord]) -> int:
-    """The checksum a checkpoint keeps of the records 1..k of its history (see :func:`chain_crc`)."""
-    crc = 0
-    for record in records:
-        crc = chain_crc(crc, record.to_dict())
-    return crc
-
-
 def _is_final(run_dir: RunDir, final: History, state: dict[str, Any]) -> bool:
     """Whether ``final`` is the history the final checkpoint ``state`` closed."""
-    if "history" in state:  # a legacy checkpoint holds its history
-        saved = History.from_dict(state["history"])
-        return final.equals(saved, include_time=True) and final.meta == saved.meta
+    held = state.get("held_history")
+    if held is not None:  # a checkpoint of an older format: the history it holds
+        return final.equals(held, include_time=True) and final.meta == held.meta
     meta = run_dir.document().get("meta", {})
     same = len(final) == state["iteration"] and final.stop_reason == state["stop_reason"]
     return same and final.meta == meta and history_crc(final.records) == state["log_crc"]
@@ -102,12 +88,11 @@ def read_history(run_dir: RunDir) -> History:
     damaged: list[int] = []
     chains: dict[int, int | None] = {}
     records, _ = run_dir.read_log(damaged, chains)
-    history, legacy = History(meta=dict(run_dir.document().get("meta", {}))), False
-    if state is not None and "history" in state:
-        try:
-            history, legacy = History.from_dict(state["history"]), True
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise run_dir.damaged(run_dir.CHECKPOINT, exc, RESTART) from None
+    history = History(meta=dict(run_dir.document().get("meta", {})))
+    held = None if state is None else state.get("held_history")
+    legacy = held is not None  # the history is the checkpoint's own, the log adds nothing to it
+    if held is not None:
+        history = held
     elif state is not None:
         history = checkpoint_history(run_dir, state, records) or history
     from_checkpoint = len(history)
@@ -131,7 +116,7 @@ def _append_own_records(
 ) -> int | None:
     """Append the logged records that follow ``history`` and are provably this run's.
 
-    Each must carry the ``"chain"`` (:func:`~creps_gym.runner.runlog.record_chain`) of this run's
+    Each must carry the ``"chain"`` (:func:`~creps_gym.runner.rundir.log_chain.record_chain`) of this run's
     fingerprint and of the history before it. Returns the first iteration that does not (None if none).
     """
     following = [r for r in records if r.iteration > len(history)]

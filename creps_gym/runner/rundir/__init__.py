@@ -14,24 +14,27 @@ file                      content
                           JSON document, never pickle), replaced atomically (temporary file + rename; the
                           run's own temporaries left by a killed process are removed when the run
                           resumes). It holds the optimiser's and the loop's state, not the history (that
-                          is in the log: :mod:`creps_gym.runner.recovery`), and records the run's
-                          :func:`~creps_gym.runner.trust.config_fingerprint`: another run's is refused
-``run.lock``              the live writer's process id (see :mod:`creps_gym.runner.session`)
+                          is in the log: :mod:`creps_gym.runner.rundir.recovery`), and records the run's
+                          :func:`~creps_gym.runner.rundir.checkpoint.config_fingerprint`: another
+                          run's is refused
+``run.lock``              the live writer's process id (see :mod:`creps_gym.runner.rundir.session`)
 ``best_policy.npz``       the best evaluated mean policy, ``policy.npz`` the final one
-                          (:mod:`creps_gym.runner.policy_store`; ``creps_gym.load_policy(folder)``)
+                          (:mod:`creps_gym.runner.rundir.policies`; ``creps_gym.load_policy(folder)``)
 ``history.json`` / .csv   the final :class:`~creps_gym.runner.history.History` (written at the end)
 ``iohanalyzer.csv``       the evaluations in IOHanalyzer's CSV layout (written at the end)
 ``learning_curve.png``    the plot written by ``creps-gym run`` (when matplotlib is installed)
 ========================= ===========================================================================
 
 A run directory is untrusted input: a damaged file raises :class:`RunDirError` (a ``ValueError``) naming
-the file and what to do, and ``config.json`` is checked by :func:`creps_gym.runner.trust.check_trusted`.
-Every file is read and written through :mod:`creps_gym.runner.files`: only regular files, never through
-a link, with bounded reads. The log's lines are described in :mod:`creps_gym.runner.runlog`.
+the file and what to do, and ``config.json`` is checked by
+:func:`creps_gym.runner.rundir.references.check_trusted`. Every file is read and written through
+:mod:`creps_gym.runner.rundir.files`: only regular files, never through a link, with bounded reads. The log's
+lines are described in :mod:`creps_gym.runner.rundir.log_chain`.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import platform
@@ -45,23 +48,17 @@ from typing import Any
 
 from creps_gym.errors import RunDirError, RunDirWarning
 from creps_gym.optimizers.base import load_state, save_state
-from creps_gym.runner import files
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History, IterationRecord
-from creps_gym.runner.ioh import iohanalyzer_text
-from creps_gym.runner.recovery import RESTART, read_history
-from creps_gym.runner.runlog import entry_crc as _crc
-from creps_gym.runner.runlog import log_line, parse_log, record_chain
-from creps_gym.runner.session import RunLock
-from creps_gym.runner.trust import (
-    CHECKPOINT_FORMAT,
-    LEGACY_FORMATS,
-    check_checkpoint,
-    check_trusted,
-    config_fingerprint,
-)
+from creps_gym.runner.results.ioh import iohanalyzer_text
+from creps_gym.runner.rundir import files
+from creps_gym.runner.rundir.checkpoint import checkpoint_document, config_fingerprint, open_checkpoint
+from creps_gym.runner.rundir.log_chain import log_line, parse_log, record_chain
+from creps_gym.runner.rundir.recovery import RESTART, read_history
+from creps_gym.runner.rundir.references import check_trusted
+from creps_gym.runner.rundir.session import RunLock
 
-__all__ = ["RESTART", "RunDir", "RunDirError", "RunDirWarning", "package_versions"]
+__all__ = ["RESTART", "RunDir", "package_versions"]
 
 
 def package_versions() -> dict[str, str]:
@@ -74,9 +71,6 @@ def package_versions() -> dict[str, str]:
         except PackageNotFoundError:
             found[package] = "not installed"
     return found
-
-
-_CHECKPOINT_KEYS = ("format", "fingerprint", "state_crc")
 
 
 class RunDir:
@@ -159,7 +153,7 @@ class RunDir:
         return run_dir
 
     def write_file(self, name: str, data: str | bytes) -> None:
-        """Replace the file ``name`` atomically (:func:`creps_gym.runner.files.write_run_file`)."""
+        """Replace the file ``name`` atomically (:func:`creps_gym.runner.rundir.files.write_run_file`)."""
         files.write_run_file(self.file(name), data.encode() if isinstance(data, str) else data)
 
     def _check_new(self, overwrite: bool) -> None:
@@ -223,7 +217,7 @@ class RunDir:
         return document
 
     def config(self) -> RunConfig:
-        """The run's configuration, checked by :func:`~creps_gym.runner.trust.check_trusted`.
+        """The run's configuration, checked by :func:`~creps_gym.runner.rundir.references.check_trusted`.
 
         Its ``ray_address`` is None: ``config.json`` records the cluster a run was started on, but a run
         directory never chooses the Ray cluster a resumed run joins (connecting to a cluster lets it run
@@ -242,7 +236,7 @@ class RunDir:
         return replace(config, ray_address=None)
 
     def fingerprint(self) -> str:
-        """The :func:`~creps_gym.runner.trust.config_fingerprint` of ``config.json``'s configuration.
+        """The :func:`~creps_gym.runner.rundir.checkpoint.config_fingerprint` of ``config.json``'s config.
 
         It imports nothing (unlike :meth:`config`, it does not check the names in it).
         """
@@ -308,9 +302,7 @@ class RunDir:
         self, state: dict[str, Any], optimizer_state: dict[str, Any], config: RunConfig
     ) -> Path:
         """Write the runner's state, the optimiser's ``state_dict()`` and ``config``'s fingerprint."""
-        flat = {"format": CHECKPOINT_FORMAT, "fingerprint": config_fingerprint(config), **state}
-        flat["state_crc"] = _crc(state, sort_keys=True)  # the loop's state is checked as a whole
-        flat.update({f"optimizer.{key}": value for key, value in optimizer_state.items()})
+        flat = checkpoint_document(state, optimizer_state, config)
         path = self.file(self.CHECKPOINT)
         files.check_regular(path)
         try:
@@ -326,7 +318,9 @@ class RunDir:
         """``(runner state, optimiser state)`` of the last checkpoint, or None if there is none yet.
 
         With ``config``, a checkpoint written under another configuration (another seed, env, dimension,
-        optimiser, ...) raises :class:`RunDirError`, and so does a damaged one.
+        optimiser, ...) raises :class:`RunDirError`, and so does a damaged one. A checkpoint of an older
+        format is upgraded to the current form here, once
+        (:func:`~creps_gym.runner.rundir.checkpoint.open_checkpoint`).
         """
         path = self.file(self.CHECKPOINT)
         try:
@@ -338,29 +332,8 @@ class RunDir:
                 flat = load_state(stream)
         except Exception as exc:  # an untrusted file: every way of failing to parse it is damage
             raise self.damaged(self.CHECKPOINT, exc, RESTART) from None
-        if flat.get("format") not in (CHECKPOINT_FORMAT, *LEGACY_FORMATS):
-            found = f"format {flat.get('format')!r}, expected {CHECKPOINT_FORMAT!r}"
-            raise self.damaged(self.CHECKPOINT, found, RESTART)
-        if flat["format"] == CHECKPOINT_FORMAT:
-            self._check_state_crc(flat)
-        if config is not None:
-            check_checkpoint(flat, config, str(path), RESTART)
-        prefix = "optimizer."
-        optimizer_state = {k[len(prefix) :]: v for k, v in flat.items() if k.startswith(prefix)}
-        state = {k: v for k, v in flat.items() if not k.startswith(prefix) and k not in _CHECKPOINT_KEYS}
-        return state, optimizer_state
-
-    def _check_state_crc(self, flat: dict[str, Any]) -> None:
-        """Refuse a checkpoint whose loop state is not the one it was written with."""
-        state = {
-            k: v for k, v in flat.items() if not k.startswith("optimizer.") and k not in _CHECKPOINT_KEYS
-        }
-        try:
-            intact = flat.get("state_crc") == _crc(state, sort_keys=True)
-        except (TypeError, ValueError):
-            intact = False
-        if not intact:
-            raise self.damaged(self.CHECKPOINT, "the loop state does not match its checksum", RESTART)
+        damaged = functools.partial(self.damaged, self.CHECKPOINT, advice=RESTART)
+        return open_checkpoint(flat, config, str(path), RESTART, damaged)
 
     # -- results ---------------------------------------------------------------------------------------------
     def write_results(self, history: History, *, only_changed: bool = False) -> list[str]:
@@ -393,5 +366,5 @@ class RunDir:
             return False
 
     def read_history(self) -> History:
-        """The run's history: see :func:`creps_gym.runner.recovery.read_history`."""
+        """The run's history: see :func:`creps_gym.runner.rundir.recovery.read_history`."""
         return read_history(self)

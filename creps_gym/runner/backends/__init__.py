@@ -11,12 +11,12 @@ parameters. Every backend therefore computes the same returns, bit for bit, in t
 * ``vector``: a Gymnasium vector env. The native one (``vector_entry_point``, one batched ``evaluate`` call,
   contexts set through ``reset(options={"context": ...})``) where registered, else ``AsyncVectorEnv`` (or
   ``SyncVectorEnv`` with ``vector_mode="sync"``) reset with the per-episode seeds (and contexts), see
-  :mod:`.vector_backend`.
+  :mod:`.vector`.
 * ``ray``: Ray tasks (``pip install creps-gym[ray]``), one chunk of episodes per cluster CPU; Ray is imported
   only when this backend is built. An already initialised Ray is used as is; a running cluster at
   ``ray_address`` (or ``RAY_ADDRESS``) is joined and left running; otherwise a local instance is started
   and shut down by ``RayBackend.close``, with a watchdog that stops it if the run's process dies without
-  shutting it down (see :mod:`.ray_backend`).
+  shutting it down (see :mod:`.ray`).
 
 **Failure policy** (the same on every backend). Every episode gets ``retries + 1`` attempts of its own:
 an episode whose reset or step raises, or whose reward is not a finite real number (a str, bool, None or
@@ -40,8 +40,7 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym.errors import EpisodeError
-from creps_gym.runner.episodes import (
+from creps_gym.runner.backends.episodes import (
     Array,
     Backend,
     EnvSource,
@@ -55,7 +54,6 @@ from creps_gym.runner.episodes import (
 __all__ = [
     "Backend",
     "EnvSource",
-    "EpisodeError",
     "SerialBackend",
     "check_context",
     "episode_return",
@@ -120,11 +118,11 @@ def make_backend(
     if name == "serial":
         return SerialBackend(source, retries, env)
     if name == "vector":
-        from creps_gym.runner.vector_backend import VectorBackend
+        from creps_gym.runner.backends.vector import VectorBackend
 
         return VectorBackend(source, retries, workers, vector_mode, samples)
     if name == "ray":
-        from creps_gym.runner.ray_backend import RayBackend  # imports Ray only when asked for
+        from creps_gym.runner.backends.ray import RayBackend  # imports Ray only when asked for
 
         return RayBackend(source, retries, workers, ray_address)
     raise ValueError(f"backend: expected one of ['auto', 'serial', 'vector', 'ray'], got {name!r}")

@@ -1,7 +1,7 @@
 """Output paths the user names (``-o``, ``policy --save``, ``evaluate --video``): one set of rules.
 
 :func:`check_output_path` checks a path before anything is computed, like ``-o``
-(:func:`creps_gym.runner.files.output_target`): a symbolic link is followed and its target replaced, a
+(:func:`creps_gym.runner.rundir.files.output_target`): a symbolic link is followed and its target replaced, a
 target that is not a regular file (a FIFO, a device, a folder) and a run directory's own file
 (``checkpoint.npz``, ``log.jsonl``, ... of any run folder) are refused with a ``ValueError`` naming the
 option (CLI exit code 2). :func:`write_output_with` writes a file that a library writes by name (a video)
@@ -18,8 +18,8 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from creps_gym._files import replace_atomically, temporary_beside
-from creps_gym.runner.files import output_target
 from creps_gym.runner.rundir import RunDir
+from creps_gym.runner.rundir.files import output_target
 
 __all__ = ["check_output_path", "write_output_with"]
 

@@ -16,8 +16,8 @@ from helpers import EXTRAS, SPHERE, cli_in_process
 import creps_gym
 from creps_gym.optimizers import Policy
 from creps_gym.runner import History, RunDir, resume, run
-from creps_gym.runner.build import split_seed
 from creps_gym.runner.rundir.policies import evaluate_on_env
+from creps_gym.runner.seeds import split_seed
 
 # c-cma-es restarts at iteration 24 with these options (its stagnation criterion after 5 iterations), and
 # its evaluations get worse after that (``keep_best=False``: its recommendation restarts with the search): the

@@ -189,8 +189,8 @@ def _strings(value: Any) -> list[str]:
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
 
-    from creps_gym.runner.build import split_seed
     from creps_gym.runner.rundir.policies import evaluate_on_env
+    from creps_gym.runner.seeds import split_seed
 
     _output(args.video, "--video", VIDEO_SUFFIXES)
     policy = _load(args)

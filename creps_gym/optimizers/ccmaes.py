@@ -190,9 +190,14 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         if config.baseline_bandwidth > 0.0:  # Eq. (C1'')
             return local_advantages(contexts, returns, config.baseline_bandwidth, *past)
         return context_advantages(  # Eq. (C1)
-            contexts, returns, config.baseline_degree, config.baseline_ridge, *past,
-            config.standardise_advantages, self._baseline_loss(),
-        )  # fmt: skip
+            contexts,
+            returns,
+            config.baseline_degree,
+            config.baseline_ridge,
+            *past,
+            config.standardise_advantages,
+            self._baseline_loss(),
+        )
 
     def _step(self, contexts: Array, params: Array, weights: Array, constants: CMAConstants) -> _Step:
         policy = self.policy.copy()
@@ -223,14 +228,27 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
                 policy.mean_map, contexts[selected], deviations[selected], weights[selected]
             )
         path_sigma, path_cov, cov, hsig = update_paths_and_cov(  # Eqs. (C5)-(C8)
-            self.policy.cov, self.path_sigma, self.path_cov, signal, shift, deviations, weights, constants,
-            self.iteration, inv_sqrt,
-        )  # fmt: skip
+            self.policy.cov,
+            self.path_sigma,
+            self.path_cov,
+            signal,
+            shift,
+            deviations,
+            weights,
+            constants,
+            self.iteration,
+            inv_sqrt,
+        )
         repaired = policy.set_cov(cov)
         policy.step_size = csa_step(sigma, path_sigma, constants)  # Eq. (C9)
         ratio = float(np.linalg.norm(path_sigma)) / expected_norm(path_sigma.size)
-        diagnostics = {"step_size": policy.step_size, "mu_eff": constants.mu_eff, "path_sigma_ratio": ratio,
-                       "hsig": float(hsig), "cov_repaired": float(repaired)}  # fmt: skip
+        diagnostics = {
+            "step_size": policy.step_size,
+            "mu_eff": constants.mu_eff,
+            "path_sigma_ratio": ratio,
+            "hsig": float(hsig),
+            "cov_repaired": float(repaired),
+        }
         return _Step(policy, path_sigma, path_cov, diagnostics)
 
     def _search_score(self) -> float:
@@ -280,15 +298,21 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             return {}
         config = self.config
         met: dict[str, Any] = distribution_stops(
-            self.step_size, config.initial_step_size, np.diag(self.policy.cov), self._eigen()[0],
-            self.path_cov, config.tolx, config.tolupsigma, config.max_condition,
-        )  # fmt: skip
+            self.step_size,
+            config.initial_step_size,
+            np.diag(self.policy.cov),
+            self._eigen()[0],
+            self.path_cov,
+            config.tolx,
+            config.tolupsigma,
+            config.max_condition,
+        )
         met.update(self._no_signal_stops())
         return met
 
     # -- checkpoints ---------------------------------------------------------------------------------------
     def _state(self) -> dict[str, Any]:
-        state = self._policy_state()
+        state, best = self._policy_state(), self.best_coefficients  # best: None before the first restart
         state.update(
             path_sigma=self.path_sigma.copy(),
             path_cov=self.path_cov.copy(),
@@ -297,10 +321,9 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             past_contexts=self.past_contexts.copy(),
             past_returns=self.past_returns.copy(),
             restarts_done=self.restarts_done,
-            best_coefficients=np.zeros((0, self.n_params)) if self.best_coefficients is None
-            else self.best_coefficients.copy(),
-            best_score=np.asarray([self.best_score] if self.best_coefficients is not None else []),
-        )  # fmt: skip
+            best_coefficients=np.zeros((0, self.n_params)) if best is None else best.copy(),
+            best_score=np.asarray([] if best is None else [self.best_score]),
+        )
         return state
 
     @classmethod

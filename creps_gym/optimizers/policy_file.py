@@ -276,8 +276,15 @@ class Policy:
             if (pair[0] is None) != (pair[1] is None):
                 raise ValueError(f"arrays: expected both {prefix}_low and {prefix}_high or neither")
             boxes[f"{prefix}_box"] = None if pair[0] is None else pair
-        policy = cls(document["features"], coefficients, context_dim=z, env=document["env"],
-                     env_kwargs=document["env_kwargs"], source=document["source"], **boxes)  # fmt: skip
+        policy = cls(
+            document["features"],
+            coefficients,
+            context_dim=z,
+            env=document["env"],
+            env_kwargs=document["env_kwargs"],
+            source=document["source"],
+            **boxes,
+        )
         if policy.n_params != p:
             got = policy.n_params
             raise ValueError(f"arrays['coefficients']: expected {p} columns (n_params), got {got}")

@@ -213,26 +213,66 @@ def restore_optimizer(name: str, state: Mapping[str, Any]) -> Any:
 _MISSING = object()
 
 _DEFAULTS = (
-    ("creps", "Contextual REPS: KL-bounded weights, weighted ML mean and covariance (premature convergence)",
-     "creps_gym.optimizers.creps:CREPS", {}),
-    ("creps-cma-old", "CREPS-CMA, old-mean variant: rank-mu covariance around the sampling mean (Eq. 16)",
-     "creps_gym.optimizers.creps_cma:CREPSCMA", {"variant": "old"}),
-    ("creps-cma-current", "CREPS-CMA, current-mean variant: rank-mu covariance around the new mean (Eq. 13)",
-     "creps_gym.optimizers.creps_cma:CREPSCMA", {"variant": "current"}),
-    ("creps-cma-csa", "CREPS-CMA with step-size control: CREPS weights and mean, CMA covariance and CSA",
-     "creps_gym.optimizers.creps_cma:CREPSCMA", {"step_size": "csa"}),
-    ("c-cma-es", "Contextual CMA-ES: rank weights on context-baselined returns, step-size control (CSA)",
-     "creps_gym.optimizers.ccmaes:CCMAES", {}),
-    ("c-cma-es-surrogate", "C-CMA-ES with a linear-quadratic surrogate of the return, used while it ranks",
-     "creps_gym.optimizers.ccmaes_surrogate:CCMAESSurrogate", {}),
-    ("c-bo", "Contextual Bayesian optimisation: a GP over (s, theta), MES or UCB at each s (50-500 episodes)",
-     "creps_gym.optimizers.cbo:ContextualBO", {}),
-    ("cma", "pycma CMA-ES (non-contextual: ignores the context; extra 'adapters')",
-     "creps_gym.optimizers.adapters.pycma:CMAAdapter", {}),
-    ("nevergrad", "nevergrad optimiser, TwoPointsDE by default (non-contextual; extra 'adapters')",
-     "creps_gym.optimizers.adapters.nevergrad:NevergradAdapter", {}),
-    ("optuna", "optuna TPE sampler, ask-and-tell (non-contextual; extra 'adapters')",
-     "creps_gym.optimizers.adapters.optuna:OptunaAdapter", {}),
-)  # fmt: skip
+    (
+        "creps",
+        "Contextual REPS: KL-bounded weights, weighted ML mean and covariance (premature convergence)",
+        "creps_gym.optimizers.creps:CREPS",
+        {},
+    ),
+    (
+        "creps-cma-old",
+        "CREPS-CMA, old-mean variant: rank-mu covariance around the sampling mean (Eq. 16)",
+        "creps_gym.optimizers.creps_cma:CREPSCMA",
+        {"variant": "old"},
+    ),
+    (
+        "creps-cma-current",
+        "CREPS-CMA, current-mean variant: rank-mu covariance around the new mean (Eq. 13)",
+        "creps_gym.optimizers.creps_cma:CREPSCMA",
+        {"variant": "current"},
+    ),
+    (
+        "creps-cma-csa",
+        "CREPS-CMA with step-size control: CREPS weights and mean, CMA covariance and CSA",
+        "creps_gym.optimizers.creps_cma:CREPSCMA",
+        {"step_size": "csa"},
+    ),
+    (
+        "c-cma-es",
+        "Contextual CMA-ES: rank weights on context-baselined returns, step-size control (CSA)",
+        "creps_gym.optimizers.ccmaes:CCMAES",
+        {},
+    ),
+    (
+        "c-cma-es-surrogate",
+        "C-CMA-ES with a linear-quadratic surrogate of the return, used while it ranks",
+        "creps_gym.optimizers.ccmaes_surrogate:CCMAESSurrogate",
+        {},
+    ),
+    (
+        "c-bo",
+        "Contextual Bayesian optimisation: a GP over (s, theta), MES or UCB at each s (50-500 episodes)",
+        "creps_gym.optimizers.cbo:ContextualBO",
+        {},
+    ),
+    (
+        "cma",
+        "pycma CMA-ES (non-contextual: ignores the context; extra 'adapters')",
+        "creps_gym.optimizers.adapters.pycma:CMAAdapter",
+        {},
+    ),
+    (
+        "nevergrad",
+        "nevergrad optimiser, TwoPointsDE by default (non-contextual; extra 'adapters')",
+        "creps_gym.optimizers.adapters.nevergrad:NevergradAdapter",
+        {},
+    ),
+    (
+        "optuna",
+        "optuna TPE sampler, ask-and-tell (non-contextual; extra 'adapters')",
+        "creps_gym.optimizers.adapters.optuna:OptunaAdapter",
+        {},
+    ),
+)
 for _name, _description, _target, _fixed in _DEFAULTS:
     register_optimizer(_name, _description, _target, _fixed)

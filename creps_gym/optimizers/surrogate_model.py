@@ -125,8 +125,12 @@ class SurrogateModel:
     def state(self, prefix: str) -> dict[str, Any]:
         """The model as arrays and JSON scalars, keys starting with ``prefix``."""
         arrays = {name: getattr(self, name).copy() for name in self._ARRAYS}
-        scalars = {"kind": self.kind, "step_size": self.step_size, "return_centre": self.return_centre,
-                   "return_scale": self.return_scale}  # fmt: skip
+        scalars = {
+            "kind": self.kind,
+            "step_size": self.step_size,
+            "return_centre": self.return_centre,
+            "return_scale": self.return_scale,
+        }
         return {f"{prefix}{name}": value for name, value in {**arrays, **scalars}.items()}
 
     @classmethod
@@ -138,8 +142,13 @@ class SurrogateModel:
         if kind not in KINDS[1:]:
             raise ValueError(f"state['{prefix}kind']: expected one of {KINDS[1:]}, got {kind!r}")
         p, z = n_params, n_context_dims
-        shapes = {"mean_coefficients": (n_features, p), "whitening": (p, p), "context_centre": (z,),
-                  "context_scale": (z,), "coefficients": (model_coefficients(kind, p, z),)}  # fmt: skip
+        shapes = {
+            "mean_coefficients": (n_features, p),
+            "whitening": (p, p),
+            "context_centre": (z,),
+            "context_scale": (z,),
+            "coefficients": (model_coefficients(kind, p, z),),
+        }
         arrays = {
             name: as_float_array(state[f"{prefix}{name}"], f"state['{prefix}{name}']", shape).copy()
             for name, shape in shapes.items()
@@ -182,8 +191,17 @@ def fit_model(
     centre, spread = contexts.mean(axis=0), np.where(spread > 0, spread, 1.0)
     r_centre = float(returns.mean())
     r_scale = float(np.abs(returns - r_centre).max()) or 1.0
-    model = SurrogateModel(kind, coefficients.copy(), float(step_size), whitening.copy(), centre, spread,
-                           r_centre, r_scale, np.zeros(0))  # fmt: skip
+    model = SurrogateModel(
+        kind,
+        coefficients.copy(),
+        float(step_size),
+        whitening.copy(),
+        centre,
+        spread,
+        r_centre,
+        r_scale,
+        np.zeros(0),
+    )
     s, u = model.inputs(mean_map, contexts, params)
     design = _design(kind, s, u)
     distance = np.einsum("ij,ij->i", u, u)  # Mahalanobis distance² to the current mean at s_k
@@ -192,14 +210,27 @@ def fit_model(
     weights = 1.0 - 0.9 * ranks / max(distance.size - 1, 1)  # Eq. (S3): 1 (nearest) down to 0.1 (farthest)
     root = np.sqrt(weights)
     try:  # Eq. (S3): a QR least-squares solve of √w·X c = √w·y (the normal equations square cond X)
-        fit = linalg.lstsq(design * root[:, None], root * (returns - r_centre) / r_scale, check_finite=False,
-                           lapack_driver="gelsy")[0]  # fmt: skip
+        fit = linalg.lstsq(
+            design * root[:, None],
+            root * (returns - r_centre) / r_scale,
+            check_finite=False,
+            lapack_driver="gelsy",
+        )[0]
     except (linalg.LinAlgError, ValueError):
         return None
     if not np.isfinite(fit).all():
         return None
-    return SurrogateModel(kind, model.mean_coefficients, model.step_size, model.whitening, centre, spread,
-                          r_centre, r_scale, fit)  # fmt: skip
+    return SurrogateModel(
+        kind,
+        model.mean_coefficients,
+        model.step_size,
+        model.whitening,
+        centre,
+        spread,
+        r_centre,
+        r_scale,
+        fit,
+    )
 
 
 def kendall_tau(first: Array, second: Array) -> float:

@@ -25,13 +25,15 @@ ask/tell protocol), :mod:`.env_model` (the model behind an env's wrappers), :mod
 
 from creps_gym.runner.api import resume, run
 from creps_gym.runner.backends import EnvSource, make_backend
+from creps_gym.runner.build import default_initial_distribution
 from creps_gym.runner.callbacks import Callback, ProgressBar
 from creps_gym.runner.config import BACKENDS, CONTEXT_DRAWS, VECTOR_MODES, RunConfig
 from creps_gym.runner.history import History, IterationRecord
-from creps_gym.runner.loop import Runner, default_initial_distribution, split_seed
+from creps_gym.runner.loop import Runner
 from creps_gym.runner.results.export import write_iohanalyzer
 from creps_gym.runner.results.plots import load_history, plot_histories, plot_run_dirs
 from creps_gym.runner.rundir import RunDir, package_versions
+from creps_gym.runner.seeds import split_seed
 
 __all__ = [
     "BACKENDS",

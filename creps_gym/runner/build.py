@@ -22,7 +22,7 @@ from creps_gym.optimizers.registry import make_optimizer
 from creps_gym.optimizers.registry import optimizer_class as registered_class
 from creps_gym.runner.backends import Backend, EnvSource, make_backend
 from creps_gym.runner.config import RunConfig
-from creps_gym.runner.seeds import SeedPlan, seed_child, split_seed
+from creps_gym.runner.seeds import SeedPlan, seed_child
 
 __all__ = [
     "build_backend",
@@ -30,7 +30,6 @@ __all__ = [
     "default_initial_distribution",
     "make_env",
     "per_parameter",
-    "split_seed",  # re-exported from .seeds
     "uniform_mean",
 ]
 

@@ -43,7 +43,7 @@ from creps_gym.optimizers.registry import recommended_samples
 from creps_gym.runner import build, env_model, protocol
 from creps_gym.runner.backends import Backend, EnvSource, retry
 from creps_gym.runner.backends.ray import check_ray_cluster
-from creps_gym.runner.build import build_backend, build_optimizer, default_initial_distribution, split_seed
+from creps_gym.runner.build import build_backend, build_optimizer
 from creps_gym.runner.callbacks import as_callback
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.contexts import ContextDraws
@@ -55,8 +55,9 @@ from creps_gym.runner.rundir.checkpoint import check_run_memory
 from creps_gym.runner.rundir.log_chain import chain_crc
 from creps_gym.runner.rundir.policies import RunPolicies, evaluate_contexts, evaluated_policy
 from creps_gym.runner.rundir.session import DeferredInterrupt
+from creps_gym.runner.seeds import split_seed
 
-__all__ = ["Runner", "default_initial_distribution", "split_seed"]  # the last two re-exported from .build
+__all__ = ["Runner"]
 
 Array = NDArray[np.float64]
 

@@ -63,11 +63,15 @@ SETTLE_STEPS = 500  # the standing robot settles for 1 s before any episode star
 # A right-leg kick for the precision task's ball (about 8 m): CMA-ES from a hand-made swing, then CMA-ES on
 # the mean return under N(0, 0.03^2) perturbations for robustness (see benchmarks/kick/README.md).
 # Normalised units; the recommended initial mean.
-REFERENCE_KICK: Array = np.array(
-    [0.2240, 0.4762, 0.0473, 0.2843, 0.0426, 0.6308, 0.5542, 0.1158, -0.0344, -0.2869, -0.1746, 0.1892,
-     -0.4231, -0.0201, -0.5163, -0.5637, 0.2372, 0.2611, 0.6974, -0.0027, 0.5251, -0.1084, -0.4773, 0.0645,
-     -1.0000]
-)  # fmt: skip
+REFERENCE_KICK: Array = np.concatenate(
+    [
+        [0.2240, 0.4762, 0.0473, 0.2843, 0.0426, 0.6308],  # the initial pose: right leg (LEG_JOINTS)
+        [0.5542, 0.1158, -0.0344, -0.2869, -0.1746, 0.1892],  # ... left leg
+        [-0.4231, -0.0201, -0.5163, -0.5637, 0.2372, 0.2611],  # the final pose: right leg
+        [0.6974, -0.0027, 0.5251, -0.1084, -0.4773, 0.0645],  # ... left leg
+        [-1.0000],  # the swing duration
+    ]
+)
 REFERENCE_KICK.flags.writeable = False
 
 

@@ -89,8 +89,10 @@ def _draw_groups(axes: tuple, groups: Mapping[str, Sequence[History]], regret: b
     entries = []
     for k, (text, runs) in enumerate(groups.items()):
         style = {"color": f"C{k % 10}", "linestyle": ("-", "--", ":", "-.")[k // 10 % 4], "label": text}
-        lines = [_draw(axes[0], *_stack(runs, "mean_return"), style, band),
-                 _draw(axes[1], *_stack(runs, metric), style, band)]  # fmt: skip
+        lines = [
+            _draw(axes[0], *_stack(runs, "mean_return"), style, band),
+            _draw(axes[1], *_stack(runs, metric), style, band),
+        ]
         drawn = [line for line in lines if line is not None]
         entries += [(drawn[0], text)] if drawn else []
     return entries

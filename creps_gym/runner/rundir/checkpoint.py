@@ -48,9 +48,23 @@ CHECKPOINT_FORMAT = "creps_gym.run/3"
 #: no fingerprint (matched on the history's seed, samples and env).
 LEGACY_FORMATS = ("creps_gym.run/2", "creps_gym.run/1")
 #: The configuration fields that define a run's results (the others only say where and how it runs).
-FINGERPRINT_FIELDS = ("env", "env_kwargs", "optimizer", "optimizer_options", "seed", "samples", "iterations",
-                      "eval_every", "eval_contexts", "context_draws", "initial_mean", "initial_std",
-                      "max_episodes", "target_regret", "max_time")  # fmt: skip
+FINGERPRINT_FIELDS = (
+    "env",
+    "env_kwargs",
+    "optimizer",
+    "optimizer_options",
+    "seed",
+    "samples",
+    "iterations",
+    "eval_every",
+    "eval_contexts",
+    "context_draws",
+    "initial_mean",
+    "initial_std",
+    "max_episodes",
+    "target_regret",
+    "max_time",
+)
 #: Fields fingerprinted only when set (``context_selector`` not None): runs without a selector keep the
 #: fingerprint they had before the fields existed, so their checkpoints still load.
 FINGERPRINT_FIELDS_IF_SET = ("context_selector", "context_selector_options")

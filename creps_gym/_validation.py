@@ -313,14 +313,21 @@ def check_fits_in_memory(n_bytes: float, name: str, value: Any, what: str) -> No
 MAX_JSON_DEPTH = 100
 
 
-def load_json(text: str | bytes, source: str, max_depth: int = MAX_JSON_DEPTH) -> Any:
+def load_json(
+    text: str | bytes, source: str, max_depth: int = MAX_JSON_DEPTH, *, standard: bool = False
+) -> Any:
     """``json.loads(text)``; a ``ValueError`` naming ``source`` if it nests deeper than ``max_depth``.
 
     Deep nesting would otherwise raise ``RecursionError`` here or in any recursive code that reads it.
+    With ``standard``, ``NaN`` and ``Infinity`` (which Python's ``json`` reads) are a ``ValueError`` too.
     """
     expected = f"{source}: expected JSON nested at most {max_depth} levels deep"
+
+    def refuse(constant: str) -> None:
+        raise ValueError(f"expected standard JSON, got {constant}")
+
     try:
-        document = json.loads(text)
+        document = json.loads(text, parse_constant=refuse) if standard else json.loads(text)
     except RecursionError:
         raise ValueError(f"{expected}, got deeper") from None
     stack = [(document, 1)]

@@ -176,7 +176,7 @@ OPTIONAL_LIBRARIES = {
 
 #: The package's ground floor: modules every layer may import, the optimisers included (they import no
 #: other package module, and no third-party library beyond numpy).
-GROUND_FLOOR = ("creps_gym._validation", "creps_gym._files", "creps_gym.errors")
+GROUND_FLOOR = ("creps_gym._validation", "creps_gym._files", "creps_gym._npz", "creps_gym.errors")
 #: Ground-floor modules that import the standard library only (no numpy: ``creps-gym --help`` imports them).
 STDLIB_ONLY = ("creps_gym._files", "creps_gym.errors")
 

@@ -185,7 +185,7 @@ def test_a_compressed_entry_that_inflates_beyond_the_limit_is_refused(tmp_path):
     with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_DEFLATED) as archive:
         archive.writestr(f"{JSON_ENTRY}.npy", b"\0" * (9 * 2**20))  # over MAX_JSON_BYTES once inflated
     (tmp_path / "p.npz").write_bytes(buffer.getvalue())
-    with pytest.raises(ValueError, match="expected an uncompressed entry"):  # policy files are stored
+    with pytest.raises(ValueError, match="expected an uncompressed array"):  # policy files are stored
         Policy.load(tmp_path / "p.npz")
 
 

@@ -88,7 +88,7 @@ def test_a_compressed_policy_file_that_declares_many_rbf_centres_is_refused(tmp_
     assert (tmp_path / "small.npz").stat().st_size < 200_000  # 1.5 M centres in ~100 kB
     result = _cli("evaluate", tmp_path / "small.npz")
     assert result.returncode == 3, result.stderr
-    assert "expected an uncompressed entry" in result.stderr and "small.npz" in result.stderr
+    assert "expected an uncompressed array" in result.stderr and "small.npz" in result.stderr
 
 
 def test_contexts_whose_policy_features_exceed_memory_are_refused_before_allocating():

@@ -157,7 +157,7 @@ def _environment(args: argparse.Namespace, policy: Any) -> tuple[str, dict[str, 
     """The env id and keywords to evaluate on, and the run's config (None for a policy file)."""
     from creps_gym.errors import RunDirError
     from creps_gym.runner.rundir import RunDir
-    from creps_gym.runner.rundir.references import module_reference
+    from creps_gym.runner.rundir.references import unimported_module
 
     if Path(args.run).is_dir():
         config = RunDir.open(args.run).config()  # checked: names no module that is not imported
@@ -166,25 +166,14 @@ def _environment(args: argparse.Namespace, policy: Any) -> tuple[str, dict[str, 
         return config.env, dict(config.env_kwargs), config
     if policy.env is None:
         raise UsageError(f"RUN: expected a policy file that names its env, got {args.run}")
-    texts = [policy.env, *_strings(policy.env_kwargs)]
-    for text in texts:
-        module = module_reference(text)
-        if module is not None and module not in sys.modules:
-            raise RunDirError(
-                f"RUN: {args.run} names the module {module!r} ({text!r}), which is not imported; a policy "
-                "file never makes creps-gym import code: pass --import MODULE if you trust it"
-            )
+    found = unimported_module([policy.env, policy.env_kwargs], "policy")
+    if found is not None:
+        _, text, module = found
+        raise RunDirError(
+            f"RUN: {args.run} names the module {module!r} ({text!r}), which is not imported; a policy "
+            "file never makes creps-gym import code: pass --import MODULE if you trust it"
+        )
     return policy.env, dict(policy.env_kwargs), None
-
-
-def _strings(value: Any) -> list[str]:
-    if isinstance(value, str):
-        return [value]
-    if isinstance(value, dict):
-        return [s for key, item in value.items() for s in (str(key), *_strings(item))]
-    if isinstance(value, list):
-        return [s for item in value for s in _strings(item)]
-    return []
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:

@@ -7,13 +7,12 @@ declare far more than the file holds) and read to at most its declared size, eac
 (dtype float64, shape matching its bytes) before anything is allocated; the JSON document at most
 :data:`MAX_JSON_BYTES`, nested at most 100 levels deep, without NaN or infinity. Every failure is a
 ``ValueError`` naming the file. The no-follow bounded read and the atomic write are the package's
-ground floor, :mod:`creps_gym._files`.
+ground floor, :mod:`creps_gym._files`, and so is the ``.npz`` + JSON container, :mod:`creps_gym._npz`.
 """
 
 from __future__ import annotations
 
 import io
-import json
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -22,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym._files import Bound, output_target, read_bounded, replace_atomically
-from creps_gym._validation import MAX_JSON_DEPTH
+from creps_gym._npz import container_bytes, container_entries, document_of, read_arrays, read_directory
 
 __all__ = ["MAX_JSON_BYTES", "MAX_POLICY_BYTES", "policy_bytes", "read_policy_file", "write_policy_file"]
 
@@ -33,20 +32,12 @@ ARRAY_ENTRIES = ("coefficients", "context_low", "context_high", "param_low", "pa
 
 
 def policy_bytes(document: dict[str, Any], arrays: dict[str, NDArray[Any]]) -> bytes:
-    """The bytes of a policy file: ``arrays`` and the JSON ``document``, stored uncompressed.
+    """The bytes of a policy file: ``arrays`` (as float64) and the JSON ``document``, stored uncompressed.
 
     They depend on the policy only (the entries carry a fixed date), so equal policies give equal files.
     """
-    payload = json.dumps(document, sort_keys=True, allow_nan=False).encode()
-    entries = {k: np.asarray(v, dtype=np.float64) for k, v in arrays.items()}
-    entries[JSON_ENTRY] = np.frombuffer(payload, dtype=np.uint8)
-    buffer = io.BytesIO()
-    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_STORED) as archive:
-        for name, array in entries.items():
-            npy = io.BytesIO()
-            np.lib.format.write_array(npy, np.ascontiguousarray(array), allow_pickle=False)
-            archive.writestr(zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0)), npy.getvalue())
-    return buffer.getvalue()
+    floats = {k: np.asarray(v, dtype=np.float64) for k, v in arrays.items()}
+    return container_bytes(container_entries(floats, JSON_ENTRY, document))
 
 
 def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]], path: Any) -> Path:
@@ -86,52 +77,6 @@ def _read_bytes(path: Path) -> bytes:
         ) from None
 
 
-def _array(raw: bytes, name: str) -> NDArray[Any]:
-    """One ``.npy`` entry, its header checked before the data is read."""
-    stream = io.BytesIO(raw)
-    major, _ = np.lib.format.read_magic(stream)
-    if major == 1:
-        shape, fortran, dtype = np.lib.format.read_array_header_1_0(stream)
-    elif major == 2:
-        shape, fortran, dtype = np.lib.format.read_array_header_2_0(stream)
-    else:
-        raise ValueError(f"{name}: expected a .npy header of version 1 or 2, got {major}")
-    wanted = np.dtype(np.uint8) if name == JSON_ENTRY else np.dtype("<f8")
-    if dtype != wanted or dtype.hasobject:
-        raise ValueError(f"{name}: expected dtype {wanted}, got {dtype}")
-    if not all(type(n) is int and n >= 0 for n in shape) or len(shape) > 2:  # not bool
-        raise ValueError(f"{name}: expected a shape of non-negative ints, at most two, got {shape}")
-    count = int(np.prod(shape, dtype=object))
-    if count * dtype.itemsize != len(raw) - stream.tell():
-        raise ValueError(f"{name}: expected {count * dtype.itemsize} bytes of data for shape {shape}")
-    array = np.frombuffer(raw, dtype=dtype, offset=stream.tell())
-    array = array.reshape(shape, order="F" if fortran else "C")
-    return np.array(array, dtype=dtype, order="C")  # a writable copy
-
-
-def _finite_json(text: str) -> Any:
-    """Standard JSON (no NaN or infinity) nested at most :data:`MAX_JSON_DEPTH` levels deep."""
-
-    def refuse(constant: str) -> None:
-        raise ValueError(f"expected standard JSON, got {constant}")
-
-    expected = f"{JSON_ENTRY}: expected JSON nested at most {MAX_JSON_DEPTH} levels deep"
-    try:
-        document = json.loads(text, parse_constant=refuse)
-    except RecursionError:
-        raise ValueError(f"{expected}, got deeper") from None
-    stack = [(document, 1)]
-    while stack:  # deep nesting would be a RecursionError in any recursive code that reads it
-        value, depth = stack.pop()
-        if isinstance(value, (dict, list)):
-            if depth > MAX_JSON_DEPTH:
-                raise ValueError(f"{expected}, got {depth} levels")
-            stack.extend(
-                (child, depth + 1) for child in (value.values() if isinstance(value, dict) else value)
-            )
-    return document
-
-
 def read_policy_file(path: Any) -> tuple[Any, dict[str, NDArray[np.float64]]]:
     """The JSON document and the arrays of a policy file (see the module docstring for the checks).
 
@@ -141,35 +86,23 @@ def read_policy_file(path: Any) -> tuple[Any, dict[str, NDArray[np.float64]]]:
     arrays : dict of str to float64 ndarray
     """
     path = Path(path)
-    data = _read_bytes(path)
+    stream = io.BytesIO(_read_bytes(path))
     try:
-        with zipfile.ZipFile(io.BytesIO(data)) as archive:
-            infos = archive.infolist()
-            names = [info.filename for info in infos]
-            allowed = {f"{name}.npy" for name in (*ARRAY_ENTRIES, JSON_ENTRY)}
-            unknown = sorted(set(names) - allowed)
-            if unknown or len(set(names)) != len(names) or f"{JSON_ENTRY}.npy" not in names:
-                raise ValueError(f"expected entries among {sorted(allowed)} (no repeats), got {names}")
-            entries = {}
-            for info in infos:
-                limit = MAX_JSON_BYTES if info.filename.startswith(JSON_ENTRY) else MAX_POLICY_BYTES
-                if info.compress_type != zipfile.ZIP_STORED or info.file_size != info.compress_size:
-                    raise ValueError(
-                        f"{info.filename}: expected an uncompressed entry (as written), got a compressed one"
-                    )
-                if info.file_size > limit:
-                    raise ValueError(f"{info.filename}: expected at most {limit} bytes, got {info.file_size}")
-                with archive.open(info) as stream:
-                    raw = stream.read(limit + 1)
-                if len(raw) > limit:
-                    raise ValueError(f"{info.filename}: expected at most {limit} bytes, got more")
-                entries[info.filename[: -len(".npy")]] = _array(raw, info.filename[: -len(".npy")])
-            payload = entries.pop(JSON_ENTRY)
-            if payload.ndim != 1:
-                raise ValueError(f"{JSON_ENTRY}: expected a 1-D uint8 array, got shape {payload.shape}")
-            document = _finite_json(payload.tobytes().decode("utf-8"))
+        entries = read_directory(stream, str(path))
+        allowed = (*ARRAY_ENTRIES, JSON_ENTRY)
+        if not set(entries) <= set(allowed) or JSON_ENTRY not in entries:
+            names = [info.filename for info in entries.values()]
+            raise ValueError(f"expected entries among {sorted(f'{n}.npy' for n in allowed)}, got {names}")
+        if entries[JSON_ENTRY].file_size > MAX_JSON_BYTES:
+            got = entries[JSON_ENTRY].file_size
+            raise ValueError(f"{JSON_ENTRY}.npy: expected at most {MAX_JSON_BYTES} bytes, got {got}")
+        arrays = read_arrays(stream, entries, {JSON_ENTRY: "|u1", "*": "<f8"})
+        document = document_of(arrays.pop(JSON_ENTRY), JSON_ENTRY)
+        for name, array in arrays.items():
+            if array.ndim > 2:
+                raise ValueError(f"{name}.npy: expected a shape of at most two dimensions, got {array.shape}")
     except (ValueError, KeyError, EOFError, OSError, RecursionError, zipfile.BadZipFile, UnicodeError) as exc:
         raise ValueError(f"path: expected a creps_gym policy file (.npz), got {path} ({exc})") from None
     except (RuntimeError, NotImplementedError) as exc:  # zipfile: encrypted, unknown compression
         raise ValueError(f"path: expected a creps_gym policy file (.npz), got {path} ({exc})") from None
-    return document, entries
+    return document, arrays

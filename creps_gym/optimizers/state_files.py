@@ -8,13 +8,15 @@ Never pickle, on either side:
 * :func:`load_state` reads the zip directory before it decompresses anything: every entry must be a
   ``.npy`` array, stored as :func:`save_state` stores it (uncompressed, so no entry is larger than its
   bytes in the file: no "zip bomb"), listed in the document's manifest of arrays (``__arrays__``; an
-  unknown entry is refused), and the arrays together must fit in memory. Arrays are then read with
-  ``allow_pickle=False``.
+  unknown entry is refused), and the arrays together must fit in memory. Each array's ``.npy`` header is
+  checked (a numeric dtype, a shape that matches its bytes) before its data is copied out.
+
+The container (entries, directory, arrays, JSON document) is the package's ground floor,
+:mod:`creps_gym._npz`, shared with policy files; the atomic write is :mod:`creps_gym._files`'.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import zipfile
 from collections.abc import Mapping
@@ -24,7 +26,7 @@ from typing import Any, BinaryIO
 import numpy as np
 
 from creps_gym._files import replace_atomically
-from creps_gym._validation import check_fits_in_memory, load_json
+from creps_gym._npz import container_entries, document_of, read_arrays, read_directory
 
 __all__ = ["ARRAY_KINDS", "JSON_KEY", "MANIFEST_KEY", "load_state", "save_state"]
 
@@ -111,34 +113,9 @@ def save_state(state: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
             raise ValueError(f"state: the key {reserved!r} is reserved")
     meta = _encode_non_finite({k: v for k, v in state.items() if k not in arrays})
     meta[MANIFEST_KEY] = sorted(arrays)
-    payload = json.dumps(meta, sort_keys=True, allow_nan=False).encode()
-    arrays[JSON_KEY] = np.frombuffer(payload, dtype=np.uint8)
+    entries = container_entries(arrays, JSON_KEY, meta)
     path.parent.mkdir(parents=True, exist_ok=True)
-    return replace_atomically(path, lambda stream: np.savez(stream, **arrays))
-
-
-def _entries(stream: BinaryIO, name: Any) -> dict[str, int]:
-    """Key -> uncompressed size of every entry, read from the zip directory (nothing decompressed).
-
-    ``ValueError`` for an entry that is not a ``.npy`` array stored uncompressed (a compressed entry can
-    be far larger than the file: :func:`save_state` never compresses), or for arrays too large for memory.
-    """
-    with zipfile.ZipFile(stream) as archive:
-        infos = archive.infolist()
-    sizes: dict[str, int] = {}
-    for info in infos:
-        key = info.filename[:-4] if info.filename.endswith(".npy") else None
-        if key is None or key in sizes:
-            what = "a second entry" if key is not None else "an entry that is not a .npy array"
-            raise ValueError(f"{what} {info.filename!r}")
-        if info.compress_type != zipfile.ZIP_STORED or info.file_size > info.compress_size:
-            raise ValueError(
-                f"entry {info.filename!r}: expected an uncompressed array, got {info.compress_size} bytes "
-                f"that decompress to {info.file_size}"
-            )
-        sizes[key] = info.file_size
-    check_fits_in_memory(sum(sizes.values()), "path", str(name), "its arrays")
-    return sizes
+    return replace_atomically(path, lambda stream: np.savez(stream, **entries))  # the layout of format /1
 
 
 def load_state(path: str | os.PathLike[str] | BinaryIO) -> dict[str, Any]:
@@ -164,25 +141,24 @@ def load_state(path: str | os.PathLike[str] | BinaryIO) -> dict[str, Any]:
         if stream.read(6) == b"\x93NUMPY":
             raise ValueError("got a single array (.npy), not an .npz")
         stream.seek(0)
-        sizes = _entries(stream, name)
+        entries = read_directory(stream, str(name))
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise ValueError(f"path: expected a creps_gym checkpoint (.npz), got {name} ({exc})") from None
-    if JSON_KEY not in sizes:
+    if JSON_KEY not in entries:
         raise ValueError(f"path: expected a creps_gym checkpoint with a {JSON_KEY!r} entry, got {name}")
     try:
-        stream.seek(0)
-        with np.load(stream, allow_pickle=False) as data:
-            document = load_json(data[JSON_KEY].tobytes().decode(), f"{name}: {JSON_KEY}")
-            if not isinstance(document, dict):
-                raise ValueError(f"a JSON {type(document).__name__}, not an object")
-            manifest = document.pop(MANIFEST_KEY, None)
-            keys = sorted(k for k in sizes if k != JSON_KEY)
-            if manifest is not None and manifest != keys:
-                unknown = sorted(set(keys) - set(manifest)) if isinstance(manifest, list) else keys
-                what = f"unknown entries {unknown}" if unknown else f"entries {keys}"
-                raise ValueError(f"{what} (its manifest {MANIFEST_KEY!r} lists {str(manifest)[:200]})")
-            state: dict[str, Any] = _decode_non_finite(document)
-            state.update({k: data[k].copy() for k in keys})
+        arrays = read_arrays(stream, entries, {JSON_KEY: "|u1", "*": f"kind:{ARRAY_KINDS}"})
+        document = document_of(arrays.pop(JSON_KEY), f"{name}: {JSON_KEY}", standard=False)
+        if not isinstance(document, dict):
+            raise ValueError(f"a JSON {type(document).__name__}, not an object")
+        manifest = document.pop(MANIFEST_KEY, None)
+        keys = sorted(arrays)
+        if manifest is not None and manifest != keys:
+            unknown = sorted(set(keys) - set(manifest)) if isinstance(manifest, list) else keys
+            what = f"unknown entries {unknown}" if unknown else f"entries {keys}"
+            raise ValueError(f"{what} (its manifest {MANIFEST_KEY!r} lists {str(manifest)[:200]})")
+        state: dict[str, Any] = _decode_non_finite(document)
+        state.update({k: arrays[k] for k in keys})
     except (ValueError, KeyError, TypeError, UnicodeDecodeError, OSError, zipfile.BadZipFile) as exc:
         raise ValueError(f"path: expected a creps_gym checkpoint, got a damaged {name} ({exc!r})") from None
     return state

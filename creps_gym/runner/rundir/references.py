@@ -38,6 +38,7 @@ __all__ = [
     "import_modules",
     "module_reference",
     "registered_env_id",
+    "unimported_module",
 ]
 
 
@@ -93,6 +94,18 @@ def _strings(value: Any, where: str) -> Iterator[tuple[str, str]]:
             yield from _strings(item, f"{where}[{index}]")
 
 
+def unimported_module(value: Any, where: str) -> tuple[str, str, str] | None:
+    """The first string in the JSON ``value`` (keys included) that names a module not imported, or None.
+
+    Returns ``(where in value, the string, the module)``; ``where`` names ``value`` itself.
+    """
+    for field, text in _strings(value, where):
+        module = module_reference(text)
+        if module is not None and module not in sys.modules:
+            return field, text, module
+    return None
+
+
 def check_trusted(config: RunConfig, source: str) -> None:
     """Refuse a configuration read from ``source`` that would import code (see the module docstring)."""
 
@@ -106,14 +119,11 @@ def check_trusted(config: RunConfig, source: str) -> None:
         raise refuse("optimizer", config.optimizer, f"a registered optimiser name {optimizer_names()}")
     if config.context_selector is not None and config.context_selector not in selector_names():
         raise refuse("context_selector", config.context_selector, f"a registered selector {selector_names()}")
-    found = [("env", config.env)] if config.env is not None else []
-    found += _strings(config.env_kwargs, "env_kwargs")
-    found += _strings(config.optimizer_options, "optimizer_options")
-    found += _strings(config.context_selector_options, "context_selector_options")
-    for field, text in found:
-        module = module_reference(text)
-        if module is not None and module not in sys.modules:
-            raise refuse(field, text, f"no reference to a module that is not imported (here {module!r})")
+    for field in ("env", "env_kwargs", "optimizer_options", "context_selector_options"):
+        found = unimported_module(getattr(config, field), field)  # config.env None: no string
+        if found is not None:
+            where, text, module = found
+            raise refuse(where, text, f"no reference to a module that is not imported (here {module!r})")
     if config.env is not None and config.env.split(":", 1)[-1] not in gym.registry:  # module imported above
         raise refuse("env", config.env, "a registered env id")
     _check_options_are_data(config, source)

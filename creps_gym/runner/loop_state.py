@@ -62,7 +62,7 @@ def restore(runner: Runner, run_dir: RunDir, optimizer: Any, optimizer_class: An
         runner.draws.selection.load(state)
         runner.history = _history_at_checkpoint(run_dir, state, runner._meta())
         runner._log_crc = int(state["log_crc"])
-        runner.policies.restore(state.get("best_policy"), runner.history)  # None in older checkpoints
+        runner.policies.restore(state["best_policy"], runner.history)
         runner.iteration, runner.episodes = int(state["iteration"]), int(state["episodes"])
         runner._elapsed_before = float(state["elapsed"])
     except RunDirError:

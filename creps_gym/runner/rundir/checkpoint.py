@@ -6,8 +6,9 @@ formats are still read (:data:`LEGACY_FORMATS`): ``/2`` holds the whole history 
 seeded resets), ``/1`` also has no fingerprint (it is matched on its history's seed, samples and env).
 This module is the only one that knows them: :func:`open_checkpoint` checks a checkpoint as its format
 was written and upgrades an older one, once, to the current form (``stop_reason`` and ``log_crc`` from
-its history, which it keeps as ``state["held_history"]``, a :class:`~creps_gym.runner.history.History`),
-so the loop and the recovery of a history read one form.
+its history, which it keeps as ``state["held_history"]``, a :class:`~creps_gym.runner.history.History`;
+``best_policy`` None where a checkpoint was written before runs kept one), so the loop and the recovery of
+a history read one form.
 
 **Checkpoints.** A checkpoint records the :func:`config_fingerprint` of its run; :func:`check_checkpoint`
 refuses one written under another configuration, and runner state that no run can have written.
@@ -241,4 +242,5 @@ def open_checkpoint(
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise damaged(exc) from None
         state.update(stop_reason=held.stop_reason, log_crc=history_crc(held.records), held_history=held)
+    state.setdefault("best_policy", None)  # none in checkpoints written before runs kept their best policy
     return state, optimizer_state

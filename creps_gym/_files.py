@@ -224,5 +224,11 @@ def replace_atomically(
 
 
 def write_atomically(path: str | os.PathLike[str], data: bytes) -> Path:
-    """Replace ``path`` atomically with ``data`` (:func:`replace_atomically`); returns ``path``."""
-    return replace_atomically(path, lambda stream: stream.write(data))
+    """Replace ``path`` atomically with ``data`` (:func:`replace_atomically`); returns ``path``.
+
+    A failure is an ``OSError`` (of the same kind, e.g. ``PermissionError``) naming ``path``.
+    """
+    try:
+        return replace_atomically(path, lambda stream: stream.write(data))
+    except OSError as exc:
+        raise type(exc)(exc.errno, exc.strerror, str(path)) from None

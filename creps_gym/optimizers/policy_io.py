@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._files import Bound, output_target, read_bounded, replace_atomically
+from creps_gym._files import Bound, output_target, read_bounded, write_atomically
 from creps_gym._npz import container_bytes, container_entries, document_of, read_arrays, read_directory
 
 __all__ = ["MAX_JSON_BYTES", "MAX_POLICY_BYTES", "policy_bytes", "read_policy_file", "write_policy_file"]
@@ -50,10 +50,7 @@ def write_policy_file(document: dict[str, Any], arrays: dict[str, NDArray[Any]],
     """
     target = output_target(path)
     data = policy_bytes(document, arrays)
-    try:
-        return replace_atomically(target, lambda stream: stream.write(data))
-    except OSError as exc:
-        raise OSError(exc.errno, exc.strerror, str(target)) from None
+    return write_atomically(target, data)
 
 
 def _not_regular(path: Path, kind: str) -> ValueError:

@@ -9,7 +9,8 @@ The loop's core is flat: :mod:`.api` (run, resume), :mod:`.config` (RunConfig), 
 new run builds), :mod:`.loop` (the Runner), :mod:`.seeds` (the seed plan), :mod:`.contexts` (how contexts
 are drawn), :mod:`.selection` (the context selector), :mod:`.protocol` (an optimiser checked against the
 ask/tell protocol), :mod:`.env_model` (the model behind an env's wrappers), :mod:`.divergence`,
-:mod:`.callbacks` (callbacks, progress bar), :mod:`.history` (History). Three wings:
+:mod:`.callbacks` (callbacks, progress bar), :mod:`.history` (History), :mod:`.ioh` (its IOHanalyzer CSV
+text). Three wings:
 
 * :mod:`.backends`: where episodes run (failure policy, serial; :mod:`.backends.episodes` what every
   backend shares, :mod:`.backends.vector`, :mod:`.backends.ray`, :mod:`.backends.watchdog`);
@@ -18,8 +19,8 @@ ask/tell protocol), :mod:`.env_model` (the model behind an env's wrappers), :mod
   from the log, :mod:`.rundir.checkpoint` what a checkpoint may hold and its formats,
   :mod:`.rundir.references` what a run directory may name, :mod:`.rundir.policies` the policies a run
   keeps, ``load_policy``);
-* :mod:`.results`: what is made of finished runs (:mod:`.results.plots`, :mod:`.results.export` and
-  :mod:`.results.ioh` IOHanalyzer CSV, :mod:`.results.groups` seeds of one setting, :mod:`.results.video`,
+* :mod:`.results`: what is made of finished runs (:mod:`.results.plots`, :mod:`.results.export` (IOHanalyzer
+  CSV files), :mod:`.results.groups` seeds of one setting, :mod:`.results.video`,
   :mod:`.results.outputs` the output paths a user names).
 """
 

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from creps_gym._files import write_atomically
 from creps_gym._validation import load_json
 
 __all__ = ["History", "IterationRecord", "atomic_write_text", "decode_float", "encode_float"]
@@ -49,9 +50,7 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
 
     ``path`` itself is replaced (a link there is not followed); ``OSError`` naming it if it cannot be.
     """
-    from creps_gym.runner.rundir.files import atomic_write
-
-    return atomic_write(path, text.encode("utf-8"))
+    return write_atomically(path, text.encode("utf-8"))
 
 
 def _same_float(a: float, b: float) -> bool:

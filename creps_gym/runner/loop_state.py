@@ -9,7 +9,7 @@ reaches this module upgraded (:mod:`creps_gym.runner.rundir.checkpoint`): it hol
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from creps_gym.errors import RunDirError
 from creps_gym.optimizers.registry import restore_optimizer
@@ -18,14 +18,12 @@ from creps_gym.runner.history import History
 from creps_gym.runner.rundir import RESTART, RunDir
 from creps_gym.runner.rundir.recovery import REBUILD, checkpoint_history
 
-if TYPE_CHECKING:  # for annotations only: the loop imports this module
-    from creps_gym.runner.loop import Runner
-
 __all__ = ["loop_state", "restore"]
 
 
-def loop_state(runner: Runner, run_dir: RunDir) -> dict[str, Any]:
-    """The loop's state of ``runner`` as its checkpoint in ``run_dir`` keeps it (O(1) in the run)."""
+def loop_state(runner: Any, run_dir: RunDir) -> dict[str, Any]:
+    """The loop's state of ``runner`` (a :class:`~creps_gym.runner.loop.Runner`) as its checkpoint in
+    ``run_dir`` keeps it (O(1) in the run)."""
     return {
         "env_rng": runner.env_rng.bit_generator.state,
         "iteration": runner.iteration,
@@ -38,8 +36,9 @@ def loop_state(runner: Runner, run_dir: RunDir) -> dict[str, Any]:
     }
 
 
-def restore(runner: Runner, run_dir: RunDir, optimizer: Any, optimizer_class: Any, seed: int) -> None:
-    """Restore ``runner`` from the checkpoint of ``run_dir`` (read once), or start it afresh if it has none.
+def restore(runner: Any, run_dir: RunDir, optimizer: Any, optimizer_class: Any, seed: int) -> None:
+    """Restore ``runner`` (a :class:`~creps_gym.runner.loop.Runner`, which calls this while it is built)
+    from the checkpoint of ``run_dir`` (read once), or start it afresh if it has none.
 
     ``optimizer`` (an object) or ``optimizer_class`` restores an object optimiser's state; ``seed`` seeds
     a new one. A damaged checkpoint, or one that does not fit the run, raises :class:`RunDirError`.

@@ -25,7 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from creps_gym.runner.history import History
-from creps_gym.runner.results.ioh import (
+from creps_gym.runner.ioh import (
     IOH_COLUMNS,
     check_one_env,
     env_key,

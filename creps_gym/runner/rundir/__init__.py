@@ -50,7 +50,7 @@ from creps_gym.errors import RunDirError, RunDirWarning
 from creps_gym.optimizers.base import load_state, save_state
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History, IterationRecord
-from creps_gym.runner.results.ioh import iohanalyzer_text
+from creps_gym.runner.ioh import iohanalyzer_text
 from creps_gym.runner.rundir import files
 from creps_gym.runner.rundir.checkpoint import checkpoint_document, config_fingerprint, open_checkpoint
 from creps_gym.runner.rundir.log_chain import log_line, parse_log, record_chain

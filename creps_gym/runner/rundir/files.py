@@ -43,7 +43,6 @@ __all__ = [
     "LIMITS",
     "MAX_DEPTH",
     "append_run_file",
-    "atomic_write",
     "check_regular",
     "file_kind",
     "json_document",
@@ -172,28 +171,14 @@ def append_run_file(path: str | os.PathLike[str], data: bytes) -> None:
         os.close(fd)
 
 
-def _atomic_write(path: Path, data: bytes, failure: Callable[[Path, OSError], Exception]) -> Path:
-    """Write ``data`` to ``path`` through a new temporary file in its folder and a rename."""
-    try:
-        return _files.write_atomically(path, data)
-    except OSError as exc:
-        raise failure(path, exc) from None
-
-
-def atomic_write(path: str | os.PathLike[str], data: bytes) -> Path:
-    """Replace ``path`` (a link there is replaced, not followed) atomically; ``OSError`` naming it."""
-
-    def failure(where: Path, exc: OSError) -> OSError:
-        return type(exc)(exc.errno, exc.strerror, str(where))
-
-    return _atomic_write(Path(path), data, failure)
-
-
 def write_run_file(path: str | os.PathLike[str], data: bytes) -> Path:
     """Replace a run directory's file (absent or regular, see the module docstring) atomically."""
     path = Path(path)
     check_regular(path)
-    return _atomic_write(path, data, lambda p, exc: os_failure(p, exc, "write it"))
+    try:
+        return _files.write_atomically(path, data)
+    except OSError as exc:
+        raise os_failure(path, exc, "write it") from None
 
 
 def write_output(
@@ -209,7 +194,7 @@ def write_output(
     is not a regular file or that ``protected`` refuses (a run directory's own file); ``OSError`` naming
     the file for a target that cannot be written (a full disk, a read-only file system, ...).
     """
-    return atomic_write(output_target(path, name=name, protected=protected), data)
+    return _files.write_atomically(output_target(path, name=name, protected=protected), data)
 
 
 def json_document(text: str | bytes, source: str) -> Any:

@@ -34,168 +34,44 @@ from __future__ import annotations
 import math
 import os
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import finite_mean
-from creps_gym.errors import ConfigError, RunDirError
-from creps_gym.optimizers.base import ContextualOptimizer
-from creps_gym.optimizers.registry import optimizer_class, recommended_samples, restore_optimizer
+from creps_gym.errors import RunDirError
+from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
 from creps_gym.runner import build, checks
 from creps_gym.runner.config import RunConfig
-from creps_gym.runner.history import History, IterationRecord, decode_float, encode_float
+from creps_gym.runner.history import History, IterationRecord
+from creps_gym.runner.manual_records import (
+    ASK_TELL,
+    Episode,
+    Sizes,
+    Spaces,
+    check_optimizer,
+    is_ask_tell,
+    refuse_resume,
+    with_box_options,
+)
 from creps_gym.runner.policy_store import RunPolicies
 from creps_gym.runner.recovery import RESTART, chain_crc
 from creps_gym.runner.rundir import RunDir
 from creps_gym.runner.seeds import split_seed
 from creps_gym.runner.trust import check_run_memory
 
-__all__ = ["ASK_TELL", "AskTellRun", "Episode", "Spaces", "is_ask_tell", "refuse_resume"]
+__all__ = [
+    "ASK_TELL",
+    "AskTellRun",
+    "Episode",
+    "Spaces",
+    "is_ask_tell",
+    "refuse_resume",
+]
 
 Array = NDArray[np.float64]
-#: The key of an ask/tell run's spaces in ``config.json``'s ``meta`` and of its state in the checkpoint.
-ASK_TELL = "ask_tell"
-#: Where a box's options go for an optimiser whose configuration takes them (c-bo: its search box).
-_BOX_OPTIONS = ("param_low", "param_high", "context_low", "context_high")
-
-
-@dataclass(frozen=True)
-class Spaces:
-    """The parameter box (p,) and the context box (z,) of an ask/tell run (infinite bounds allowed)."""
-
-    param_low: Array
-    param_high: Array
-    context_low: Array
-    context_high: Array
-
-    @classmethod
-    def of(cls, **boxes: Any) -> Spaces:
-        """Checked boxes: 1-D, non-empty, no NaN, low < high (``ValueError`` naming the box)."""
-        arrays = {}
-        for name in _BOX_OPTIONS:
-            value = np.asarray(boxes[name], dtype=np.float64)
-            if value.ndim != 1 or value.size == 0 or np.isnan(value).any():
-                raise ValueError(f"{name}: expected a non-empty list of numbers, got {boxes[name]!r}")
-            arrays[name] = value
-        for kind in ("param", "context"):
-            low, high = arrays[f"{kind}_low"], arrays[f"{kind}_high"]
-            if low.shape != high.shape or not (low < high).all():
-                raise ValueError(
-                    f"{kind}_high: expected {low.size} numbers above {kind}_low {low.tolist()}, got "
-                    f"{high.tolist()}"
-                )
-        return cls(**arrays)
-
-    @classmethod
-    def from_dict(cls, data: Any) -> Spaces:
-        if not isinstance(data, dict) or sorted(data) != sorted(_BOX_OPTIONS):
-            raise ValueError(f"expected the boxes {list(_BOX_OPTIONS)}, got {str(data)[:200]}")
-        if not all(isinstance(v, list) for v in data.values()):
-            raise ValueError("expected each box as a list of numbers")
-        return cls.of(**{k: [decode_float(x) for x in v] for k, v in data.items()})
-
-    def to_dict(self) -> dict[str, list[Any]]:
-        return {name: [encode_float(x) for x in getattr(self, name)] for name in _BOX_OPTIONS}
-
-    def env(self) -> gym.Env:
-        """A stand-in env holding the boxes: what the optimiser's start and the policy files read."""
-        return _SpacesEnv(self)
-
-    def equals(self, other: Spaces) -> bool:
-        return all(np.array_equal(getattr(self, n), getattr(other, n)) for n in _BOX_OPTIONS)
-
-
-class _SpacesEnv(gym.Env):  # type: ignore[type-arg]
-    """The spaces of an ask/tell run; its episodes run outside creps_gym."""
-
-    def __init__(self, spaces: Spaces) -> None:
-        self.action_space = gym.spaces.Box(spaces.param_low, spaces.param_high, dtype=np.float64)
-        self.observation_space = gym.spaces.Box(spaces.context_low, spaces.context_high, dtype=np.float64)
-
-    def step(self, action: Any) -> Any:
-        raise RuntimeError("an ask/tell run's episodes run outside creps_gym: `creps-gym tell` their returns")
-
-
-@dataclass
-class Episode:
-    """One episode of the current batch: its id, context (z,), asked and clipped params (p,), return."""
-
-    episode: int
-    context: Array
-    asked: Array
-    params: Array
-    value: float | None = None  # the told return (None: pending)
-    failed: bool = False
-
-    @property
-    def pending(self) -> bool:
-        return self.value is None and not self.failed
-
-    def to_dict(self) -> dict[str, Any]:
-        data = {"episode": self.episode, "failed": self.failed, "value": self.value}
-        data.update({k: getattr(self, k).tolist() for k in ("context", "asked", "params")})
-        return data
-
-    @classmethod
-    def from_dict(cls, data: Any, p: int, z: int) -> Episode:
-        """An episode of the checkpoint, checked (``ValueError`` naming what is wrong)."""
-        if not isinstance(data, dict) or sorted(data) != ["asked", "context", "episode", "failed", "params",
-                                                           "value"]:  # fmt: skip
-            raise ValueError(f"expected an episode record, got {str(data)[:200]}")
-        episode, value, failed = data["episode"], data["value"], data["failed"]
-        if type(episode) is not int or episode < 1 or type(failed) is not bool:
-            raise ValueError(f"expected an episode id >= 1 and a failed flag, got {episode!r}, {failed!r}")
-        if value is not None and (type(value) is not float or not math.isfinite(value) or failed):
-            raise ValueError(f"episode {episode}: expected a finite return or none, got {value!r}")
-        arrays = {}
-        for key, size in (("context", z), ("asked", p), ("params", p)):
-            row = data[key]
-            if not isinstance(row, list) or len(row) != size or not all(type(x) is float for x in row):
-                raise ValueError(f"episode {episode}: expected {key} of {size} numbers, got {str(row)[:200]}")
-            arrays[key] = np.array(row, dtype=np.float64)
-            if not np.isfinite(arrays[key]).all():
-                raise ValueError(f"episode {episode}: expected finite {key}, got {row}")
-        return cls(episode, value=value, failed=failed, **arrays)
-
-
-def is_ask_tell(run_dir: RunDir) -> bool:
-    """Whether ``run_dir`` is an ask/tell run (its ``config.json``'s ``meta`` holds its spaces)."""
-    return ASK_TELL in run_dir.document().get("meta", {})
-
-
-def refuse_resume(run_dir: RunDir) -> None:
-    """``ValueError`` for an ask/tell run: its episodes run outside creps_gym, ``resume`` cannot run them."""
-    if is_ask_tell(run_dir):
-        raise ValueError(
-            f"run_dir: expected a run that creps_gym runs, got {run_dir.path}, an ask/tell run (its episodes "
-            "run outside creps_gym): continue it with `creps-gym ask` and `creps-gym tell`"
-        )
-
-
-def _check_optimizer(name: str | None) -> None:
-    if name is None or not issubclass(optimizer_class(name), ContextualOptimizer):
-        raise ConfigError(
-            "optimizer",
-            "expected one of creps_gym's own optimisers (an adapter asks and tells whole populations, not "
-            f"one episode at a time), got {name!r}",
-        )
-
-
-def _with_box_options(config: RunConfig, spaces: Spaces) -> RunConfig:
-    """``config`` with the boxes as options of an optimiser that takes them (c-bo) and was not given them:
-    the parameter box the user typed is the robot's, so the search stays inside it."""
-    fields = getattr(optimizer_class(config.optimizer), "config_class", None)
-    names = getattr(fields, "__dataclass_fields__", {})
-    options = dict(config.optimizer_options)
-    for name in _BOX_OPTIONS:
-        value = getattr(spaces, name)
-        if name in names and name not in options and np.isfinite(value).all():
-            options[name] = value.tolist()
-    return replace(config, optimizer_options=options)
 
 
 class AskTellRun:
@@ -235,28 +111,32 @@ class AskTellRun:
         overwrite: bool = False,
     ) -> AskTellRun:
         """A new ask/tell run in ``path``: ``config.env`` (a registered id) or ``spaces`` (exactly one)."""
-        _check_optimizer(config.optimizer)
+        check_optimizer(config.optimizer)
         if (config.env is None) == (spaces is None):
             raise TypeError("spaces: expected an env id in the config or the spaces (exactly one)")
         if spaces is None:
             env = build.make_env(str(config.env), dict(config.env_kwargs))
             try:
                 checks.check_box_spaces(env)
-                low, high = env.action_space.low.ravel(), env.action_space.high.ravel()
-                spaces = Spaces.of(param_low=low, param_high=high, context_low=env.observation_space.low.ravel(),
-                                   context_high=env.observation_space.high.ravel())  # fmt: skip
+                boxes = {"param": env.action_space, "context": env.observation_space}
+                ends = {
+                    f"{kind}_{end}": getattr(box, end).ravel()
+                    for kind, box in boxes.items()
+                    for end in ("low", "high")
+                }
+                spaces = Spaces.of(**ends)
             finally:
                 env.close()
         p, z = spaces.param_low.size, spaces.context_low.size
         if config.samples is None:
             config = replace(config, samples=recommended_samples(config.optimizer, p, z))
-        config = _with_box_options(config, spaces)
+        config = with_box_options(config, spaces)
         check_run_memory(config, p, z, covariance=True)
         optimizer = build.build_optimizer(config, spaces.env(), z, split_seed(config.seed)[1])
-        checks.check_minimum_batch(optimizer, _Sizes(config, p, z))
-        meta = {"env": config.env or "ask/tell", "optimizer": config.optimizer, "seed": config.seed,
-                "n_params": p, "n_context_dims": z, "samples": config.samples, "metric": "return",
-                ASK_TELL: spaces.to_dict()}  # fmt: skip
+        checks.check_minimum_batch(optimizer, Sizes(config, p, z))
+        meta = {"env": config.env or "ask/tell", "optimizer": config.optimizer, "seed": config.seed}
+        meta.update(n_params=p, n_context_dims=z, samples=config.samples, metric="return")
+        meta[ASK_TELL] = spaces.to_dict()
         run = cls(RunDir.create(path, config, meta, overwrite=overwrite), config, spaces)
         try:
             run.optimizer = optimizer
@@ -280,7 +160,7 @@ class AskTellRun:
         config = run_dir.config()
         try:
             spaces = Spaces.from_dict(document["meta"][ASK_TELL])
-            _check_optimizer(config.optimizer)
+            check_optimizer(config.optimizer)
             check_run_memory(config, spaces.param_low.size, spaces.context_low.size, covariance=True)
         except ValueError as exc:
             if isinstance(exc, RunDirError):
@@ -312,7 +192,7 @@ class AskTellRun:
             self._check_batch(own)
             self.optimizer = restore_optimizer(str(self.config.optimizer), optimizer_state)
             checks.check_optimizer_sizes(
-                self.optimizer, "optimizer state", _Sizes(self.config, self.p, self.z)
+                self.optimizer, "optimizer state", Sizes(self.config, self.p, self.z)
             )
             self._check_pending(optimizer_state)
             self.env_rng.bit_generator.state = checks.generator_state(state["env_rng"])
@@ -378,8 +258,8 @@ class AskTellRun:
             optimizer_state["pending_params"] = np.array([e.asked for e in self.batch])
         else:
             optimizer_state = {k: v for k, v in optimizer_state.items() if not k.startswith("pending_")}
-        own = {"spaces": self.spaces.to_dict(), "batch": [e.to_dict() for e in self.batch],
-               "next_episode": self.next_episode, "started": self.started}  # fmt: skip
+        own = {"spaces": self.spaces.to_dict(), "batch": [e.to_dict() for e in self.batch]}
+        own.update(next_episode=self.next_episode, started=self.started)
         state = {
             "env_rng": self.env_rng.bit_generator.state,
             "iteration": self.iteration,
@@ -414,15 +294,15 @@ class AskTellRun:
         low, high = self.spaces.context_low, self.spaces.context_high
         if not extrapolate and not ((low <= row) & (row <= high)).all():
             raise ValueError(
-                f"context: expected a context in the box [{low.tolist()}, {high.tolist()}], got {row.tolist()} "
-                "(pass extrapolate to ask outside it)"
+                f"context: expected a context in the box [{low.tolist()}, {high.tolist()}], got "
+                f"{row.tolist()} (pass extrapolate to ask outside it)"
             )
         self._check_open()
         if self._slots() == 0:
             ids = [e.episode for e in self.pending]
             raise RuntimeError(
-                f"ask: expected a batch with room, got {self.config.samples} episodes asked and episodes {ids} "
-                "pending: tell their returns (or that they failed) first"
+                f"ask: expected a batch with room, got {self.config.samples} episodes asked and episodes "
+                f"{ids} pending: tell their returns (or that they failed) first"
             )
         asked = checks.real_params(self.optimizer.ask(row[None, :]), "ask", (1, self.p))[0]
         params = np.clip(asked, self.spaces.param_low, self.spaces.param_high)
@@ -507,13 +387,3 @@ class AskTellRun:
             return "max_episodes"
         met = checks.stop_criteria(self.optimizer.stop())
         return f"optimizer: {', '.join(met)}" if met else None
-
-
-@dataclass
-class _Sizes:
-    """What the runner's checks read of a run: its config and sizes."""
-
-    config: RunConfig
-    n_params: int
-    n_context_dims: int
-    env_name: str = "the run's spaces"

@@ -245,10 +245,18 @@ def _cmd_resume(args: argparse.Namespace) -> int:
     from creps_gym.runner.api import resumed_runner
     from creps_gym.runner.callbacks import ProgressBar
     from creps_gym.runner.checks import check_ray_cluster
+    from creps_gym.runner.manual import refuse_resume
     from creps_gym.runner.rundir import RunDir
+    from creps_gym.runner.session import RunDirError
 
     import_modules_and_check_names(args)
     directory = RunDir.open(args.run_dir)
+    try:
+        refuse_resume(directory)
+    except RunDirError:
+        raise
+    except ValueError as exc:
+        raise UsageError(str(exc).replace("run_dir: ", "DIR: ", 1)) from None
     config = directory.config()
     if config.env is None or config.optimizer is None:
         raise UsageError(

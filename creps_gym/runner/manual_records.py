@@ -157,7 +157,11 @@ def refuse_resume(run_dir: Any) -> None:
 
 
 def check_optimizer(name: str | None) -> None:
-    if name is None or not issubclass(optimizer_class(name), ContextualOptimizer):
+    """``ConfigError`` naming ``optimizer`` unless it is one of creps_gym's own (not an adapter)."""
+    from creps_gym.optimizers.adapters import MinimizerAdapter
+
+    cls = None if name is None else optimizer_class(name)
+    if cls is None or not issubclass(cls, ContextualOptimizer) or issubclass(cls, MinimizerAdapter):
         raise ConfigError(
             "optimizer",
             "expected one of creps_gym's own optimisers (an adapter asks and tells whole populations, not "

@@ -32,7 +32,10 @@ BOXES = [
     "--context-high",
     "1",
 ]
+#: c-bo's cheapest settings: the tests check the bookkeeping, not the search
+CHEAP = {"distillation_points": 2, "starts": 1, "candidates": 16}
 NEW = ["--new", "--optimizer", "c-bo", "--seed", "3", "--samples", "2", *BOXES]
+NEW += [f"--opt={key}={value}" for key, value in CHEAP.items()]
 CONTEXTS = [0.1, 0.9, 0.5, 0.3]
 
 
@@ -186,7 +189,7 @@ def _steps() -> list[tuple[str, float]]:
 
 
 def _new(path: Path) -> None:
-    config = RunConfig(env=None, optimizer="c-bo", iterations=2, samples=2, seed=5)
+    config = RunConfig(env=None, optimizer="c-bo", iterations=2, samples=2, seed=5, optimizer_options=CHEAP)
     spaces = Spaces.of(param_low=[-1, -1], param_high=[1, 1], context_low=[0], context_high=[1])
     AskTellRun.create(path, config, spaces).close()
 

@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import finite_mean
 from creps_gym.errors import RunDirError
+from creps_gym.optimizers.policy_file import Policy
 from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
 from creps_gym.runner import build, checks
 from creps_gym.runner.config import RunConfig
@@ -231,11 +232,18 @@ class AskTellRun:
 
     def _repair(self) -> None:
         """Rewrite ``policy.npz`` (and a finished run's results) if a crash left them stale or missing."""
-        if self.iteration:
-            history = self.history()
-            self.policies.write_final(self.run_dir, self.optimizer, history, only_changed=True)
-            if self.stop_reason is not None:
-                self.run_dir.write_results(history, only_changed=True)
+        if self.iteration and not self._policy_written():
+            self.policies.write_final(self.run_dir, self.optimizer, self.history(), only_changed=False)
+        if self.stop_reason is not None:
+            self.run_dir.write_results(self.history(), only_changed=True)
+
+    def _policy_written(self) -> bool:
+        """Whether ``policy.npz`` is this run's after the checkpoint's iteration (its source says so)."""
+        try:
+            source = Policy.load(self.run_dir.file(RunDir.POLICY)).source
+        except (OSError, ValueError):
+            return False
+        return source.get("iteration") == self.iteration and source.get("run") == self.policies.fingerprint
 
     def history(self) -> History:
         """The history of the told batches (the checkpoint's, from the log)."""

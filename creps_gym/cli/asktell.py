@@ -28,6 +28,7 @@ from creps_gym.cli.types import (
     key_value,
     numbers,
 )
+from creps_gym.errors import RunDirError
 
 __all__ = ["COMMANDS", "add_commands"]
 
@@ -198,6 +199,8 @@ def _cmd_ask(args: argparse.Namespace) -> int:
             return _print_pending(run, args)
         try:
             episode = run.ask(args.context, extrapolate=args.extrapolate)
+        except RunDirError:  # a file of the folder (exit 3)
+            raise
         except ValueError as exc:
             message = str(exc).removeprefix("context: ").replace("pass extrapolate", "pass --extrapolate")
             raise UsageError(f"argument --context: {message}") from None
@@ -238,6 +241,8 @@ def _cmd_tell(args: argparse.Namespace) -> int:
     with _open(args) as run:
         try:
             done = run.tell(args.value, args.episode, failed=args.failed)
+        except RunDirError:  # a file of the folder (exit 3)
+            raise
         except (ValueError, RuntimeError) as exc:
             message = str(exc).removeprefix("episode: ")
             raise UsageError(f"argument --episode: {message}") from None

@@ -82,6 +82,10 @@ def test_a_run_from_the_shell(tmp_path: Path) -> None:
     which = cli_in_process("tell", run, "--return", "-0.3")
     assert which.returncode == EXIT_CODES["usage"] and "[1, 2]" in which.stderr
     assert tell(run, "--return", "-0.3", "--episode", "1")["batch_told"] is False
+    again = cli_in_process(
+        "tell", run, "--return", "-0.3", "--episode", "1"
+    )  # a retry of a tell that was done
+    assert again.returncode == EXIT_CODES["usage"] and "got 1 (told already" in again.stderr
     done = tell(run, "--return", "-0.5", "--episode", "2")
     assert done["batch_told"] and done["iteration"] == 1 and done["mean_return"] == pytest.approx(-0.4)
     policy = cli_in_process("policy", run, "--context", "0.5")  # an ask/tell run's default: its final policy
@@ -93,6 +97,8 @@ def test_a_run_from_the_shell(tmp_path: Path) -> None:
     assert resume.returncode == EXIT_CODES["usage"] and "`creps-gym ask`" in resume.stderr
     history = RunDir.open(run).read_history()
     assert len(history) == 1 and history.records[0].episodes == 2
+    options = RunDir.open(run).config().optimizer_options  # c-bo searches the box the user typed
+    assert options["param_low"] == [-1.0, -1.0] and options["context_high"] == [1.0]
 
 
 def test_same_seed_and_returns_give_the_same_bits(tmp_path: Path) -> None:

@@ -346,7 +346,11 @@ class AskTellRun:
             raise RuntimeError(f"episode: expected the episode to tell (pending: {ids or 'none'}), got none")
         found = [e for e in pending if episode is None or e.episode == episode]
         if not found:
-            raise ValueError(f"episode: expected a pending episode {ids or '(none pending)'}, got {episode}")
+            known = episode is not None and 1 <= episode < self.next_episode
+            why = "told already, or failed" if known else "never asked"
+            raise ValueError(
+                f"episode: expected a pending episode {ids or '(none pending)'}, got {episode} ({why})"
+            )
         target = found[0]
         outcome = {"failed": True} if failed else {"return": float(value)}  # type: ignore[arg-type]
         self.run_dir.append_log({"event": "tell", "episode": target.episode, **outcome})

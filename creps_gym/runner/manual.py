@@ -1,32 +1,29 @@
 """A run driven episode by episode from outside: ``ask`` the parameters for a context, ``tell`` the return.
 
-For a real robot (or any episode that creps_gym cannot run itself). The run folder is a run directory
-(:class:`~creps_gym.runner.rundir.RunDir`) like any other: ``config.json`` (the :class:`RunConfig` with
-``env`` None or a registered id to rehearse on, and in its ``meta`` the ``"ask_tell"`` spaces: the
-parameter and context boxes), ``checkpoint.npz``, ``log.jsonl`` (one ``ask`` and one ``tell`` event per
-episode, one iteration record per batch), ``run.lock``, ``policy.npz`` (the mean policy after the last
-batch) and, once the run has finished, ``history.json``/``.csv``.
+For a real robot (or any episode that creps_gym cannot run itself). The folder is a run directory
+(:class:`~creps_gym.runner.rundir.RunDir`): ``config.json`` (``env`` None or a registered id to rehearse
+on; its ``meta``'s ``"ask_tell"``: the parameter and context boxes), ``checkpoint.npz``, ``log.jsonl``
+(an ``ask`` and a ``tell`` event per episode, an iteration record per batch), ``run.lock``, ``policy.npz``
+(the mean policy after the last batch) and, once finished, ``history.json``/``.csv``.
 
 **Episodes.** :meth:`AskTellRun.ask` asks the optimiser for one context and keeps the episode pending,
-with an id (1, 2, ... over the run). Up to ``samples`` episodes of a batch may be pending at once;
+with an id (1, 2, ... over the run); up to ``samples`` of a batch may be pending at once.
 :meth:`AskTellRun.tell` records one's return (or drops it as failed: another episode takes its place).
-When ``samples`` returns are told, the optimiser's ``tell`` gets the batch, the iteration is logged and
-checkpointed, and ``policy.npz`` is rewritten. Each asked row is kept in the optimiser's pending batch
-(its ``state_dict``'s ``pending_contexts``/``pending_params``), so the batch is told as the rows asked,
-one ask at a time. A parameter outside the parameter box is clipped before it is printed: a robot never
-gets one; the clipped row is what the optimiser is told (an external sample, counted in its
-``external_samples`` diagnostic).
+At ``samples`` returns the optimiser's ``tell`` gets the batch, the iteration is logged and checkpointed
+and ``policy.npz`` rewritten. The asked rows are kept as the optimiser's pending batch (its
+``state_dict``'s ``pending_contexts``/``pending_params``), so the batch is told as asked, one ask at a
+time. A parameter outside the box is clipped before it is printed (a robot never gets one) and told as
+clipped (an external sample, counted in the ``external_samples`` diagnostic).
 
-**Crash safety.** Every command takes the run's lock, writes its log event first and then the checkpoint
-(atomically): a crash between two writes leaves the checkpoint of the step before, and the step done again
-gives the same bits (asks are deterministic from the checkpointed Generator), its repeated log line
-replacing the first (the log keeps the last copy of an episode and of an iteration). ``policy.npz`` and
-the final result files are rewritten by the next command if a crash left them stale.
+**Crash safety.** Every command holds the run's lock, appends its log event, then replaces the checkpoint
+atomically: after a crash between two writes the checkpoint is the step's before, and the step done again
+gives the same bits (asks draw from the checkpointed Generator) and repeats its log line (same episode
+id: the last copy counts). The next command rewrites a ``policy.npz`` or result file a crash left stale.
 
 **Untrusted folder.** Everything read back is checked like the rest of a run directory (bounded reads,
 no link followed, :func:`~creps_gym.runner.trust.check_trusted`, memory checked before allocating); the
-episodes in the checkpoint must match the optimiser's pending batch and the spaces ``config.json``'s, or
-the checkpoint is refused naming the file.
+checkpoint's episodes must be the optimiser's pending rows and its spaces ``config.json``'s, or the
+checkpoint is refused naming the file.
 """
 
 from __future__ import annotations

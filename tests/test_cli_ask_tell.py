@@ -260,3 +260,21 @@ def test_a_crash_before_any_write_loses_nothing_and_counts_nothing_twice(
         for a, b in zip(found[1], clean[1], strict=True):  # one record per batch, the same but wall time
             assert {**a, "wall_time": 0} == {**b, "wall_time": 0}, crash_at
         assert found[2] == clean[2] and found[3].equals(clean[3]), crash_at
+
+
+def test_a_damaged_log_is_refused_before_the_batch_is_told(tmp_path: Path) -> None:
+    run = tmp_path / "robot"
+    assert cli_in_process("ask", run, *NEW).returncode == 0
+    drive(run, CONTEXTS[:2])  # iteration 1 logged
+    first = ask(run, "--context", "0.5")
+    tell(run, "--return", "-1", "--episode", str(first["episode"]))
+    second = ask(run, "--context", "0.6")
+    log = run / RunDir.LOG
+    lines = log.read_text().splitlines()
+    record = next(i for i, line in enumerate(lines) if '"iteration": 1' in line and "event" not in line)
+    lines[record] = lines[record].replace('"episodes": 2', '"episodes": 3')
+    log.write_text("\n".join(lines) + "\n")
+    before = (run / RunDir.CHECKPOINT).read_bytes()
+    result = cli_in_process("tell", run, "--return", "-2", "--episode", second["episode"])
+    assert result.returncode == EXIT_CODES["run_dir"] and str(log) in result.stderr
+    assert (run / RunDir.CHECKPOINT).read_bytes() == before  # nothing was told

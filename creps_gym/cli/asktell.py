@@ -244,8 +244,7 @@ def _cmd_tell(args: argparse.Namespace) -> int:
         except RunDirError:  # a file of the folder (exit 3)
             raise
         except (ValueError, RuntimeError) as exc:
-            message = str(exc).removeprefix("episode: ")
-            raise UsageError(f"argument --episode: {message}") from None
+            raise _tell_error(exc) from None
         record, status = done["iteration"], _status(run)
         out: dict[str, Any] = {"episode": done["episode"], "failed": args.failed, "return": args.value}
         out["batch_told"] = record is not None
@@ -267,6 +266,14 @@ def _cmd_tell(args: argparse.Namespace) -> int:
         told = f"{out['told']} of {out['samples']} told in iteration {out['iteration']}"
         print(f"episode {done['episode']} recorded ({told})")
     return 0
+
+
+def _tell_error(exc: Exception) -> UsageError:
+    """A refused tell as a usage error naming its flag (the episode's, or the return's: the optimiser
+    refuses returns whose spread overflows)."""
+    field, _, message = str(exc).partition(": ")
+    flag = {"episode": "--episode", "value": "--return", "returns": "--return"}.get(field)
+    return UsageError(f"argument {flag}: {message}" if flag else str(exc))
 
 
 COMMANDS = {"ask": _cmd_ask, "tell": _cmd_tell}

@@ -35,7 +35,6 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from creps_gym.envs.evaluation import finite_mean
 from creps_gym.errors import RunDirError
@@ -60,16 +59,7 @@ from creps_gym.runner.rundir import RunDir
 from creps_gym.runner.seeds import split_seed
 from creps_gym.runner.trust import check_run_memory
 
-__all__ = [
-    "ASK_TELL",
-    "AskTellRun",
-    "Episode",
-    "Spaces",
-    "is_ask_tell",
-    "refuse_resume",
-]
-
-Array = NDArray[np.float64]
+__all__ = ["ASK_TELL", "AskTellRun", "Episode", "Spaces", "is_ask_tell", "refuse_resume"]
 
 
 class AskTellRun:
@@ -348,17 +338,19 @@ class AskTellRun:
             raise ValueError(
                 f"episode: expected a pending episode {ids or '(none pending)'}, got {episode} ({why})"
             )
-        target = found[0]
+        target, told = found[0], sum(e.value is not None for e in self.batch) + (not failed)
+        history = self.history() if told == self.config.samples else None  # a damaged log: before writing
         outcome = {"failed": True} if failed else {"return": float(value)}  # type: ignore[arg-type]
         self.run_dir.append_log({"event": "tell", "episode": target.episode, **outcome})
         target.failed, target.value = failed, None if failed else float(value)  # type: ignore[arg-type]
-        if sum(e.value is not None for e in self.batch) < self.config.samples:
+        if history is None:
             self._checkpoint(self.optimizer.state_dict())
             return {"episode": target.episode, "iteration": None}
-        return {"episode": target.episode, "iteration": self._tell_batch()}
+        return {"episode": target.episode, "iteration": self._tell_batch(history)}
 
-    def _tell_batch(self) -> IterationRecord:
-        """Tell the optimiser the batch, log its record, checkpoint, write ``policy.npz``."""
+    def _tell_batch(self, history: History) -> IterationRecord:
+        """Tell the optimiser the batch, log its record, checkpoint, write ``policy.npz`` (and, when the
+        run has finished, its results; ``history``: the iterations before)."""
         told = [e for e in self.batch if e.value is not None]
         contexts = np.array([e.context for e in told])
         params = np.array([e.params for e in told])
@@ -377,7 +369,8 @@ class AskTellRun:
         self.log_crc = chain_crc(self.log_crc, record.to_dict())
         self.batch = []
         self._checkpoint(self.optimizer.state_dict())
-        history = self.history()
+        history.append(record)
+        history.stop_reason = self.stop_reason
         if self.stop_reason is not None:
             self.run_dir.append_log(
                 {"event": "end", "iteration": self.iteration, "stop_reason": self.stop_reason}

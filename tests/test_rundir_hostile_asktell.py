@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import cli_in_process
 from test_rundir_hostile import hostile, one_error_naming, rewrite_checkpoint
 
 from creps_gym.cli import main
@@ -110,3 +111,40 @@ def test_edited_spaces_in_config_json_are_refused(place, tmp_path, capsys, space
     assert code == 3
     named = RunDir.CHECKPOINT if spaces == "boxes" else RunDir.CONFIG  # the boxes: not the checkpoint's
     one_error_naming(error, place / named)
+
+
+# -- fuzz: any damage ends in exit code 3 or in the intact folder's result --------------------------------
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from test_rundir_fuzz import corrupt, corruptions  # noqa: E402
+
+FILES = [RunDir.CONFIG, RunDir.CHECKPOINT, RunDir.LOG, RunDir.POLICY, RunDir.VERSIONS]
+
+
+@pytest.fixture(scope="module")
+def intact(template, tmp_path_factory):
+    """What the batch-completing tell prints, and the policy it writes, on an intact copy."""
+    run = Path(shutil.copytree(template, tmp_path_factory.mktemp("intact") / "run"))
+    assert main([str(a) for a in (TELL[0], run, *TELL[1:], "--json")]) == 0
+    return run
+
+
+@settings(max_examples=20, deadline=None)
+@given(name=st.sampled_from(FILES), corruption=corruptions)
+def test_damage_ends_in_exit_3_or_the_intact_result(template, intact, name, corruption):
+    import tempfile
+
+    from creps_gym.optimizers.policy_file import Policy
+
+    with tempfile.TemporaryDirectory() as folder:
+        run = Path(shutil.copytree(template, Path(folder) / "run"))
+        corrupt(run / name, corruption)
+        result = cli_in_process(TELL[0], run, *TELL[1:], "--json")
+        code, out, error = result.returncode, result.stdout, result.stderr
+        assert code in (0, 3), error
+        if code == 3:
+            assert len([line for line in error.splitlines() if ": error: " in line]) == 1, error
+        else:
+            assert Policy.load(run / RunDir.POLICY).equals(Policy.load(intact / RunDir.POLICY))
+            assert json.loads(out)["mean_return"] == -2.0

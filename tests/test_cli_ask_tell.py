@@ -278,3 +278,34 @@ def test_a_damaged_log_is_refused_before_the_batch_is_told(tmp_path: Path) -> No
     result = cli_in_process("tell", run, "--return", "-2", "--episode", second["episode"])
     assert result.returncode == EXIT_CODES["run_dir"] and str(log) in result.stderr
     assert (run / RunDir.CHECKPOINT).read_bytes() == before  # nothing was told
+
+
+KILLED = """
+import os, signal, sys
+from creps_gym.runner import rundir
+from creps_gym.runner.manual import AskTellRun
+
+def killed(*args, **kwargs):  # after the ask's log line, before its checkpoint
+    os.kill(os.getpid(), signal.SIGKILL)
+
+rundir.RunDir.save_checkpoint = killed
+AskTellRun.open(sys.argv[1]).ask([0.5])
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not hasattr(__import__("signal"), "SIGKILL"), reason="POSIX signals")
+def test_a_process_killed_mid_ask_leaves_its_lock_to_the_next_command(tmp_path: Path) -> None:
+    import shutil
+    import subprocess
+    import sys
+
+    run, clean = tmp_path / "robot", tmp_path / "clean"
+    assert cli_in_process("ask", run, *NEW).returncode == 0
+    shutil.copytree(run, clean)
+    killed = subprocess.run([sys.executable, "-c", KILLED, str(run)], capture_output=True, timeout=120)
+    assert killed.returncode == -9 and (run / RunDir.LOCK).exists()  # the lock file of a dead process
+    again = cli_in_process("ask", run, "--context", "0.5", "--json")
+    assert again.returncode == 0 and "took over the lock" in again.stderr
+    assert json.loads(again.stdout)["params"] == ask(clean, "--context", "0.5")["params"]
+    assert json.loads(again.stdout)["episode"] == 1

@@ -96,12 +96,14 @@ def test_forged_episodes_in_the_checkpoint_are_refused(place, tmp_path, capsys, 
     assert "damaged or not written by creps_gym" in one_error_naming(error, place / RunDir.CHECKPOINT)
 
 
-@pytest.mark.parametrize("spaces", ["boxes", {"param_low": [0.0]}, "huge"])
+@pytest.mark.parametrize("spaces", ["boxes", {"param_low": [0.0]}, "huge", "samples"])
 def test_edited_spaces_in_config_json_are_refused(place, tmp_path, capsys, spaces):
     document = json.loads((place / RunDir.CONFIG).read_text())
     if spaces == "huge":  # a dimension whose covariance would not fit in memory: refused before allocating
         p = 400_000
         document["meta"]["ask_tell"].update(param_low=[-1.0] * p, param_high=[1.0] * p)
+    elif spaces == "samples":  # a batch size no ask/tell run has
+        document["config"]["samples"] = None
     elif spaces == "boxes":
         document["meta"]["ask_tell"]["param_high"] = [0.5, 0.5]
     else:

@@ -149,8 +149,10 @@ class AskTellRun:
         try:
             spaces = Spaces.from_dict(document["meta"][ASK_TELL])
             check_optimizer(config.optimizer)
+            if config.samples is None:
+                raise ValueError("samples: expected the batch size, got None")
             check_run_memory(config, spaces.param_low.size, spaces.context_low.size, covariance=True)
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             if isinstance(exc, RunDirError):
                 raise
             raise run_dir.damaged(RunDir.CONFIG, exc, "restore it from a backup") from None

@@ -2,10 +2,12 @@
 
 ``policy RUN`` prints the policy of a run folder (or of a policy file) as JSON: its parameters for the
 ``--context`` values given, else its coefficients; ``--save FILE`` writes it as a policy file.
-``evaluate RUN`` runs it on fresh, seeded test contexts of the run's env and prints the mean return and
-regret as JSON (``--run-contexts``: the run's own test contexts, which reproduce its evaluation); ``--video
-FILE`` records the episodes it evaluates, one test context unless ``--contexts`` says more, where the env
-renders (needs the ``video`` extra), saying on stderr what it renders. Exit codes are the CLI's
+An ask/tell run (``creps-gym ask``) has no evaluations: its default is its final policy, and
+``evaluate`` needs one started with ``--env``. ``evaluate RUN`` runs it on fresh, seeded test
+contexts of the run's env and prints the mean return and regret as JSON (``--run-contexts``: the
+run's own test contexts, which reproduce its evaluation); ``--video FILE`` records the episodes it
+evaluates, one test context unless ``--contexts`` says more, where the env renders (needs the
+``video`` extra), saying on stderr what it renders. Exit codes are the CLI's
 (:mod:`creps_gym.cli`): 2 for a bad ``--context`` or option, 3 for a missing or damaged run folder or
 policy file, 4 for a missing extra, 1 when the env fails.
 """
@@ -45,8 +47,9 @@ def add_commands(commands: Any) -> None:
         parser.add_argument(
             "--which",
             choices=("best", "final"),
-            default="best",
-            help="the best evaluated mean policy (default) or the final one",
+            default=None,
+            help="the best evaluated mean policy (default) or the final one (the default of an ask/tell "
+            "run, which evaluates none)",
         )
         add_import(parser)
     policy.add_argument(
@@ -86,6 +89,8 @@ def _load(args: argparse.Namespace) -> Any:
     from creps_gym.runner.rundir.policies import load_policy
 
     import_user_modules(args.imports)  # the current directory is searched too, as for `run`
+    if args.which is None:
+        args.which = "final" if _ask_tell(args.run) else "best"
     try:
         return load_policy(args.run, args.which)
     except RunDirError:
@@ -94,6 +99,17 @@ def _load(args: argparse.Namespace) -> Any:
         raise FileNotFoundError(f"RUN: {str(exc).removeprefix('path: ')}") from None
     except ValueError as exc:
         raise RunDirError(f"RUN: {exc}") from None
+
+
+def _ask_tell(path: str) -> bool:
+    """Whether ``path`` is an ask/tell run folder (False for anything else, which ``load_policy`` judges)."""
+    from creps_gym.runner.manual import is_ask_tell
+    from creps_gym.runner.rundir import RunDir
+
+    try:
+        return Path(path).is_dir() and is_ask_tell(RunDir.open(path))
+    except (OSError, ValueError):
+        return False
 
 
 #: The file names ``--video`` writes (imageio picks the format by the name).
@@ -161,6 +177,12 @@ def _environment(args: argparse.Namespace, policy: Any) -> tuple[str, dict[str, 
 
     if Path(args.run).is_dir():
         config = RunDir.open(args.run).config()  # checked: names no module that is not imported
+        if config.env is None and _ask_tell(args.run):
+            raise UsageError(
+                f"RUN: expected a run that names an env id, got {args.run}, an ask/tell run without --env "
+                "(its returns came from `creps-gym tell`: there is no env to evaluate its policy on; "
+                "`creps-gym policy` prints it)"
+            )
         if config.env is None:
             raise UsageError(f"RUN: expected a run of an env id, got {args.run} (an env object's run)")
         return config.env, dict(config.env_kwargs), config

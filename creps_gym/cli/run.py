@@ -242,13 +242,21 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_resume(args: argparse.Namespace) -> int:
+    from creps_gym.errors import RunDirError
     from creps_gym.runner.api import resumed_runner
     from creps_gym.runner.backends.ray import check_ray_cluster
     from creps_gym.runner.callbacks import ProgressBar
+    from creps_gym.runner.manual import refuse_resume
     from creps_gym.runner.rundir import RunDir
 
     import_modules_and_check_names(args)
     directory = RunDir.open(args.run_dir)
+    try:
+        refuse_resume(directory)
+    except RunDirError:
+        raise
+    except ValueError as exc:
+        raise UsageError(str(exc).replace("run_dir: ", "DIR: ", 1)) from None
     config = directory.config()
     if config.env is None or config.optimizer is None:
         raise UsageError(

@@ -10,6 +10,7 @@ from creps_gym.errors import RunDirError
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History
 from creps_gym.runner.loop import Runner
+from creps_gym.runner.manual_records import refuse_resume
 from creps_gym.runner.rundir import RunDir
 
 __all__ = ["resume", "resumed_runner", "run"]
@@ -134,6 +135,7 @@ def resume(
         is restored from the checkpoint).
     """
     directory = RunDir.open(run_dir)
+    refuse_resume(directory)  # an ask/tell run's episodes run outside creps_gym
     config = directory.config()
     if config.env is None and env is None:
         raise ValueError("env: expected the env object this run was started with (its config has no env id)")

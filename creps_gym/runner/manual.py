@@ -40,8 +40,9 @@ from creps_gym.envs.evaluation import finite_mean
 from creps_gym.errors import RunDirError
 from creps_gym.optimizers.policy_file import Policy
 from creps_gym.optimizers.registry import recommended_samples, restore_optimizer
-from creps_gym.runner import build, checks
+from creps_gym.runner import build, protocol
 from creps_gym.runner.config import RunConfig
+from creps_gym.runner.env_model import check_box_spaces
 from creps_gym.runner.history import History, IterationRecord
 from creps_gym.runner.manual_records import (
     ASK_TELL,
@@ -106,7 +107,7 @@ class AskTellRun:
         if spaces is None:
             env = build.make_env(str(config.env), dict(config.env_kwargs))
             try:
-                checks.check_box_spaces(env)
+                check_box_spaces(env)
                 boxes = {"param": env.action_space, "context": env.observation_space}
                 ends = {
                     f"{kind}_{end}": getattr(box, end).ravel()
@@ -122,7 +123,7 @@ class AskTellRun:
         config = with_box_options(config, spaces)
         check_run_memory(config, p, z, covariance=True)
         optimizer = build.build_optimizer(config, spaces.env(), z, split_seed(config.seed)[1])
-        checks.check_minimum_batch(optimizer, Sizes(config, p, z))
+        protocol.check_minimum_batch(optimizer, Sizes(config, p, z))
         meta = {"env": config.env or "ask/tell", "optimizer": config.optimizer, "seed": config.seed}
         meta.update(n_params=p, n_context_dims=z, samples=config.samples, metric="return")
         meta[ASK_TELL] = spaces.to_dict()
@@ -182,11 +183,11 @@ class AskTellRun:
             self.next_episode, self.started = own["next_episode"], own["started"]
             self._check_batch(own)
             self.optimizer = restore_optimizer(str(self.config.optimizer), optimizer_state)
-            checks.check_optimizer_sizes(
+            protocol.check_optimizer_sizes(
                 self.optimizer, "optimizer state", Sizes(self.config, self.p, self.z)
             )
             self._check_pending(optimizer_state)
-            self.env_rng.bit_generator.state = checks.generator_state(state["env_rng"])
+            self.env_rng.bit_generator.state = protocol.generator_state(state["env_rng"])
             self.iteration, self.log_crc = int(state["iteration"]), int(state["log_crc"])
             self.stop_reason = state["stop_reason"]
         except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
@@ -302,7 +303,7 @@ class AskTellRun:
                 f"ask: expected a batch with room, got {self.config.samples} episodes asked and episodes "
                 f"{ids} pending: tell their returns (or that they failed) first"
             )
-        asked = checks.real_params(self.optimizer.ask(row[None, :]), "ask", (1, self.p))[0]
+        asked = protocol.real_params(self.optimizer.ask(row[None, :]), "ask", (1, self.p))[0]
         params = np.clip(asked, self.spaces.param_low, self.spaces.param_high)
         episode = Episode(self.next_episode, row.copy(), asked, params)
         entry = {"event": "ask", "episode": episode.episode, "iteration": self.iteration + 1}
@@ -390,5 +391,5 @@ class AskTellRun:
             return "iterations"
         if config.max_episodes is not None and (self.iteration + 1) * config.samples > config.max_episodes:
             return "max_episodes"
-        met = checks.stop_criteria(self.optimizer.stop())
+        met = protocol.stop_criteria(self.optimizer.stop())
         return f"optimizer: {', '.join(met)}" if met else None

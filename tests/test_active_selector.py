@@ -66,6 +66,19 @@ def test_plausible_maximisers_are_the_largest_upper_bounds():
         assert rows[:, 1:] == pytest.approx(thetas[np.argsort(-bound)[:4]])
 
 
+def test_many_contexts_are_scored_in_blocks_with_the_same_choice(monkeypatch):
+    from creps_gym.optimizers import context_value
+
+    model = _model()
+    contexts, thetas = (
+        np.random.default_rng(4).uniform(size=(9, 1)),
+        np.random.default_rng(5).uniform(size=(20, 2)),
+    )
+    whole = plausible_maximisers(model, contexts, thetas, 3, 4.0)
+    monkeypatch.setattr(context_value, "BLOCK", 20 * 30 * 2)  # two contexts per block
+    assert plausible_maximisers(model, contexts, thetas, 3, 4.0) == pytest.approx(whole, abs=0)
+
+
 def test_the_utility_is_highest_where_the_optimum_is_least_known():
     optimizer = _half_explored()
     candidates = np.array([[0.1], [0.2], [0.3], [0.7], [0.8], [0.9]])
@@ -122,7 +135,7 @@ def test_bad_utilities_options_and_states_are_refused_with_named_errors():
             selector.select(np.random.default_rng(0), 4, context_utility=utility)
     for options, match in [
         ({"candidates": 0}, "candidates: expected an integer >= 1"),
-        ({"targets": 5000}, "targets: expected an integer of at most 4096"),
+        ({"targets": 5000}, "targets: expected an integer of at most 1024"),
         ({"uniform_share": 1.5}, "uniform_share"),
     ]:
         with pytest.raises(ValueError, match=match):

@@ -49,6 +49,9 @@ Array = NDArray[np.float64]
 #: The parameter candidates of :func:`utility_thetas`: this many from a fixed seed (never the optimiser's
 #: Generator), plus the θ of the best ``BEST_TOLD`` episodes told.
 FIXED_THETAS, BEST_TOLD, THETA_SEED = 64, 16, 20_151_207
+#: Largest (inputs x training points) block :func:`plausible_maximisers` predicts at once: many contexts
+#: are scored in blocks, so the memory stays bounded whatever the selector asks.
+BLOCK = 2**22
 
 
 def utility_thetas(told: Array, returns: Array) -> Array:
@@ -74,11 +77,16 @@ def plausible_maximisers(model: GPModel, contexts: Array, thetas: Array, count: 
         Per context, its pairs in order of decreasing bound (ties: the earlier θ first).
     """
     r, m = contexts.shape[0], thetas.shape[0]
-    inputs = _pairs(contexts, thetas)
-    mean, variance = model.predict(inputs)
-    bound = (mean + math.sqrt(beta) * np.sqrt(variance)).reshape(r, m)
-    order = np.argsort(-bound, axis=1, kind="stable")[:, : min(count, m)]
-    return inputs.reshape(r, m, -1)[np.arange(r)[:, None], order]
+    rows = max(1, BLOCK // (m * max(1, model.inputs.shape[0])))  # contexts per block
+    chosen = []
+    for start in range(0, r, rows):
+        block = contexts[start : start + rows]
+        inputs = _pairs(block, thetas)
+        mean, variance = model.predict(inputs)
+        bound = (mean + math.sqrt(beta) * np.sqrt(variance)).reshape(block.shape[0], m)
+        order = np.argsort(-bound, axis=1, kind="stable")[:, : min(count, m)]
+        chosen.append(inputs.reshape(block.shape[0], m, -1)[np.arange(block.shape[0])[:, None], order])
+    return np.concatenate(chosen)
 
 
 def posterior_covariance(model: GPModel, a: Array, b: Array) -> Array:

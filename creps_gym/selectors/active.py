@@ -39,7 +39,7 @@ __all__ = ["ActiveContextSelector"]
 
 Array = NDArray[np.float64]
 #: Largest candidate and target sets (each sizes the optimiser's work at every select).
-MAX_POINTS = 4096
+MAX_POINTS = 1024
 
 
 class ActiveContextSelector:
@@ -48,11 +48,11 @@ class ActiveContextSelector:
     Parameters
     ----------
     candidates : int
-        Uniform candidate contexts scored per iteration (>= 1, at most 4096; at least the batch's
+        Uniform candidate contexts scored per iteration (>= 1, at most 1024; at least the batch's
         active share are drawn).
     targets : int
         Uniform target contexts per iteration whose optimal parameters the utility values (>= 1, at
-        most 4096).
+        most 1024).
     uniform_share : float
         Share of every iteration's episodes drawn uniformly in the whole box, in [0, 1].
     """

@@ -1,12 +1,12 @@
 """What one more episode at a context would teach a GP about the optimal parameters everywhere (c-bo's
 ``context_utility``).
 
-After Metzen, "Active Contextual Entropy Search" (NIPS 2015 workshop on Bayesian optimisation; Metzen,
-Fabisch & Hansen 2015, BO-CPS): the context of the next trial is the one whose query most reduces the
-entropy of the optimal parameters' distribution p(θ*(s)) summed over the whole context space. ACES
-estimates that entropy reduction with entropy search at a set of representative contexts; here it is
-approximated in closed form, without sampling, by the variance the query removes from the values of the
-*plausible maximisers*:
+After J. H. Metzen, "Active Contextual Entropy Search" (2015), which extends BO-CPS (Metzen, Fabisch &
+Hansen 2015): the context of the next trial is the one whose query most reduces the entropy of the
+optimal parameters' distribution p(θ*(s)) summed over the whole context space. ACES estimates that
+entropy reduction with one entropy search per representative context (a k-means summary of uniform
+contexts in Metzen's implementation); here it is approximated in closed form, without sampling, by the
+variance the query removes from the values of the *plausible maximisers*:
 
 1. **Representers.** At each target context s_i (the selector draws them over the context box), the
    ``b`` parameter vectors of a shared candidate set with the largest upper confidence bound

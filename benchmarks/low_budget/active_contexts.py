@@ -1,14 +1,17 @@
 """Active context choice against uniform draws for c-bo at a low budget (issue 44, item 2).
 
-c-bo runs on a contextual function (``creps_gym/<Function>-v0`` with ``dim=p``, ``context_dim=z``) from
-the issue's start (mean 0, σ = 2), in batches of its recommended size (4), with the training contexts of
-every batch chosen by the ``uniform`` or the ``active`` selector (the latter given c-bo's
+c-bo runs on a contextual function (``creps_gym/<Function>-v0`` with ``dim=p``, ``context_dim=z``), or
+on ``Steep<Function>`` (the context study's function whose regret grows 100-fold across the box,
+``benchmarks/contexts/tasks.py``), from the issue's start (mean 0, σ = 2), in batches of its recommended
+size (4), with the training contexts of every batch chosen by the ``uniform`` or the ``active`` selector (the latter given c-bo's
 ``context_utility``). After each budget the run records the mean regret of ``recommend`` on 100 uniform
 test contexts (seed 12345; the same for both selectors), and the seconds the selector spent. Writes one
 JSON document with provenance and a Markdown table next to it (``--render-only`` redraws the table).
 
     OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.active_contexts \\
         --out benchmarks/low_budget/results/active_contexts.json
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.active_contexts \
+        --tasks SteepSphere:2:1 SteepRosenbrock:2:1 --out benchmarks/low_budget/results/active_steep.json
 """
 
 from __future__ import annotations
@@ -39,11 +42,22 @@ TEST_SEED, TEST_CONTEXTS = 12_345, 100
 SELECTORS = ("uniform", "active")
 
 
+def make_task(function: str, p: int, z: int) -> Any:
+    """The env of ``creps_gym/<function>-v0``, or for ``Steep<function>`` the context study's
+    :class:`~benchmarks.contexts.tasks.SteepFunction` (regret scaled by 100^u(s): the box's upper end of
+    the first context coordinate is 100 times steeper)."""
+    if function.startswith("Steep"):
+        from benchmarks.contexts.tasks import SteepFunction
+
+        return SteepFunction(function[len("Steep") :], dim=p, context_dim=z, steepness=100.0)
+    return gym.make(f"creps_gym/{function}-v0", dim=p, context_dim=z).unwrapped
+
+
 def one_run(
     function: str, p: int, z: int, selector_name: str, budgets: list[int], seed: int
 ) -> dict[str, Any]:
     """c-bo with ``selector_name``'s contexts on one function; its regret after each of ``budgets``."""
-    env = gym.make(f"creps_gym/{function}-v0", dim=p, context_dim=z).unwrapped
+    env = make_task(function, p, z)
     optimizer = make_optimizer("c-bo", p, z, seed, initial_mean=0.0, initial_cov=4.0)
     selector = make_selector(selector_name)
     selector.bind(env.observation_space.low.astype(float), env.observation_space.high.astype(float), None)

@@ -3,14 +3,15 @@
 c-bo runs on a contextual function (``creps_gym/<Function>-v0`` with ``dim=p``, ``context_dim=z``), or
 on ``Steep<Function>`` (the context study's function whose regret grows 100-fold across the box,
 ``benchmarks/contexts/tasks.py``), from the issue's start (mean 0, σ = 2), in batches of its recommended
-size (4), with the training contexts of every batch chosen by the ``uniform`` or the ``active`` selector (the latter given c-bo's
-``context_utility``). After each budget the run records the mean regret of ``recommend`` on 100 uniform
-test contexts (seed 12345; the same for both selectors), and the seconds the selector spent. Writes one
-JSON document with provenance and a Markdown table next to it (``--render-only`` redraws the table).
+size (4), with the training contexts of every batch chosen by the ``uniform`` or the ``active`` selector
+(the latter given c-bo's ``context_utility``). After each budget the run records the mean regret of
+``recommend`` on 100 uniform test contexts (seed 12345; the same for both selectors), and the seconds
+the selector spent. Writes one JSON document with provenance and a Markdown table next to it
+(``--render-only`` redraws the table).
 
     OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.active_contexts \\
         --out benchmarks/low_budget/results/active_contexts.json
-    OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.active_contexts \
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.active_contexts \\
         --tasks SteepSphere:2:1 SteepRosenbrock:2:1 --out benchmarks/low_budget/results/active_steep.json
 """
 

@@ -8,19 +8,26 @@ import json
 import shutil
 from pathlib import Path
 
+import pytest
+
 from benchmarks.low_budget import active_contexts
 
 RESULTS = Path(__file__).resolve().parent.parent / "benchmarks" / "low_budget" / "results"
 
 
-def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path):
-    copy = tmp_path / "active_contexts.json"
-    shutil.copy(RESULTS / "active_contexts.json", copy)
-    assert active_contexts.render(copy) == (RESULTS / "active_contexts.md").read_text()
+NAMES = ("active_contexts", "active_steep")
 
 
-def test_every_task_has_both_selectors_on_the_same_seeds_at_least_five_and_provenance():
-    document = json.loads((RESULTS / "active_contexts.json").read_text())
+@pytest.mark.parametrize("name", NAMES)
+def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path, name):
+    copy = tmp_path / f"{name}.json"
+    shutil.copy(RESULTS / f"{name}.json", copy)
+    assert active_contexts.render(copy) == (RESULTS / f"{name}.md").read_text()
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_task_has_both_selectors_on_the_same_seeds_at_least_five_and_provenance(name):
+    document = json.loads((RESULTS / f"{name}.json").read_text())
     assert document["provenance"]["recorded"] is True
     tasks = {(r["function"], r["p"], r["z"]) for r in document["runs"]}
     for task in tasks:

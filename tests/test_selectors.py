@@ -67,8 +67,43 @@ def test_same_seed_same_contexts_and_a_restored_state_continues_exactly(name):
     restored.load_state_dict(json.loads(json.dumps(first.state_dict())))
     rng_a, rng_b = np.random.default_rng(9), np.random.default_rng(9)
     assert (first.select(rng_a, 12) == restored.select(rng_b, 12)).all()
-    if name in ("uniform", "arcsine", "beta", "env", "bandit", "progress"):  # random draws: seeds matter
+    if name in ("uniform", "arcsine", "beta", "env", "bandit", "progress", "active"):  # random: seeds matter
         assert not (_feed(_selector(name), 4, 1)[0] == _feed(_selector(name), 5, 1)[0]).all()
+
+
+def _toy_utility(chosen: list[np.ndarray]):
+    """A model's ``context_utility`` stand-in: larger far from every context chosen so far and pending."""
+
+    def utility(candidates, targets, pending):
+        seen = np.concatenate([*chosen, np.zeros((0, 2)) if pending is None else pending])
+        if not len(seen):
+            return np.zeros(len(candidates))
+        return np.min(((candidates[:, None, :] - seen[None, :, :]) ** 2).sum(axis=2), axis=1)
+
+    return utility
+
+
+@pytest.mark.parametrize(
+    "name", [n for n in selector_names() if getattr(SELECTORS[n], "uses_context_utility", 0)]
+)
+def test_selectors_that_use_the_models_utility_keep_the_protocol_with_it(name):
+    runs = []
+    for _ in range(2):
+        selector, chosen, rng = _selector(name), [], np.random.default_rng(6)
+        for _ in range(4):
+            contexts = selector.select(rng, 5, context_utility=_toy_utility(chosen))
+            assert contexts.shape == (5, 2) and (contexts >= LOW).all() and (contexts <= HIGH).all()
+            chosen.append(contexts)
+            selector.tell(contexts, -contexts[:, 0], {"sigma": 0.5})
+        runs.append(np.concatenate(chosen))
+        restored = _selector(name)
+        restored.load_state_dict(json.loads(json.dumps(selector.state_dict())))
+        utility = _toy_utility(chosen)
+        a, b = np.random.default_rng(1), np.random.default_rng(1)
+        assert (
+            selector.select(a, 3, context_utility=utility) == restored.select(b, 3, context_utility=utility)
+        ).all()
+    assert (runs[0] == runs[1]).all()  # the same seed and utility: the same contexts
 
 
 def test_the_samplers_are_adapted_not_copied():

@@ -17,6 +17,14 @@ Protocol rules (enforced by :class:`ContextualOptimizer`, documented for users):
 
 Checkpoints are ``.npz`` files holding the arrays plus one JSON document (``__state__.json``), never
 pickle (:mod:`creps_gym.optimizers.state_files`). A restored optimiser continues with bit-identical asks.
+
+Optional model hook: an optimiser with a model of the return may define
+``context_utility(candidates (m, z), targets (r, z), pending (k, z) or None) -> (m,)``, the value of one
+more episode at each candidate context for learning the optimal parameters at the target contexts, after
+episodes at the ``pending`` contexts (larger is better; finite; deterministic given the optimiser's state,
+drawing nothing from its Generator). The runner hands it, as a plain callable, to context selectors that
+ask for it (:mod:`creps_gym.selectors.active`); ``c-bo`` implements it
+(:meth:`creps_gym.optimizers.cbo.ContextualBO.context_utility`).
 """
 
 from __future__ import annotations

@@ -40,6 +40,7 @@ from creps_gym.optimizers.acquisitions import Acquisition, AcquisitionMaximiser,
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.cbo_config import MAX_COUNTS, CBOConfig
 from creps_gym.optimizers.ccmaes_config import options_doc, options_signature
+from creps_gym.optimizers.context_value import context_information, utility_thetas
 from creps_gym.optimizers.gp_model import (
     GPModel,
     default_start,
@@ -275,6 +276,20 @@ class ContextualBO(ContextualOptimizer):
             for row in scaled
         ]
         return self._unscaled_params(np.array(units))
+
+    def context_utility(self, candidates: Any, targets: Any, pending: Any = None) -> Array:
+        """What one more episode at each candidate context (m, z) would teach the GP about the optimal θ
+        at the ``targets`` (r, z), after the batch's ``pending`` contexts (k, z): Eq. (C1) of
+        :mod:`~creps_gym.optimizers.context_value`, shape (m,), in [0, 1]; zeros before the GP exists.
+        The protocol's optional model hook (the ``active`` selector's); draws nothing from the Generator."""
+        candidates = self._check_contexts(candidates, "candidates")
+        targets = self._check_contexts(targets, "targets")
+        rows = None if pending is None or not len(pending) else self._check_contexts(pending, "pending")
+        if self.model is None:
+            return np.zeros(candidates.shape[0])
+        thetas = utility_thetas(np.clip(self._scaled_params(self.params), 0.0, 1.0), self.returns)
+        scaled = [None if c is None else self._scaled_contexts(c) for c in (candidates, targets, rows)]
+        return context_information(self.model, scaled[0], scaled[1], thetas, scaled[2])
 
     def distillation_contexts(self) -> Array:
         """The grid :meth:`mean_policy` fits on: ``grid_points`` per dimension over the configured context

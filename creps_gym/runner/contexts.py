@@ -109,10 +109,13 @@ class ContextDraws:
         """Tell the selector (if any) an iteration's contexts, returns and the optimiser's diagnostics."""
         self.selection.tell(contexts, returns, optimizer)
 
-    def draw(self, rng: np.random.Generator, n: int, label: str) -> tuple[NDArray[np.int64], Array]:
+    def draw(
+        self, rng: np.random.Generator, n: int, label: str, optimizer: Any = None
+    ) -> tuple[NDArray[np.int64], Array]:
         """Reset seeds (n,) and contexts (n, z) of ``n`` episodes; ``label`` names them in errors.
 
-        A selector's contexts are drawn from its own stream and checked against the context box.
+        A selector's contexts are drawn from its own stream and checked against the context box (a
+        selector that asks for it gets ``optimizer``'s ``context_utility``: :meth:`Selection.select`).
         """
         seeds = rng.integers(0, SEED_HIGH, size=n)
         if self._sample is None:
@@ -120,7 +123,7 @@ class ContextDraws:
         if self.selector is None:
             contexts, name = np.asarray(self._sample(rng, n), dtype=np.float64), "sample_contexts"
         else:
-            contexts, name = np.asarray(self.selector.select(self.selection.rng, n), np.float64), "selector"
+            contexts, name = np.asarray(self.selection.select(n, optimizer), np.float64), "selector"
         if contexts.shape != (n, self.n_context_dims):
             raise ValueError(f"{name}: expected shape ({n}, {self.n_context_dims}), got {contexts.shape}")
         if self.selector is not None and not (

@@ -246,7 +246,7 @@ class Runner:
         """Run one iteration on ``backend``; returns its record and the stop reason (None: go on)."""
         self._watch = self._watch or DivergenceWatch.of_history(self.config.divergence, self.history.records)
         n, label = self.config.samples, f"iteration {self.iteration + 1}"
-        seeds, contexts = self.draws.draw(self.env_rng, n, label)
+        seeds, contexts = self.draws.draw(self.env_rng, n, label, self.optimizer)
         params = protocol.real_params(self.optimizer.ask(contexts), "ask", (n, self.n_params))
         returns = backend.evaluate(seeds, contexts, params, label)
         self.optimizer.tell(contexts, params, returns)

@@ -63,6 +63,14 @@ class Selection:
         self.selector = selector
         self.rng = None if selector is None else selector_stream(config.seed)
 
+    def select(self, n: int, optimizer: Any = None) -> Any:
+        """The selector's ``n`` contexts from its stream; a selector that declares
+        ``uses_context_utility`` also gets the optimiser's ``context_utility`` (None if it has none)."""
+        if not getattr(self.selector, "uses_context_utility", False):
+            return self.selector.select(self.rng, n)
+        utility = getattr(optimizer, "context_utility", None)
+        return self.selector.select(self.rng, n, context_utility=utility if callable(utility) else None)
+
     def tell(self, contexts: np.ndarray, returns: np.ndarray, optimizer: Any) -> None:
         """Tell the selector the iteration's outcome and the optimiser's diagnostics (no-op without one)."""
         if self.selector is not None:

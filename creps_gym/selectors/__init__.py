@@ -7,9 +7,10 @@ env's own test contexts.
 
 Modules: :mod:`.base` (the protocol, the adapters of the fixed samplers), :mod:`.bandit` (learning
 progress over grid cells, D-UCB), :mod:`.progress` (a kernel estimate of learning progress, no partition),
-:mod:`.registry` (names, options).
+:mod:`.active` (where the optimiser's model expects to learn most), :mod:`.registry` (names, options).
 """
 
+from creps_gym.selectors.active import ActiveContextSelector
 from creps_gym.selectors.bandit import LearningProgressBandit, cell_index, ducb_index
 from creps_gym.selectors.base import (
     BetaSelector,
@@ -30,6 +31,7 @@ from creps_gym.selectors.registry import (
 
 __all__ = [
     "SELECTORS",
+    "ActiveContextSelector",
     "ArcsineSelector",
     "BetaSelector",
     "ContextSelector",

@@ -12,6 +12,12 @@ of them. The runner (:mod:`creps_gym.runner.contexts`) calls, in this order:
    ``load_state_dict(state)`` on resume. A checkpoint is untrusted: ``load_state_dict`` validates
    ``state`` and raises ``ValueError``/``TypeError`` for anything ``state_dict`` cannot have written.
 
+Optional: a selector whose class sets ``uses_context_utility = True`` is called
+``select(rng, n, context_utility=f)`` instead, ``f`` being the optimiser's model hook
+``context_utility(candidates (m, z), targets (r, z), pending (k, z) or None) -> (m,)`` (see
+:mod:`creps_gym.optimizers.base`) as a plain callable, or None when the optimiser has none
+(:class:`~creps_gym.selectors.active.ActiveContextSelector`).
+
 Selectors never see the optimiser or the env: the dependency rule keeps them apart (they import numpy
 and :mod:`creps_gym.wrappers.samplers` only).
 

@@ -14,6 +14,7 @@ from typing import Any
 
 from creps_gym._validation import config_field
 from creps_gym.errors import ConfigError, ConfigTypeError
+from creps_gym.selectors.active import ActiveContextSelector
 from creps_gym.selectors.bandit import LearningProgressBandit
 from creps_gym.selectors.base import BetaSelector, EnvSelector, FixedSelector, UniformSelector
 from creps_gym.selectors.progress import KernelProgressSelector
@@ -39,6 +40,7 @@ SELECTORS: dict[str, type] = {
     "fixed": FixedSelector,
     "bandit": LearningProgressBandit,
     "progress": KernelProgressSelector,
+    "active": ActiveContextSelector,
 }
 
 

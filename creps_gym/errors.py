@@ -34,7 +34,8 @@ class EpisodeError(RuntimeError):
 
 
 class ConfigError(ValueError):
-    """A bad value of one field of a run's configuration (a ``RunConfig`` field, e.g. ``samples``).
+    """A bad value of one field of a configuration: a ``RunConfig`` field (e.g. ``samples``), or an option
+    of an optimiser (e.g. ``epsilon``, raised by the optimiser itself when a batch shows it cannot work).
 
     ``field`` names the field (the command line names the flag that sets it), ``reason`` says what was
     expected and what was given; the message is ``"field: reason"`` unless given (a component's own error

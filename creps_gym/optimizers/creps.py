@@ -33,6 +33,7 @@ from creps_gym._validation import (
     check_real_in_range,
     check_seed,
 )
+from creps_gym.errors import ConfigError
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.cma_rules import scaled_mean, stagnation_window
 from creps_gym.optimizers.dual import DUAL_KL_TOL, DualSolution, solve_dual
@@ -228,9 +229,10 @@ class CREPS(PolicyAccess, ContextualOptimizer):
                 f"k = {k} features and interpolates any smaller batch, got N = {n}"
             )
         if self.config.epsilon >= np.log(n):
-            raise ValueError(
-                f"epsilon: expected < log(N) = {np.log(n):.4f} for a batch of N={n} samples, "
-                f"got {self.config.epsilon}"
+            raise ConfigError(
+                "epsilon",
+                f"expected < log(N) = {np.log(n):.4f} for a batch of N={n} samples, "
+                f"got {self.config.epsilon}",
             )
         dual = solve_dual(
             returns, self.config.baseline_map(contexts), self.config.epsilon, self._eta

@@ -6,7 +6,7 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
-from creps_gym.errors import RunDirError
+from creps_gym.errors import ConfigError, RunDirError
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.history import History
 from creps_gym.runner.loop import Runner
@@ -94,10 +94,9 @@ def run(
             overwrite=overwrite,
             context_selector=selector,
         )
-    except ValueError as exc:  # e.g. a batch below the optimiser's minimum: name this function's argument
-        field, sep, rest = str(exc).partition(":")
-        if sep and field == "samples":
-            raise ValueError(f"samples_per_iteration:{rest}") from None
+    except ConfigError as exc:  # e.g. a batch below the optimiser's minimum: name this function's argument
+        if exc.field == "samples":
+            raise ConfigError("samples_per_iteration", exc.reason) from None
         raise
     return runner.run()
 

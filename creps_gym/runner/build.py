@@ -40,7 +40,7 @@ def make_env(env_id: str, kwargs: dict[str, Any]) -> gym.Env:
     """``gymnasium.make(env_id, **kwargs)``, with the env's own message for a bad keyword argument.
 
     An unknown keyword raises ``TypeError`` naming the keywords the env takes (and the closest ones); an
-    error the env raises about one of ``kwargs`` (``dim: expected ...``) loses Gymnasium's suffix ("was
+    error the env itself raises (``dim: expected ...``) is raised as it is, without Gymnasium's suffix ("was
     raised from the environment creator ... with kwargs (...)"), which repeats every default.
     """
     try:
@@ -53,8 +53,9 @@ def make_env(env_id: str, kwargs: dict[str, Any]) -> gym.Env:
         if unknown is not None and unknown.group(2) in kwargs:
             reason = _unknown_keyword(env_id, unknown.group(2), unknown.group(1))
             raise ConfigTypeError("env_kwargs", reason) from None
-        if message.partition(":")[0] in kwargs:  # e.g. "dim: expected an integer >= 2, got str 'abc'"
-            raise TypeError(message) from None
+        original = exc.__cause__ or exc.__context__  # the env's own error, e.g. "dim: expected an integer"
+        if isinstance(original, TypeError):
+            raise original from None
         raise
 
 

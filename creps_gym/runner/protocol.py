@@ -111,7 +111,8 @@ def check_batch_size(
 ) -> None:
     """One ask/tell of ``make()`` on ``contexts`` (n, z) with distinct returns; ValueError if it refuses.
 
-    An error naming one of the optimiser ``options`` (e.g. ``epsilon``) is raised as it is. Any other
+    An optimiser's :class:`~creps_gym.errors.ConfigError` whose ``field`` is one of its ``options`` (e.g.
+    ``epsilon``) is raised as an error of ``optimizer_options`` with its message. Any other
     ``ValueError`` of the ``tell`` is an error of ``samples`` if a batch four times as large is accepted,
     else of the initial distribution. Other exceptions are left to the run itself (the synthetic batch is not
     the run's).
@@ -119,7 +120,7 @@ def check_batch_size(
     error = _tell_error(make, contexts)
     if error is None:
         return
-    if str(error).partition(":")[0] in options:
+    if getattr(error, "field", None) in options:  # the optimiser's ConfigError about one of its options
         raise ConfigError("optimizer_options", str(error), str(error)) from None
     if _tell_error(make, np.tile(contexts, (4, 1))) is None:
         raise ConfigError(

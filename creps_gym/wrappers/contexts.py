@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from creps_gym._validation import as_float_array
 from creps_gym.envs.base import initial_distribution
 from creps_gym.envs.evaluation import contextual_model
-from creps_gym.wrappers.sources import FixedSource, checked_samples, param_bounds, unchanged_on_error
+from creps_gym.wrappers.sources import FixedSet, checked_samples, param_bounds, unchanged_on_error
 
 __all__ = ["FixedContexts", "HideContext", "NormalizeParams", "SampleContexts"]
 
@@ -77,7 +77,7 @@ class _ContextChoice(gym.Wrapper):
         return obs, info
 
 
-class FixedContexts(_ContextChoice, gym.utils.RecordConstructorArgs):
+class FixedContexts(FixedSet, _ContextChoice, gym.utils.RecordConstructorArgs):
     """Draw every episode's context from a fixed set: in a cycle, or at random with the env's ``np_random``.
 
     Parameters
@@ -100,17 +100,7 @@ class FixedContexts(_ContextChoice, gym.utils.RecordConstructorArgs):
     def __init__(self, env: gym.Env, contexts: Any, order: str = "cycle", name: str | None = None) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, contexts=contexts, order=order, name=name)
         _ContextChoice.__init__(self, env)
-        checked = self.model.check_contexts(contexts, "contexts")
-        self.source = FixedSource(checked, order)
-        self.name = name
-
-    @property
-    def contexts(self) -> Array:
-        """The context set, shape (m, z)."""
-        return self.source.contexts.copy()
-
-    def _restart(self) -> None:
-        self.source.restart()
+        self._hold(contexts, order, name)
 
     def _choose(self) -> tuple[Array, dict[str, Any]]:
         contexts, index = self.source.draw(self.np_random, 1)

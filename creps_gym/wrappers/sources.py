@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from creps_gym._validation import as_float_array
 from creps_gym.envs.base import ContextualEpisodicEnv
 
-__all__ = ["ORDERS", "FixedSource", "checked_samples", "param_bounds", "unchanged_on_error"]
+__all__ = ["ORDERS", "FixedSet", "FixedSource", "checked_samples", "param_bounds", "unchanged_on_error"]
 
 Array = NDArray[np.float64]
 ORDERS = ("cycle", "random")
@@ -49,6 +49,30 @@ class FixedSource:
             index = (self.position + np.arange(n)) % m
             self.position = int((self.position + n) % m)
         return self.contexts[index].copy(), index.astype(np.int64)
+
+
+class FixedSet:
+    """What ``FixedContexts`` and ``FixedContextsVector`` share: the checked set, its label and its cycle.
+
+    A mixin for a context-choosing wrapper whose ``model`` (the env's contextual model) is set.
+    """
+
+    model: Any
+    source: FixedSource
+    name: str | None
+
+    def _hold(self, contexts: Any, order: str, name: str | None) -> None:
+        """Check ``contexts`` (m, z) against the env's context box and keep them with ``order``."""
+        self.source = FixedSource(self.model.check_contexts(contexts, "contexts"), order)
+        self.name = name
+
+    @property
+    def contexts(self) -> Array:
+        """The context set, shape (m, z)."""
+        return self.source.contexts.copy()
+
+    def _restart(self) -> None:
+        self.source.restart()
 
 
 def checked_samples(sampler: Any, rng: np.random.Generator, n: int, model: ContextualEpisodicEnv) -> Array:

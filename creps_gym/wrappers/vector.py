@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from creps_gym._validation import as_float_array
 from creps_gym.envs.evaluation import contextual_model
-from creps_gym.wrappers.sources import FixedSource, checked_samples, param_bounds, unchanged_on_error
+from creps_gym.wrappers.sources import FixedSet, checked_samples, param_bounds, unchanged_on_error
 
 __all__ = ["FixedContextsVector", "HideContextVector", "NormalizeParamsVector", "SampleContextsVector"]
 
@@ -98,7 +98,7 @@ class _ContextChoiceVector(VectorWrapper):
         return obs, rewards, terminated, truncated, info
 
 
-class FixedContextsVector(_ContextChoiceVector):
+class FixedContextsVector(FixedSet, _ContextChoiceVector):
     """Per-env contexts from a fixed set (see :class:`~creps_gym.wrappers.contexts.FixedContexts`).
 
     Parameters
@@ -114,17 +114,7 @@ class FixedContextsVector(_ContextChoiceVector):
 
     def __init__(self, env: VectorEnv, contexts: Any, order: str = "cycle", name: str | None = None) -> None:
         super().__init__(env)
-        checked = self.model.check_contexts(contexts, "contexts")
-        self.source = FixedSource(checked, order)
-        self.name = name
-
-    @property
-    def contexts(self) -> Array:
-        """The context set, shape (m, z)."""
-        return self.source.contexts.copy()
-
-    def _restart(self) -> None:
-        self.source.restart()
+        self._hold(contexts, order, name)
 
     def _choose(self, n: int) -> tuple[Array, dict[str, Any]]:
         contexts, index = self.source.draw(self.np_random, n)

@@ -6,12 +6,7 @@ Each ``<Name>Env`` is registered as ``creps_gym/<Name>-v0`` with ``<Name>VectorE
 
 from __future__ import annotations
 
-from creps_gym.envs.functions.env import (
-    BoundedFunctionEnv,
-    ContextualFunctionEnv,
-    ContextualFunctionVectorEnv,
-    UnboundedFunctionEnv,
-)
+from creps_gym.envs.functions.env import BoundedFunctionEnv, ContextualFunctionVectorEnv, UnboundedFunctionEnv
 from creps_gym.envs.functions.manual import manual
 from creps_gym.envs.functions.specs import SPECS, FunctionSpec
 
@@ -217,8 +212,10 @@ class SharpRidgeVectorEnv(ContextualFunctionVectorEnv):
     single_env_class = SharpRidgeEnv
 
 
+_EnvPair = tuple[type[BoundedFunctionEnv | UnboundedFunctionEnv], type[ContextualFunctionVectorEnv]]
+
 #: (env class, vector env class) of every function, in the paper's order (Fig. 1a-h, then Fig. 2a-g).
-ENV_CLASSES: tuple[tuple[type[ContextualFunctionEnv], type[ContextualFunctionVectorEnv]], ...] = (
+ENV_CLASSES: tuple[_EnvPair, ...] = (
     (RosenbrockEnv, RosenbrockVectorEnv),
     (SphereEnv, SphereVectorEnv),
     (ShiftedSphereEnv, ShiftedSphereVectorEnv),

@@ -21,11 +21,10 @@ from typing import Any
 
 from creps_gym.cli.types import (
     add_import,
+    add_key_value,
+    add_search_start,
     import_modules_and_check_names,
-    initial_mean,
     integer,
-    key_value,
-    numbers,
 )
 from creps_gym.errors import RunDirError, UsageError
 
@@ -84,7 +83,7 @@ def _add_new(ask: argparse.ArgumentParser) -> None:
     new.add_argument(
         "--env", help="take the spaces of this registered env id (rehearsal; `evaluate` uses it)"
     )
-    new.add_argument("--env-kwarg", action="append", type=key_value, default=[], metavar="KEY=VALUE")
+    add_key_value(new, "--env-kwarg", "with --env: e.g. dim=5")
     new.add_argument(
         "--params", type=integer(1), metavar="P", help="p, if each parameter bound is one number"
     )
@@ -96,9 +95,8 @@ def _add_new(ask: argparse.ArgumentParser) -> None:
     new.add_argument("--samples", type=integer(2), help="episodes per batch (default: the optimiser's)")
     new.add_argument("--iterations", type=integer(1), default=1_000_000, help="batches (default: no limit)")
     new.add_argument("--max-episodes", type=integer(2), help="episode budget (default: no limit)")
-    new.add_argument("--initial-mean", type=initial_mean, help="a number or p comma-separated numbers")
-    new.add_argument("--initial-std", type=numbers, help="initial standard deviation(s)")
-    new.add_argument("--opt", action="append", type=key_value, default=[], metavar="KEY=VALUE")
+    add_search_start(new)
+    add_key_value(new, "--opt", "optimiser option")
     new.add_argument("--overwrite", action="store_true", help="replace a run already in RUN (deletes it)")
 
 

@@ -12,11 +12,10 @@ from typing import Any
 
 from creps_gym.cli.types import (
     add_import,
+    add_key_value,
+    add_search_start,
     import_modules_and_check_names,
-    initial_mean,
     integer,
-    key_value,
-    numbers,
     positive_float,
     positive_or_none,
     selector_name,
@@ -31,7 +30,6 @@ _WORKERS_DEFAULT = "vector: one per sample for a native vector env, else one per
 _DIVERGENCE_HELP = (
     "stop once 10 evaluations in a row are worse than the first by this factor of its size ('none': never)"
 )
-_INITIAL_MEAN_HELP = "a number, p comma-separated numbers, or 'uniform' in the box"
 
 
 def add_commands(commands: Any) -> None:
@@ -128,13 +126,12 @@ def _add_budgets(run: argparse.ArgumentParser, defaults: dict[str, Any]) -> None
         ("--target-regret", positive_float, "stop once the mean regret is at most this", "no target"),
         ("--max-time", positive_float, "stop after this many seconds", "no limit"),
         ("--divergence", positive_or_none, _DIVERGENCE_HELP, None),
-        ("--initial-mean", initial_mean, _INITIAL_MEAN_HELP, "the env-declared mean"),
-        ("--initial-std", numbers, "initial standard deviation(s)", "the env-declared one"),
     ]
     for flag, parse, text, if_none in optional:
         default = defaults[flag[2:].replace("-", "_")]
         shown = if_none if default is None else default
         run.add_argument(flag, type=parse, default=default, help=f"{text} (default: {shown})")
+    add_search_start(run, defaults["initial_mean"], defaults["initial_std"])
 
 
 def _add_options(run: argparse.ArgumentParser) -> None:
@@ -155,14 +152,7 @@ def _add_options(run: argparse.ArgumentParser) -> None:
         ("--selector-opt", "context selector option, e.g. --selector-opt cells=4"),
     )
     for flag, text in flags:
-        run.add_argument(
-            flag,
-            action="append",
-            type=key_value,
-            default=[],
-            metavar="KEY=VALUE",
-            help=f"{text}; VALUE is JSON or a string (repeatable)",
-        )
+        add_key_value(run, flag, text)
 
 
 # -- handlers -----------------------------------------------------------------------------------------------

@@ -1,8 +1,8 @@
 """Argument types of the ``creps-gym`` command line: each names what it expected and what it got.
 
 Also what every command module shares: :class:`UsageError` (exit code 2), the ``--import`` flag and the
-imports it asks for. Names that a module may register (``--env``, ``--optimizer``) are checked after
-``--import`` (:func:`import_modules_and_check_names`), not by their argument types.
+imports it asks for, the ``KEY=VALUE`` flags. Names that a module may register (``--env``, ``--optimizer``)
+are checked after ``--import`` (:func:`import_modules_and_check_names`), not by their argument types.
 """
 
 from __future__ import annotations
@@ -19,6 +19,8 @@ from creps_gym.errors import UsageError
 
 __all__ = [
     "add_import",
+    "add_key_value",
+    "add_search_start",
     "import_modules_and_check_names",
     "import_user_modules",
     "initial_mean",
@@ -29,6 +31,8 @@ __all__ = [
     "positive_or_none",
     "selector_name",
 ]
+
+_INITIAL_MEAN_HELP = "a number, p comma-separated numbers, or 'uniform' in the box"
 
 
 def import_user_modules(modules: Sequence[str]) -> None:
@@ -58,6 +62,34 @@ def add_import(parser: argparse.ArgumentParser) -> None:
         help="import MODULE first (e.g. the module that registers your env or optimiser; repeatable; "
         "searched in the current directory too); a run directory never makes creps-gym import anything",
     )
+
+
+def add_key_value(parser: Any, flag: str, text: str) -> None:
+    """A repeatable ``KEY=VALUE`` flag (``--opt``, ``--env-kwarg``, ``--selector-opt``), parsed by
+    :func:`key_value` into a list of pairs; ``text`` starts its help."""
+    parser.add_argument(
+        flag,
+        action="append",
+        type=key_value,
+        default=[],
+        metavar="KEY=VALUE",
+        help=f"{text}; VALUE is JSON or a string (repeatable)",
+    )
+
+
+def add_search_start(parser: Any, mean: Any = None, std: Any = None) -> None:
+    """``--initial-mean`` and ``--initial-std``, the search distribution's start (``run``, ``ask --new``).
+
+    ``mean`` and ``std`` are their defaults; ``None`` means the env-declared ones (the box rule for an env
+    that declares none, as an ask/tell run's boxes).
+    """
+    flags = (
+        ("--initial-mean", initial_mean, _INITIAL_MEAN_HELP, mean, "the env-declared mean"),
+        ("--initial-std", numbers, "initial standard deviation(s)", std, "the env-declared one"),
+    )
+    for flag, parse, text, default, if_none in flags:
+        shown = if_none if default is None else default
+        parser.add_argument(flag, type=parse, default=default, help=f"{text} (default: {shown})")
 
 
 def import_modules_and_check_names(args: argparse.Namespace) -> None:

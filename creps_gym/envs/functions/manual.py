@@ -15,16 +15,16 @@ __all__ = ["manual"]
 
 _NBSP = "\u00a0"
 
-_TEMPLATE = """{title}: contextual version, ``x = theta + A s``.
+_TEMPLATE = """{spec.title}: contextual version, ``x = theta + A s``.
 
 ## Description
-The paper's {title} function (Abdolmaleki et al. 2019, section 5.1, Table 1, {panel}) made contextual:
-the agent chooses parameters theta for the context s, and the function is evaluated at
+The paper's {spec.title} function (Abdolmaleki et al. 2019, section 5.1, Table 1, {spec.panel}) made
+contextual: the agent chooses parameters theta for the context s, and the function is evaluated at
 ``x = theta + A s``.
 
-    {formula}
+    {spec.formula}
 
-Reference: {reference}. {optimum_text} {note}
+Reference: {spec.reference}. {optimum_text} {spec.note}
 
 The instance (A ~ U[-1, 1]^(p x z){shift_text}) is drawn from the ``instance`` seed, see
 :mod:`creps_gym.envs.functions.instance`: one instance is the same problem on every machine.
@@ -49,7 +49,7 @@ raises ``ValueError``, and so does a finite theta whose return overflows (far ou
 theta = 1e200): no step returns ±inf or NaN. The paper's stopping target is {target_text}.
 
 ## Arguments
-``gymnasium.make("creps_gym/{name}-v0", dim=15, context_dim=1, instance=0)``
+``gymnasium.make("creps_gym/{spec.name}-v0", dim=15, context_dim=1, instance=0)``
 
 * ``dim`` (int >= 2): p, the number of parameters. The paper uses 15 (and 2 to 64 in Fig. 3).
 * ``context_dim`` (int >= 0): z. The default is 1; the paper's text says both 1 and 3 (and 1 to 5 in
@@ -58,7 +58,7 @@ theta = 1e200): no step returns ±inf or NaN. The paper's stopping target is {ta
   searches on it.
 * ``instance`` (int >= 0): seed of A{seed_text}.
 
-``gymnasium.make_vec("creps_gym/{name}-v0", num_envs=n)`` gives the native vector env, which evaluates
+``gymnasium.make_vec("creps_gym/{spec.name}-v0", num_envs=n)`` gives the native vector env, which evaluates
 the whole batch in one numpy call and reproduces the scalar env bit for bit.
 
 ## Version History
@@ -138,13 +138,8 @@ def manual(spec: FunctionSpec) -> str:
     seed_text = (", o" if spec.shifted else "") + (" and R" if spec.rotated else "")
     return _wrap(
         _TEMPLATE.format(
-            title=spec.title,
-            name=spec.name,
-            panel=spec.panel,
-            formula=spec.formula,
-            reference=spec.reference,
+            spec=spec,
             optimum_text=optimum_text,
-            note=spec.note,
             shift_text=shift_text,
             box_text=box_text,
             info_text=info_text,

@@ -1,7 +1,7 @@
 """Smoke tests of the paper-reproduction studies (``benchmarks/functions``, ``benchmarks/scaling``).
 
-The scripts run as users run them (a subprocess, by path or with ``python -m``) on tiny configurations into a
-temporary directory; the tests check that the tables and figures appear, that the tables are computed from
+The scripts run as users run them (a subprocess, by path or with ``python -m``, once per study and mode; the
+other calls in this process, ``helpers.study_in_process``) on tiny configurations into a temporary directory; the tests check that the tables and figures appear, that the tables are computed from
 the cached run results, and that cached runs are not recomputed (the studies resume). The committed
 renderings under ``docs/results/`` must be what ``--render-only`` draws from the committed run caches.
 """
@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import study_in_process
 
 pytest.importorskip("matplotlib")
 pytest.importorskip("cma")
@@ -69,12 +70,12 @@ def test_functions_study_writes_table_and_figures_from_its_cached_runs(tmp_path:
     key = "Sphere-p4-z1-creps-cma-old-s0-b3000-n50"
     tampered = dict(documents[key], hit=1234567, final=1e-9)
     (cache / f"{key}.json").write_text(json.dumps(tampered))
-    log = _script("functions", *args)
+    log = study_in_process("functions", *args)
     assert "12 runs cached" in log and "0 to compute" in log
     assert "1,234,567 (1/1)" in (out / "results.md").read_text()
     # A partial study renders what has finished, computing nothing.
     (cache / f"{key}.json").unlink()
-    _script("functions", *args, "--render-only")
+    study_in_process("functions", *args, "--render-only")
     assert len(list(cache.glob("*.json"))) == 11
     assert "Partial: 11 of 12 runs have finished." in (out / "results.md").read_text()
 
@@ -628,7 +629,7 @@ def test_ccmaes_study_sweeps_the_batch_size_on_the_sphere_at_z_1(tmp_path: Path)
         "3",
     ]
     args += ["--seeds", "1", "--headline-seeds", "1", "--budget", "3000", "--workers", "1"]
-    log = _script("ccmaes", *args, "--cache", str(cache), "--out", str(out))
+    log = study_in_process("ccmaes", *args, "--cache", str(cache), "--out", str(out))
     # The sweep runs on the Sphere at z = 1 only; pycma on every function and z.
     sweep = sorted(k for k in _documents(cache) if "c-cma-es" in k)
     assert sweep == [
@@ -659,7 +660,7 @@ def test_ccmaes_study_renders_the_remedies_from_the_cached_runs(tmp_path: Path) 
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--remedies", "--dim", "4", "--context-dims", "1", "--seeds", "1", "--headline-seeds", "1"]
     args += ["--budget", "1000", "--workers", "1", "--cache", str(cache), "--out", str(out)]
-    log = _script("ccmaes", *args)
+    log = study_in_process("ccmaes", *args)
     assert "0 runs cached" in log and "7 to compute" in log
     documents = _documents(cache)
     suffixes = ["-baseline_batches=1-restarts=0", "-restarts=0", "-baseline_batches=1", ""]

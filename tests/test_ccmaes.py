@@ -606,8 +606,7 @@ def test_distribution_stops_apply_each_threshold_at_its_boundary():
 
 
 def test_the_runner_and_cli_take_the_recommended_batch_size_when_none_is_given(tmp_path):
-    import subprocess
-    import sys
+    from helpers import cli_in_process
 
     from creps_gym.optimizers import recommended_samples
     from creps_gym.runner import run
@@ -615,9 +614,10 @@ def test_the_runner_and_cli_take_the_recommended_batch_size_when_none_is_given(t
     history = run("c-cma-es", "creps_gym/Sphere-v0", 2, None, 0, env_kwargs={"dim": 15, "context_dim": 1})
     assert history.records[-1].episodes == 2 * recommended_samples("c-cma-es", 15, 1) == 2 * 24
     assert recommended_samples("cma", 15, 3) == 12  # pycma's default population; it ignores the context
-    command = [sys.executable, "-m", "creps_gym.cli", "run", "--env", "creps_gym/Sphere-v0", "--optimizer"]
+    command = ["run", "--env", "creps_gym/Sphere-v0", "--optimizer"]
     command += ["c-cma-es", "--iterations", "1", "--seed", "0", "--out", str(tmp_path / "run")]
-    subprocess.run(command, check=True, capture_output=True, timeout=120)
+    done = cli_in_process(*command)
+    assert done.returncode == 0, done.stderr
     assert '"samples": 24' in (tmp_path / "run" / "config.json").read_text()
 
 

@@ -449,12 +449,15 @@ def test_the_generic_path_learns_from_the_declared_start():
 
     env = gym.make(PRECISION, num_threads=0).unwrapped
     gains = []
-    for seed in (0, 1, 2):  # ten iterations from σ = 0.02 do not always improve: most runs must
+    # Ten iterations from σ = 0.02 do not always improve: most runs must. Seeds 0, 1, 2 gave -0.25, +2.83,
+    # +3.77; two of the three improving is seeds 1 and 2 improving (seed 0's run, which cannot count, is not
+    # computed again).
+    for seed in (1, 2):
         history = run("c-cma-es", PRECISION, 10, 20, seed, eval_every=10)
         contexts = test_contexts(env, 16, split_seed(seed)[2])  # the runner's test contexts
         start = evaluate_policy(env, env.reference_params(), contexts).mean_return
         gains.append(history.column("eval_return")[-1] - start)
-    assert sum(gain > 1.0 for gain in gains) >= 2, gains  # measured: -0.25, +2.83, +3.77
+    assert all(gain > 1.0 for gain in gains), gains
     env.close()
 
 

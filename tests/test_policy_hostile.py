@@ -8,6 +8,7 @@ Exit codes come from ``creps_gym.cli.main`` in this process; a subprocess only w
 
 from __future__ import annotations
 
+import itertools
 import os
 import resource
 import shutil
@@ -15,6 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from helpers import EXTRAS, SPHERE, cli_command
 
@@ -39,6 +41,45 @@ def reacher_run(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("runs") / "reacher"
     run("c-cma-es", REACHER, 2, None, 0, run_dir=path, eval_every=1)
     return path
+
+
+@pytest.fixture(scope="module")
+def recorded_episode(reacher_run, tmp_path_factory) -> Path:
+    """The first frames of one evaluated episode of ``reacher_run``, drawn once (``.npy``, shape (n, h, w, 3)) and
+    replayed by the tests below, which are about the video file written, not the drawing
+    (tests/test_video.py checks the drawing and the progress)."""
+    pytest.importorskip("imageio")
+    from creps_gym.runner import video
+
+    frames = []
+    original = video.EpisodeVideo.__iter__
+
+    def keep(self):  # the first 12 frames (drawn when read): enough for any file limit below
+        for frame in itertools.islice(original(self), 12):
+            frames.append(frame)
+            yield frame
+
+    folder = tmp_path_factory.mktemp("episode")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(video.EpisodeVideo, "__iter__", keep)
+        assert main(["evaluate", str(reacher_run), "--contexts", "1", "--video", str(folder / "v.gif")]) == 0
+    np.save(folder / "frames.npy", np.stack(frames))
+    return folder / "frames.npy"
+
+
+#: ``creps-gym ARGS`` in a process whose videos replay the frames of a ``.npy`` file (sys.argv[1]).
+REPLAY = (
+    "import sys\nimport numpy as np\nfrom creps_gym.cli import main\nfrom creps_gym.runner import video\n"
+    "frames = np.load(sys.argv[1])\nvideo.EpisodeVideo.__iter__ = lambda self: iter(frames)\n"
+    "sys.exit(main(sys.argv[2:]))"
+)
+
+
+def _replay(monkeypatch: pytest.MonkeyPatch, recorded: Path) -> None:
+    from creps_gym.runner import video
+
+    frames = np.load(recorded)
+    monkeypatch.setattr(video.EpisodeVideo, "__iter__", lambda self: iter(frames))
 
 
 def _other_run(tmp_path: Path, source: Path) -> Path:
@@ -172,10 +213,13 @@ def test_evaluate_video_refuses_what_o_refuses_and_reports_no_success(
 @EXTRAS
 @LINUX
 @pytest.mark.parametrize("suffix", [".mp4", ".gif"])
-def test_a_video_cut_by_a_full_disk_is_an_error_naming_the_file(tmp_path, reacher_run, suffix):
+def test_a_video_cut_by_a_full_disk_is_an_error_naming_the_file(
+    tmp_path, reacher_run, recorded_episode, suffix
+):
     target = tmp_path / f"video{suffix}"
+    args = ["evaluate", reacher_run, "--contexts", 2, "--video", target]
     result = subprocess.run(
-        cli_command("evaluate", reacher_run, "--contexts", 2, "--video", target),
+        [sys.executable, "-c", REPLAY, recorded_episode, *map(str, args)],
         capture_output=True,
         text=True,
         timeout=120,
@@ -188,9 +232,12 @@ def test_a_video_cut_by_a_full_disk_is_an_error_naming_the_file(tmp_path, reache
 
 @EXTRAS
 @pytest.mark.parametrize("suffix", [".mp4", ".gif"])
-def test_a_video_is_written_whole_through_a_temporary(tmp_path, capsys, reacher_run, suffix):
+def test_a_video_is_written_whole_through_a_temporary(
+    tmp_path, capsys, monkeypatch, reacher_run, recorded_episode, suffix
+):
     from creps_gym.cli.policy import check_video_file
 
+    _replay(monkeypatch, recorded_episode)
     target = tmp_path / f"video{suffix}"
     assert main(["evaluate", str(reacher_run), "--contexts", "2", "--video", str(target)]) == 0
     assert f'"video": "{target}"' in capsys.readouterr().out

@@ -94,9 +94,14 @@ def plant_payload(out: Path, module: str) -> None:
     out.joinpath(*parts[:-1], f"{parts[-1]}.py").write_text(payload)
 
 
-@pytest.mark.parametrize("module", [*EVIL_MODULES, "this"])
+def _refused_message(module: str) -> str:
+    return f"config.json: env: expected no reference to a module that is not imported (here {module!r})"
+
+
+@pytest.mark.parametrize("module", ["evil_payload", "this"])
 @pytest.mark.parametrize("entry", ["python-api", "python-m-cli"])
 def test_resume_never_imports_a_module_named_by_config_json(tmp_path, module, entry):
+    """In a process started in the run folder (the process boundary; every other name in process below)."""
     out = make_run(tmp_path / "run", stop_after=3)
     plant_payload(out, module)
     edit_config(out, env=f"{module}:creps_gym/Sphere-v0")
@@ -115,9 +120,35 @@ def test_resume_never_imports_a_module_named_by_config_json(tmp_path, module, en
     assert not (out / "PAYLOAD_RAN").exists()
     assert "Beautiful is better than ugly" not in result.stdout
     assert result.returncode == expected_code, stream
-    assert f"config.json: env: expected no reference to a module that is not imported (here {module!r})" in (
-        stream
-    )
+    assert _refused_message(module) in stream
+    assert "--import MODULE" in stream
+
+
+@pytest.mark.parametrize("module", EVIL_MODULES)
+@pytest.mark.parametrize("entry", ["python-api", "python-m-cli"])
+def test_resume_in_the_run_folder_never_imports_a_module_named_by_config_json(
+    tmp_path, monkeypatch, module, entry
+):
+    """Every name, in this process, with the run folder first on ``sys.path`` as ``python -c`` ("") and
+    ``python -m`` (the folder) put it."""
+    out = make_run(tmp_path / "run", stop_after=3)
+    plant_payload(out, module)
+    edit_config(out, env=f"{module}:creps_gym/Sphere-v0")
+    monkeypatch.chdir(out)
+    monkeypatch.syspath_prepend("" if entry == "python-api" else str(out))
+    before = set(sys.modules)
+    if entry == "python-api":
+        with pytest.raises(RunDirError) as refused:
+            resume(".")
+        returncode, stream = 1, str(refused.value)
+    else:
+        result = cli("resume", ".", "--no-plot")
+        returncode, stream = result.returncode, result.stderr
+        assert "Traceback" not in stream
+    assert not (out / "PAYLOAD_RAN").exists()
+    assert not {name for name in set(sys.modules) - before if name.split(".")[0] == module.split(".")[0]}
+    assert returncode == (1 if entry == "python-api" else 3), stream
+    assert _refused_message(module) in stream
     assert "--import MODULE" in stream
 
 

@@ -275,16 +275,13 @@ def test_a_run_directory_may_name_only_registered_selectors_and_data_options(tmp
 
 
 def test_the_command_line_names_the_selector_and_refuses_bad_ones(tmp_path):
-    import subprocess
-
-    from helpers import cli_command
+    from helpers import cli_in_process
 
     base = ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 2, "--samples", 12]
     base += ["--seed", 0, "--no-plot"]
-    good = cli_command(
+    done = cli_in_process(
         *base, "--out", tmp_path / "a", "--context-selector", "bandit", "--selector-opt", "cells=3"
     )
-    done = subprocess.run(good, capture_output=True, text=True, timeout=120, check=False)
     assert done.returncode == 0, done.stderr
     config = json.loads((tmp_path / "a" / RunDir.CONFIG).read_text())["config"]
     assert config["context_selector"] == "bandit" and config["context_selector_options"] == {"cells": 3}
@@ -296,6 +293,5 @@ def test_the_command_line_names_the_selector_and_refuses_bad_ones(tmp_path):
         ),
         (["--selector-opt", "cells=3"], "argument --selector-opt: expected none without a context_selector"),
     ]:
-        bad = subprocess.run(cli_command(*base, "--out", tmp_path / "b", *extra), capture_output=True,
-                             text=True, timeout=120, check=False)  # fmt: skip
+        bad = cli_in_process(*base, "--out", tmp_path / "b", *extra)
         assert bad.returncode == 2 and match in bad.stderr and "Traceback" not in bad.stderr, bad.stderr

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import EXTRAS
+from helpers import EXTRAS, study_in_process
 
 from benchmarks import provenance, study_runner
 
@@ -68,10 +68,10 @@ def test_quick_computes_every_run_again_and_render_only_redraws_the_cached_ones(
     )
     tampered = {**json.loads(paths[0].read_text()), "final": 1234.5, "provenance": None}
     paths[0].write_text(json.dumps(tampered))
-    _study(*args, "--render-only")  # reads the cache as it is
+    study_in_process("functions", *args, "--render-only")  # reads the cache as it is
     assert "1 run: computed before provenance was recorded" in (out / "results.md").read_text()
     (out / "timing.json").unlink()
-    log = _study(*args)  # --quick: computes both runs again, reading no cached document
+    log = study_in_process("functions", *args)  # --quick: computes both runs again, reading no cached one
     assert "0 runs cached" in log and "2 to compute" in log
     assert json.loads((out / "timing.json").read_text())["computed"] == 2  # not "read from the cache"
     again = json.loads(paths[0].read_text())

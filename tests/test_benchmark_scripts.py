@@ -1,9 +1,10 @@
 """Smoke tests of the paper-reproduction studies (``benchmarks/functions``, ``benchmarks/scaling``).
 
 The scripts run as users run them (a subprocess, by path or with ``python -m``, once per study and mode; the
-other calls in this process, ``helpers.study_in_process``) on tiny configurations into a temporary directory; the tests check that the tables and figures appear, that the tables are computed from
-the cached run results, and that cached runs are not recomputed (the studies resume). The committed
-renderings under ``docs/results/`` must be what ``--render-only`` draws from the committed run caches.
+other calls in this process, ``helpers.study_in_process``) on tiny configurations into a temporary
+directory; the tests check that the tables and figures appear, that the tables are computed from the cached
+run results, and that cached runs are not recomputed (the studies resume). The committed renderings under
+``docs/results/`` must be what ``--render-only`` draws from the committed run caches.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ import pytest
 from creps_gym.runner.watchdog import Watchdog, process_stat, process_tree
 
 pytestmark = pytest.mark.skipif(not os.path.isdir("/proc"), reason="the watchdog needs Linux's /proc")
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def _driver(tmp_path: Path, body: str) -> subprocess.Popen:

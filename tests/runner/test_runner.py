@@ -418,7 +418,7 @@ def test_record_round_trip_and_column_errors():
 
 def test_the_runner_guide_examples_run_and_print_what_their_comment_says(tmp_path, monkeypatch, capsys):
     pytest.importorskip("matplotlib")
-    guide = Path(__file__).resolve().parent.parent / "docs" / "runner.md"
+    guide = Path(__file__).resolve().parents[2] / "docs" / "runner.md"
     blocks = python_blocks(guide)
     monkeypatch.chdir(tmp_path)
     namespace: dict = {"__name__": "runner_guide"}

@@ -47,7 +47,7 @@ def reacher_run(tmp_path_factory) -> Path:
 def recorded_episode(reacher_run, tmp_path_factory) -> Path:
     """The first frames of one evaluated episode of ``reacher_run``, drawn once (``.npy``, shape
     (n, h, w, 3)) and replayed by the tests below, which are about the video file written, not the drawing
-    (tests/test_video.py checks the drawing and the progress)."""
+    (tests/runner/results/test_video.py checks the drawing and the progress)."""
     pytest.importorskip("imageio")
     from creps_gym.runner import video
 

@@ -14,7 +14,7 @@ from creps_gym.cli import EXIT_CODES, main
 from creps_gym.runner import RunConfig, run
 from creps_gym.runner.divergence import WINDOW, DivergenceWatch, evaluation_loss
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 # c-cma-es at a batch above its recommended 48 diverges on Different Powers with z = 3 (seed 4 of the study)
 DIVERGING = {
     "env": "creps_gym/DifferentPowers-v0",

@@ -68,7 +68,7 @@ def test_pin_renames_or_copies_and_reads_no_link(tmp_path, monkeypatch):
 def test_the_committed_pinned_document_is_its_run_and_the_new_defaults_change_it(tmp_path: Path):
     """The check behind ``pin`` on a scaling run that restarts: its committed document, pinned to the
     former defaults, is what the pinned spec computes (the former None restart loss is the squared one:
-    ``tests/test_ccmaes_restarts.py``); with the new defaults the run differs."""
+    ``tests/optimizers/test_ccmaes_restarts.py``); with the new defaults the run differs."""
     former = RunSpec("Rosenbrock", 2, 5, "c-cma-es", 0, 100_000, options=restart_defaults.FORMER)
     default = RunSpec("Rosenbrock", 2, 5, "c-cma-es", 0, 100_000)
     pinned, new = run_all([former, default], tmp_path, workers=1, log=lambda line: None)

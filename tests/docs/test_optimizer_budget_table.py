@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "optimizers.md"
 RESULTS = ROOT / "docs" / "results" / "ccmaes" / "full" / "results.md"
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from helpers import EXTRAS, cli_command
 
-GUIDE = Path(__file__).resolve().parent.parent / "docs" / "writing_an_adapter.md"
+GUIDE = Path(__file__).resolve().parents[2] / "docs" / "writing_an_adapter.md"
 SECTION = GUIDE.read_text().split("## Your own optimiser from the command line", 1)[1].split("\n## ", 1)[0]
 MODULE = re.search(r"```python\n(.*?)```", SECTION, flags=re.DOTALL).group(1)
 COMMANDS = [

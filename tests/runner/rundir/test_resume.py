@@ -101,7 +101,7 @@ def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(
 
 def test_a_format_2_run_directory_resumes_with_its_own_context_stream(tmp_path):
     """tests/golden/run2 was written by the code before batched draws (see tests/golden/make_run2.py)."""
-    golden = Path(__file__).parent / "golden" / "run2"
+    golden = Path(__file__).resolve().parents[2] / "golden" / "run2"
     out = tmp_path / "run"
     shutil.copytree(golden / "run", out)
     directory = RunDir.open(out)

@@ -10,7 +10,7 @@ import pytest
 
 from benchmarks.low_budget import compare, gp_backends
 
-RESULTS = Path(__file__).resolve().parent.parent / "benchmarks" / "low_budget" / "results"
+RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 
 
 @pytest.mark.parametrize(("name", "module"), [("quick", compare), ("gp_backends", gp_backends)])

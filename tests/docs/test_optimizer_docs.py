@@ -11,7 +11,7 @@ import pytest
 
 from creps_gym.optimizers.registry import optimizer_class, optimizer_names
 
-DOC = Path(__file__).resolve().parent.parent / "docs" / "optimizers.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "optimizers.md"
 # the sections whose option tables document a config class (a subclass: its parent's sections too)
 SECTIONS = {
     "CREPSConfig": ["## Configuration"],

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "regenerate_golden.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "regenerate_golden.py"
 spec = importlib.util.spec_from_file_location("regenerate_golden", SCRIPT)
 regenerate_golden = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(regenerate_golden)

@@ -155,5 +155,5 @@ def test_the_floor_table_of_the_docs_is_rendered_from_the_committed_floor_runs()
     ``results/floor`` file, as ``floor_probe.floor_table`` renders it."""
     from benchmarks.contextual_bbo.floor_probe import floor_table
 
-    doc = (Path(__file__).resolve().parents[1] / "docs" / "algorithms.md").read_text(encoding="utf-8")
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "algorithms.md").read_text(encoding="utf-8")
     assert floor_table() in doc

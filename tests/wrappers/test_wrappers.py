@@ -383,7 +383,7 @@ def test_every_vector_wrapper_on_every_registered_native_vector_env(env_id):
     np.testing.assert_array_equal(obs, UniformContexts(low, high)(seeding.np_random(3)[0], 2))
 
 
-DOC = Path(__file__).resolve().parents[1] / "docs" / "wrappers.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "wrappers.md"
 
 
 @pytest.mark.parametrize("index", [0, 1, pytest.param(2, marks=EXTRAS)])  # block 2 makes a MuJoCo env

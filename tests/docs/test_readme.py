@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from helpers import python_blocks
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+README = Path(__file__).resolve().parents[2] / "README.md"
 BLOCKS = python_blocks(README)
 
 

@@ -75,7 +75,7 @@ def test_failures_after_the_retries_stop_the_run_with_a_clear_error(local_ray, t
 
 
 def test_flaky_episodes_and_resets_are_retried_as_on_serial(local_ray):
-    """The retry policy of every backend (tests/test_failures.py), on Ray."""
+    """The retry policy of every backend (tests/runner/backends/test_failures.py), on Ray."""
     for seed in (0, 1):
         reference = run(CREPSCMA(2, 1, seed=seed), flaky_envs.flaky(), 3, 20, seed)
         for flakes in ({"step_rate": 0.1}, {"reset_rate": 0.1}):

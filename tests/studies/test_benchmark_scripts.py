@@ -28,7 +28,7 @@ pytest.importorskip("cma")
 # The repository root is on sys.path (pyproject.toml: pytest's `pythonpath`), as for `python -m pytest`.
 from benchmarks import baselines, study_runner, study_tools
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 BENCHMARKS = REPO / "benchmarks"
 with_baselines = functools.partial(study_tools.execute, baselines=baselines.BASELINES)
 

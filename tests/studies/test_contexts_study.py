@@ -14,7 +14,7 @@ from helpers import EXTRAS, python_blocks
 from benchmarks.contexts import report, run
 from benchmarks.contexts.tasks import SteepFunction
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 RESULTS = Path(run.__file__).resolve().parent / "results"
 

@@ -16,7 +16,7 @@ from benchmarks import provenance, study_runner
 
 pytestmark = EXTRAS  # the studies need matplotlib and pycma, and record the full environment's BLAS
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 BENCHMARKS = REPO / "benchmarks"
 
 

@@ -25,7 +25,7 @@ from creps_gym.cli.types import key_value
 from creps_gym.optimizers import registry
 from creps_gym.runner import RunConfig, RunDir, run
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 GUIDE = (ROOT / "docs" / "writing_an_adapter.md").read_text()
 #: The guide's optimiser module, under names no other test uses.
 MODULE = (

@@ -42,7 +42,7 @@ from creps_gym.runner.ray_backend import cluster_cpus, plan_chunks, resolve_addr
 from creps_gym.runner.trust import config_fingerprint
 from creps_gym.runner.watchdog import Watchdog, process_tree, terminate
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 # A killed node is declared dead after 3 refused health checks 1 s apart (Ray's default: 5 checks 3 s apart);
 # a live but slow node still gets 5 s per check, so a loaded machine does not lose one.
 FAST_NODE_DEATH = {"RAY_health_check_period_ms": "1000", "RAY_health_check_timeout_ms": "5000",

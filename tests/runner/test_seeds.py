@@ -11,7 +11,7 @@ from creps_gym.runner.build import uniform_mean
 from creps_gym.runner.seeds import SeedPlan, seed_child
 from creps_gym.runner.selection import selector_stream
 
-PACKAGE = Path(__file__).resolve().parents[1] / "creps_gym"
+PACKAGE = Path(__file__).resolve().parents[2] / "creps_gym"
 
 
 def test_the_children_keep_the_numbers_every_recorded_result_was_drawn_with() -> None:

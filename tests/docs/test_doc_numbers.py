@@ -8,7 +8,7 @@ from pathlib import Path
 
 from helpers import EXTRAS
 
-_PATH = Path(__file__).resolve().parent.parent / "scripts" / "render_doc_numbers.py"
+_PATH = Path(__file__).resolve().parents[2] / "scripts" / "render_doc_numbers.py"
 _SPEC = importlib.util.spec_from_file_location("render_doc_numbers", _PATH)
 render = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(render)

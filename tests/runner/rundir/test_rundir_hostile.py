@@ -495,7 +495,7 @@ def test_the_threat_model_in_the_runner_guide_quotes_the_limits_the_code_applies
     from creps_gym._validation import MAX_JSON_DEPTH
     from creps_gym.runner import files
 
-    guide = (Path(__file__).resolve().parent.parent / "docs" / "runner.md").read_text(encoding="utf-8")
+    guide = (Path(__file__).resolve().parents[3] / "docs" / "runner.md").read_text(encoding="utf-8")
     section = guide[guide.index("### Threat model") : guide.index("- **No code from a run directory.**")]
     quoted = " ".join(section.split())
     assert files.LIMITS == {"config.json": 16 << 20, "versions.json": 16 << 20, "run.lock": 4096}

@@ -24,7 +24,7 @@ from creps_gym.runner.config import RunConfig
 from creps_gym.runner.loop import Runner
 
 ADAPTERS = {"cma": CMAAdapter, "nevergrad": NevergradAdapter, "optuna": OptunaAdapter}
-GUIDE = Path(__file__).resolve().parent.parent / "docs" / "writing_an_adapter.md"
+GUIDE = Path(__file__).resolve().parents[2] / "docs" / "writing_an_adapter.md"
 
 
 def _drive(optimizer, iterations, n=8, z=1, seed=0):

@@ -47,20 +47,8 @@ def test_registry_lists_every_adapter_with_a_one_line_description():
         assert registry.optimizer_class(name) is cls
 
 
-@pytest.mark.parametrize("name", marked(registry.optimizer_names()))
-def test_every_registered_optimizer_follows_the_protocol_and_restores_exactly(name):
-    optimizer = registry.make_optimizer(name, 3, 2, 11, initial_mean=[0.1, 0.2, 0.3], initial_cov=0.5)
-    assert (optimizer.n_params, optimizer.n_context_dims) == (3, 2)
-    _drive(optimizer, 3, z=2)
-    contexts = np.full((8, 2), 0.5)
-    pending = optimizer.ask(contexts)  # a checkpoint may be taken between ask and tell
-    restored = registry.restore_optimizer(name, optimizer.state_dict())
-    returns = -np.sum(pending**2, axis=1)
-    optimizer.tell(contexts, pending, returns)
-    restored.tell(contexts, pending, returns)
-    assert np.array_equal(optimizer.ask(contexts), restored.ask(contexts))
-    assert np.array_equal(optimizer.recommend(contexts[:2]), restored.recommend(contexts[:2]))
-    assert optimizer.diagnostics == restored.diagnostics
+# Every registered optimiser's shape and checkpoint (pending batch included):
+# tests/optimizers/test_contract_checkpoint.py.
 
 
 def test_make_optimizer_names_the_valid_choices_and_fixed_options():

@@ -92,13 +92,7 @@ def test_a_corrupted_checkpoint_is_refused_at_load(name, corruption, tmp_path):
         restore_optimizer(name, load_state(save_state(state, tmp_path / "opt.npz")))
 
 
-@pytest.mark.parametrize("name", NATIVE)
-def test_an_intact_checkpoint_still_restores_bit_identically(name, tmp_path):
-    state = _trained_state(name)
-    restored = restore_optimizer(name, load_state(save_state(state, tmp_path / "opt.npz")))
-    original = restore_optimizer(name, state)
-    contexts = np.linspace(0, 3, 7)[:, None]
-    np.testing.assert_array_equal(original.ask(contexts), restored.ask(contexts))
+# An intact checkpoint restores bit-identically: tests/optimizers/test_contract_checkpoint.py.
 
 
 @pytest.mark.parametrize("name", NATIVE)

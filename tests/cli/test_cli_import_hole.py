@@ -84,6 +84,7 @@ def shadowed_run(tmp_path_factory) -> Path:
     ids=["help", "list", "resume", "policy", "export"],
 )
 @pytest.mark.parametrize("form", ["-m", "-Bm", "-W ignore -m"])
+@pytest.mark.slow
 def test_python_dash_m_in_a_run_folder_imports_nothing_from_it(shadowed_run, args, form):
     command = cli_command(*args)
     command[1:2] = form.split()  # [python, -m, creps_gym.cli, ...] with the interpreter's flags

@@ -216,6 +216,7 @@ def _python(env, *args):
     return subprocess.run([sys.executable, *args], env=env, capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_a_gl_library_that_does_not_load_gives_the_projects_short_error_first(tmp_path):
     fake = tmp_path / "fake" / "mujoco"
     fake.mkdir(parents=True)  # mujoco as it fails when MUJOCO_GL=osmesa and libOSMesa is missing
@@ -298,6 +299,7 @@ def test_ctrl_c_while_the_results_are_written_lets_the_run_finish(tmp_path, caps
 
 
 @EXTRAS  # the plot needs matplotlib
+@pytest.mark.slow
 def test_ctrl_c_while_the_plot_is_drawn_exits_0_with_the_plot(tmp_path, capsys, monkeypatch):
     from creps_gym.runner import plots
 

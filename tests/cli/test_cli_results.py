@@ -87,6 +87,7 @@ MANY = ("n8-0", "n12-0", "eps-0", "p4", "n12-1", "n8-1")
     ("names", "labels"),
     [(("n8-0", "n8-1"), None), (MANY, None), (MANY, ["a", "b", "c", "d", "b", "a"])],  # 1, 1 and 2 columns
 )
+@pytest.mark.slow
 def test_the_legend_lies_in_the_figure_and_covers_no_axes(runs, tmp_path, names, labels):
     pytest.importorskip("matplotlib")
     figure = plot_run_dirs(_paths(runs, *names), tmp_path / "curves.png", mix_envs=True, labels=labels)

@@ -42,6 +42,7 @@ def test_help_and_list_import_no_heavy_module(argv):
     assert json.loads(result.stdout.splitlines()[-1]) == []
 
 
+@pytest.mark.slow
 def test_importing_the_package_registers_the_ids_when_gymnasium_is_imported_in_either_order():
     result = _python(
         """
@@ -62,6 +63,7 @@ def test_importing_the_package_registers_the_ids_when_gymnasium_is_imported_in_e
 
 
 @EXTRAS  # the table records which optional modules each env needs: every extra must be installed
+@pytest.mark.slow
 def test_the_static_table_agrees_with_the_registries_and_run_config():
     result = subprocess.run(
         [sys.executable, "-m", "creps_gym.listing", "--check"], capture_output=True, text=True, timeout=600
@@ -81,6 +83,7 @@ def test_list_prints_every_row_of_the_static_table():
     "module",
     ["creps_gym.wrappers", "creps_gym.selectors", "creps_gym.envs.functions.suite", "creps_gym.runner"],
 )
+@pytest.mark.slow
 def test_a_subpackage_that_imports_gymnasium_first_registers_every_id(module):
     """Gymnasium imported for the first time *by* a creps_gym module: the ids are registered from the
     static table (before: registering imported that module's package again, half-initialised)."""

@@ -15,6 +15,7 @@ import subprocess
 import time
 from pathlib import Path
 
+import pytest
 from helpers import EXTRAS, cli_command
 
 GUIDE = Path(__file__).resolve().parents[2] / "docs" / "writing_an_adapter.md"
@@ -42,6 +43,7 @@ def _workspace(tmp_path: Path) -> Path:
 
 
 @EXTRAS  # `plot` needs matplotlib
+@pytest.mark.slow
 def test_the_guide_module_is_short_and_its_commands_run_resume_plot_and_export(tmp_path):
     work = _workspace(tmp_path)
     code = [
@@ -62,6 +64,7 @@ def test_the_guide_module_is_short_and_its_commands_run_resume_plot_and_export(t
     assert not (work / "scipy.py.imported").exists()
 
 
+@pytest.mark.slow
 def test_without_import_every_command_refuses_the_run_and_names_the_flag(tmp_path):
     work = _workspace(tmp_path)
     run = cli(*COMMANDS[0][:-2], "--out", "runs/x", "--iterations", "3", "--no-plot", cwd=work)
@@ -80,6 +83,7 @@ def test_without_import_every_command_refuses_the_run_and_names_the_flag(tmp_pat
 
 
 @EXTRAS  # `plot` needs matplotlib
+@pytest.mark.slow
 def test_a_run_folder_never_puts_its_files_on_the_path(tmp_path):
     work = _workspace(tmp_path)
     run = cli(*COMMANDS[0][:-2], "--out", "runs/x", "--iterations", "3", "--no-plot", cwd=work)
@@ -98,6 +102,7 @@ def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+@pytest.mark.slow
 def test_ctrl_c_names_the_run_folder_and_resume_with_import_finishes_the_run(tmp_path):
     work = _workspace(tmp_path)
     args = [*COMMANDS[0][:-2], "--out", "runs/long run", "--iterations", "1000000", "--max-time", "6",

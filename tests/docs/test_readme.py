@@ -20,6 +20,7 @@ def test_readme_has_python_examples():
 
 
 @pytest.mark.parametrize("index", range(len(BLOCKS)))
+@pytest.mark.slow
 def test_readme_python_block_runs(index, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     namespace: dict = {"__name__": "__readme__"}
@@ -103,6 +104,7 @@ sys.exit(main(sys.argv[2:]))
 
 
 @pytest.mark.extras
+@pytest.mark.slow
 def test_the_main_job_runs_with_the_light_install_alone(tmp_path):
     """The README's main job, with every module of the extras its install line leaves out made missing."""
     pytest.importorskip("matplotlib")

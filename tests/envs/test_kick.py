@@ -297,6 +297,7 @@ _RENDER_SCRIPT += (
 
 
 @pytest.mark.parametrize("backend", ["egl", "osmesa"])
+@pytest.mark.slow
 def test_rgb_array_frame_is_not_blank(backend):
     env = {**os.environ, "MUJOCO_GL": backend}
     out = subprocess.run([sys.executable, "-c", _RENDER_SCRIPT], capture_output=True, text=True, env=env)
@@ -416,6 +417,7 @@ def test_flexibility_v2_scores_a_miss_by_how_close_the_foot_came():
     v2.close()
 
 
+@pytest.mark.slow
 def test_precision_v1_grades_a_fall_by_how_far_the_robot_went_down(precision):
     """v1 = v0 for standing kicks; a fall scores v0's fall return minus 30 × (1 − uprightness), with the
     uprightness the lowest min(height ratio, cos tilt) while watched: 1 for a kick that stands, and
@@ -461,6 +463,7 @@ def test_the_generic_path_learns_from_the_declared_start():
     env.close()
 
 
+@pytest.mark.slow
 def test_no_constant_kick_beats_the_reference_by_more_than_the_context_variance_at_seed_0():
     """Issue 13's ``--optimizer cma`` line, bounded: a non-contextual optimiser's mean policy is one kick for
     every target, and a kick whose ball stops at (x, y) scores mean(−(x − s)² − y²) ≤ −var(s) over the test
@@ -494,6 +497,7 @@ _VIDEO_SCRIPT += textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_a_whole_episode_records_to_video_with_the_target_drawn(tmp_path):
     pytest.importorskip("imageio")
     env = {**os.environ, "MUJOCO_GL": "egl"}

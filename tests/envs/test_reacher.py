@@ -195,6 +195,7 @@ def test_registration_is_json_serialisable_without_time_limit():
     assert gym.make(ENV_ID).spec.to_json()
 
 
+@pytest.mark.slow
 def test_creps_cma_old_learns_to_pass_the_via_points():
     env = PlanarReacherEnv()
     test_contexts = np.random.default_rng(123).uniform(0, 2, size=(50, 2))

@@ -43,6 +43,7 @@ def _headless_env(**extra: str) -> dict[str, str]:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="headless GLFW is a Linux case")
 @pytest.mark.parametrize("env_id", ["creps_gym/KickPrecision-v1", "creps_gym/PointMazeGoal-v0"])
 @pytest.mark.parametrize("backend", ["glfw", None])
+@pytest.mark.slow
 def test_rendering_twice_headless_never_aborts(env_id: str, backend: str | None) -> None:
     """Headless with GLFW (MUJOCO_GL=glfw, which needs a display), or with MUJOCO_GL unset: two renders
     give two frames (a backend was chosen) or the same RuntimeError twice; never the abort (exit 134) a
@@ -86,6 +87,7 @@ def _choose(probe_result: str, display: str | None = None) -> str:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the headless choice is made on Linux")
+@pytest.mark.slow
 def test_headless_choice_prefers_egl_then_osmesa_and_refuses_when_none_works() -> None:
     assert _choose("egl,osmesa") == "egl egl OK"
     assert _choose("osmesa") == "osmesa osmesa OK"
@@ -128,6 +130,7 @@ POINT_MAZE_FIRST_FRAME = textwrap.dedent(
 
 
 @EXTRAS
+@pytest.mark.slow
 def test_point_maze_first_frame_draws_the_goal_marker_at_the_context() -> None:
     out = subprocess.run([sys.executable, "-c", POINT_MAZE_FIRST_FRAME], capture_output=True, text=True,
                          timeout=300)  # fmt: skip

@@ -60,6 +60,7 @@ def test_make_optimizer_names_the_valid_choices_and_fixed_options():
 
 @EXTRAS
 @pytest.mark.parametrize("name", sorted(ADAPTERS))
+@pytest.mark.slow
 def test_adapter_learns_on_a_function_env(name):
     history = run(name, "creps_gym/Sphere-v0", 20, 12, 3, env_kwargs={"dim": 3}, eval_every=19)
     regrets = history.column("eval_regret")
@@ -237,6 +238,7 @@ def test_cma_takes_pycma_options_flat_and_reports_its_own_stop_criteria(nested):
 
 
 @EXTRAS
+@pytest.mark.slow
 def test_the_runner_gives_nevergrad_its_budget_and_ngopt_runs_on_this_numpy():
     # NGOpt picks its meta-model here, which calls float() on a one-element array (a TypeError on numpy 2.4)
     history = run("nevergrad", "creps_gym/Sphere-v0", 6, 10, 0, env_kwargs={"dim": 3},
@@ -266,6 +268,7 @@ def test_nevergrad_threads_are_stopped_by_close_and_by_the_runner():
 
 
 @EXTRAS
+@pytest.mark.slow
 def test_a_script_that_keeps_its_runner_exits(tmp_path):
     script = tmp_path / "keeps_runner.py"  # the runner, a global, holds the adapter until after exit's join
     script.write_text(
@@ -297,6 +300,7 @@ RUNNER_GUIDE = GUIDE.parent / "runner.md"
 
 @EXTRAS
 @pytest.mark.parametrize("index", range(3))
+@pytest.mark.slow
 def test_the_documented_adapter_commands_run(index, tmp_path, capsys):
     section = RUNNER_GUIDE.read_text().split("## Adapters", 1)[1].split("\n## ", 1)[0]
     commands = [line for line in section.splitlines() if line.startswith("creps-gym run ")]
@@ -474,6 +478,7 @@ def test_a_pending_batch_that_the_replay_does_not_ask_is_refused(name):
 
 
 @pytest.mark.parametrize("name", marked(registry.optimizer_names()))
+@pytest.mark.slow
 def test_every_registered_optimizer_answers_restart_and_changes_nothing_when_it_cannot(name):
     """The runner's divergence rule calls ``restart()``: a bool; where it is False, the state is unchanged
     (the run then stops); where it is True, the next ask samples the initial distribution again."""

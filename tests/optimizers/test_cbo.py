@@ -7,6 +7,8 @@ test_policy.py)."""
 
 from __future__ import annotations
 
+import copy
+import functools
 import math
 
 import numpy as np
@@ -141,6 +143,7 @@ def _sphere_regret(optimizer, matrix, contexts):
 
 
 @pytest.mark.parametrize("acquisition", ["mes", "ucb"])
+@pytest.mark.slow
 def test_it_solves_a_contextual_sphere_with_two_parameters_in_100_episodes(acquisition):
     matrix = np.random.default_rng(0).uniform(-1, 1, (2, 1))
     optimizer = make_optimizer("c-bo", 2, 1, 0, initial_mean=2.0, initial_cov=4.0, acquisition=acquisition)
@@ -163,6 +166,13 @@ def _trained(p: int = 3, z: int = 1, batches: int = 5, **options) -> ContextualB
     return optimizer
 
 
+@functools.cache
+def _trained_state() -> dict:
+    """``_trained()``'s state, computed once per test process (copy it before changing it)."""
+    return _trained().state_dict()
+
+
+@pytest.mark.slow
 def test_recommend_is_deterministic_stays_in_the_box_and_ignores_the_batch():
     optimizer = _trained()
     contexts = np.linspace(0, 1, 5)[:, None]
@@ -174,6 +184,7 @@ def test_recommend_is_deterministic_stays_in_the_box_and_ignores_the_batch():
     assert (batch >= low).all() and (batch <= high).all() and optimizer.state_dict()["rng"] == before
 
 
+@pytest.mark.slow
 def test_a_batch_at_one_context_holds_distinct_rows_through_the_kriging_believer():
     optimizer = _trained()
     params = optimizer.ask(np.full((4, 1), 0.5))
@@ -235,12 +246,13 @@ def test_bad_options_are_refused_naming_them(options, error, match):
     ],
 )
 def test_a_tampered_state_is_refused_naming_the_key(key, value, match):
-    state = _trained().state_dict()
+    state = copy.deepcopy(_trained_state())
     state[key] = value
     with pytest.raises((ValueError, TypeError), match=match):
         ContextualBO.from_state_dict(state)
 
 
+@pytest.mark.slow
 def test_a_restored_optimizer_rebuilds_the_same_gp_bit_for_bit():
     optimizer = _trained(context_low=[0.0], context_high=[1.0], param_low=-2.0, param_high=3.0)
     restored = ContextualBO.from_state_dict(optimizer.state_dict())
@@ -250,6 +262,7 @@ def test_a_restored_optimizer_rebuilds_the_same_gp_bit_for_bit():
     assert restored.ask(contexts).tobytes() == optimizer.ask(contexts).tobytes()
 
 
+@pytest.mark.slow
 def test_no_signal_and_flat_returns_stop_it():
     optimizer = make_optimizer("c-bo", 2, 1, 0)
     rng = np.random.default_rng(0)
@@ -273,6 +286,7 @@ def test_returns_near_the_float_limit_give_finite_asks_and_restore(tmp_path):
     assert restored.model.chol.tobytes() == optimizer.model.chol.tobytes()
 
 
+@pytest.mark.slow
 def test_a_checkpoint_whose_data_would_not_fit_in_memory_is_refused_before_the_gp_is_built():
     state = _trained().state_dict()
     n = 2_000_000  # the kernel matrices would need n² x (p + z + 6) x 8 bytes: about 3e14
@@ -295,6 +309,7 @@ def test_a_distillation_grid_beyond_its_bound_is_refused():
         make_optimizer("c-bo", 2, 3, 0, distillation_points=30)
 
 
+@pytest.mark.slow
 def test_without_context_dimensions_it_is_plain_bayesian_optimisation():
     optimizer = make_optimizer("c-bo", 2, 0, 0, initial_cov=4.0)
     for _ in range(10):
@@ -312,6 +327,7 @@ class _Crash(Exception):
     pass
 
 
+@pytest.mark.slow
 def test_a_run_resumed_after_a_crash_equals_the_uninterrupted_run(tmp_path):
     from creps_gym.runner import resume, run
 

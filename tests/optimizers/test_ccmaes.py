@@ -40,6 +40,7 @@ def _drive(optimizer, returns_of, iterations: int, samples: int, seed: int = 0, 
 
 
 @pytest.mark.parametrize("name", sorted(STEP_SIZE_OPTIMIZERS))
+@pytest.mark.slow
 def test_step_size_grows_on_a_linear_function_and_shrinks_on_a_sphere(name):
     make = STEP_SIZE_OPTIMIZERS[name]
     linear = make(n_params=8, n_context_dims=1, initial_cov=1.0, seed=0)
@@ -51,6 +52,7 @@ def test_step_size_grows_on_a_linear_function_and_shrinks_on_a_sphere(name):
 
 
 @pytest.mark.parametrize("name", sorted(STEP_SIZE_OPTIMIZERS))
+@pytest.mark.slow
 def test_log_step_size_does_not_drift_under_random_returns(name):
     """Unbiasedness: with returns independent of θ, log σ is a random walk without drift.
 
@@ -67,6 +69,7 @@ def test_log_step_size_does_not_drift_under_random_returns(name):
     assert abs(np.mean(drifts)) < 0.005, drifts
 
 
+@pytest.mark.slow
 def test_the_mean_shift_signal_is_n_0_c_over_mu_eff_under_random_selection():
     """y_w = Σ w_k y_k is the mean's shift at the selected samples' weighted mean context, and √μ_eff·C^(−1/2)
     y_w and every whitened coefficient shift are N(0, I) when the selection ignores θ (Monte Carlo)."""
@@ -273,6 +276,7 @@ def test_a_local_baseline_still_solves_the_contextual_sphere_and_restores_bit_id
     assert _restored_twin(local, tmp_path).config.baseline_bandwidth == 0.3
 
 
+@pytest.mark.slow
 def test_a_mean_learning_rate_below_one_still_converges_and_damps_the_mean_under_random_returns():
     """On a contextual sphere c_m = 0.5 still reaches a small regret; under random returns (pure noise) the
     mean moves c_m times as far per iteration, relative to σ, as at c_m = 1."""

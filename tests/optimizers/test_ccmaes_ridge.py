@@ -81,6 +81,7 @@ def _discus_regret(optimizer, limit: int = 400) -> float:
     return float(discus(test, optimizer.recommend(test)).mean())
 
 
+@pytest.mark.slow
 def test_c3r_removes_the_ridge_floor_on_an_ill_conditioned_contextual_function():
     """With the default ridge 1e-8, C3 stalls near a regret of 1e-8 (the slope bias ridge·|SHIFT| in x_1,
     weighted 1e6); C3r converges until tolx, 13 orders further (measured: 2.3e-8 against 6.4e-23)."""

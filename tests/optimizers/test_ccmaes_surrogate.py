@@ -134,6 +134,7 @@ def test_on_pure_noise_tau_falls_and_the_optimiser_is_plain_c_cma_es():
     assert surrogate.model_generations_total == 0
 
 
+@pytest.mark.slow
 def test_model_generations_never_count_as_episodes():
     optimizer = make_optimizer("c-cma-es-surrogate", P, Z, 0, initial_mean=1.0)
     _drive(optimizer, _sphere(2), 40)
@@ -182,6 +183,7 @@ def test_a_rejected_tell_leaves_archive_model_and_distribution_unchanged():
             )
 
 
+@pytest.mark.slow
 def test_a_checkpoint_resumes_bit_identically(tmp_path):
     returns_of = _sphere(4)
     first = make_optimizer("c-cma-es-surrogate", P, Z, 9, initial_mean=1.0)
@@ -227,6 +229,7 @@ def _episodes_to_regret(name, seed, target=1e-5, p=10, z=1, samples=24):
     return None
 
 
+@pytest.mark.slow
 def test_convergence_on_the_contextual_sphere_in_fewer_true_episodes():
     """Golden numbers at seed 0 (p = 10, z = 1, N = 24), episodes to a mean regret of 1e-5: the surrogate
     needs 336 true episodes, plain c-cma-es 3,000."""

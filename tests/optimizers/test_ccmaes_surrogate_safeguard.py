@@ -33,6 +33,7 @@ def _until_model_generations(seed: int = 0) -> tuple[CCMAESSurrogate, np.random.
     raise AssertionError("no model generation ran")
 
 
+@pytest.mark.slow
 def test_the_diverging_cell_of_issue_45_now_converges():
     """Before S7 this run's batch mean return was −1.3e+28 after 60 generations (σ ≈ 8e+10) and −1e+51 when
     tolupsigma stopped it; with S7 the model generations that made it worse are undone and it converges."""

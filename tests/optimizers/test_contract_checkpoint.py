@@ -48,6 +48,7 @@ def _restored(name: str, optimizer, folder) -> dict:
 
 @pytest.mark.parametrize("pending", [False, True])
 @pytest.mark.parametrize("name", marked(NAMES))
+@pytest.mark.slow
 def test_a_checkpoint_restores_bit_identically(name, pending, tmp_path):
     iterations, samples = BUDGETS.get(name, (12, 20))
     rng = np.random.default_rng(0)

@@ -58,6 +58,7 @@ def make_batch(n, seed, kind, layout="box"):
 
 @settings(max_examples=150, deadline=None)
 @given(batches)
+@pytest.mark.slow
 def test_weights_form_a_distribution_and_kl_meets_the_bound(batch):
     n, seed, epsilon, kind, layout = batch
     epsilon = min(epsilon, 0.9 * np.log(n))
@@ -74,6 +75,7 @@ def test_weights_form_a_distribution_and_kl_meets_the_bound(batch):
 
 @settings(max_examples=80, deadline=None)
 @given(batches, st.floats(min_value=-1e6, max_value=1e6), st.floats(min_value=1e-3, max_value=1e3))
+@pytest.mark.slow
 def test_weights_invariant_to_shift_and_positive_scale(batch, shift, scale):
     n, seed, epsilon, kind, layout = batch
     epsilon = min(epsilon, 0.9 * np.log(n))
@@ -132,6 +134,7 @@ def test_ties_for_the_best_return_share_the_weight():
     assert solution.kl <= 1.9 + DUAL_KL_TOL
 
 
+@pytest.mark.slow
 def test_kl_stays_on_the_bound_across_a_real_run():
     """Stress: every batch of a long CREPS-CMA run on a contextual sphere meets KL = ε tightly."""
     rng = np.random.default_rng(1)

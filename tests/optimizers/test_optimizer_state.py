@@ -5,6 +5,8 @@ Parametrised over every optimiser of this package in the registry (the adapters 
 
 from __future__ import annotations
 
+import copy
+import functools
 import io
 import json
 import tracemalloc
@@ -26,6 +28,12 @@ GAUSSIAN = [name for name in NATIVE if issubclass(optimizer_class(name), PolicyA
 
 
 def _trained_state(name: str) -> dict:
+    """A copy of the state of ``name`` trained for 3 iterations (trained once per test process)."""
+    return copy.deepcopy(_trained(name))
+
+
+@functools.cache
+def _trained(name: str) -> dict:
     optimizer = make_optimizer(name, 4, 1, 0, initial_mean=1.0, initial_cov=0.5)
     rng = np.random.default_rng(0)
     for _ in range(3):
@@ -130,6 +138,7 @@ def test_allow_external_must_be_a_bool_and_seed_non_negative(name):
 
 @pytest.mark.parametrize("n_params", [1, 5])
 @pytest.mark.parametrize("name", NATIVE)
+@pytest.mark.slow
 def test_pure_noise_returns_end_in_a_stop_criterion(name, n_params):
     """Returns that ignore θ carry no signal: before, Σ grew to a std of 1e15 (or collapsed and stalled) for
     10k iterations without a stop. Now the stagnation criterion (or another) ends the run."""

@@ -58,12 +58,14 @@ def learn(name: str, problem: ContextualSphere, iterations: int, samples: int, s
     return float(problem.regret(test, optimizer.recommend(test)).mean())
 
 
+@pytest.mark.slow
 def test_creps_cma_old_solves_a_contextual_sphere_and_creps_stalls():
     problem = ContextualSphere(dim=6, context_dim=2)
     assert learn("creps-cma-old", problem, iterations=350, samples=40) < 1e-5
     assert learn("creps", problem, iterations=350, samples=40) > 1e-2  # premature convergence (paper, Fig. 1)
 
 
+@pytest.mark.slow
 def test_current_mean_variant_also_converges_on_the_sphere():
     assert (
         learn("creps-cma-current", ContextualSphere(dim=6, context_dim=2), iterations=350, samples=40) < 1e-5
@@ -77,6 +79,7 @@ BUDGETS = {"c-bo": (4, 8)}
 
 
 @pytest.mark.parametrize("name", sorted(OPTIMIZERS))
+@pytest.mark.slow
 def test_same_seed_gives_bit_identical_runs(name):
     problem = ContextualSphere(dim=5, context_dim=1)
     iterations, samples = BUDGETS.get(name, (30, 20))
@@ -515,6 +518,7 @@ def test_eta_diagnostic_is_the_temperature_in_return_units():
     assert np.log(40) + weights @ np.log(weights) == pytest.approx(0.5, abs=1e-3)
 
 
+@pytest.mark.slow
 def test_eq_14_collapses_on_a_small_rosenbrock_and_the_cap_prevents_it():
     """With 50 samples and p = 4, Eq. (14) gives λ = 1 (no regularisation): CREPS-CMA-old's covariance
     collapses before the target, as in ``benchmarks/scaling``. Capping λ at 0.2 reaches it."""
@@ -558,6 +562,7 @@ def test_max_std_growth_stops_a_diverging_search():
         CREPSCMA(4, 1, max_std_growth=0.5)
 
 
+@pytest.mark.slow
 def test_old_mean_sample_covariance_is_unbiased_without_z_under_random_selection():
     """Weights that ignore θ: around the true (old) mean, E[Σ d_k ε_k ε_kᵀ] = Σ, so dividing by Z biases S
     up by 1/Z; around a mean fitted to the same samples, Z is what removes the bias (Eqs. 12 and 15)."""

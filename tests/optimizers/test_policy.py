@@ -31,6 +31,7 @@ def _trained(name: str, p: int = 4, z: int = 2, iterations: int = 3):
 
 
 @pytest.mark.parametrize("name", marked(optimizer_names()))
+@pytest.mark.slow
 def test_every_optimizer_gives_a_policy_equal_to_recommend(name, tmp_path):
     """Or, for an optimiser whose policy distils ``recommend`` (``distilled_policy``, c-bo: a GP's
     maximisers), equal to the least-squares fit of ``recommend`` on its distillation grid."""
@@ -205,6 +206,7 @@ def test_links_fifos_and_oversized_files_are_refused(tmp_path):
         Policy.load(tmp_path / "missing.npz")
 
 
+@pytest.mark.slow
 def test_a_policy_file_loads_without_mujoco_ray_or_gymnasium_envs(tmp_path):
     path = _trained("creps").mean_policy().save(tmp_path / "p.npz")
     code = (
@@ -231,6 +233,7 @@ def test_an_optimizer_loads_from_a_run_checkpoint(tmp_path):
         CCMAES.from_state_dict({k: v for k, v in state.items() if k != "kind"})
 
 
+@pytest.mark.slow
 def test_creps_gym_exposes_policy_and_load_policy_lazily():
     code = "import sys, creps_gym; assert 'creps_gym.runner' not in sys.modules; creps_gym.load_policy"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
@@ -269,6 +272,7 @@ def _same_policy(optimizer, contexts) -> None:
 
 
 @pytest.mark.parametrize("name", marked(optimizer_names()))
+@pytest.mark.slow
 def test_the_mean_policy_is_recommend_after_a_restart_a_resume_and_a_kept_best(name, tmp_path):
     """Issue 42, item 1: ``mean_policy()`` (what ``policy.npz`` holds) ignored C-CMA-ES's kept best while
     ``recommend`` applied it, so the "final" policy of a restarted run was the restarted search's."""

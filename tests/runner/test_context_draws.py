@@ -88,6 +88,7 @@ def test_the_default_backend_is_the_native_vector_env_of_a_registered_id():
         RunConfig(SPHERE, "creps", 1, 10, 0, context_draws="x")
 
 
+@pytest.mark.slow
 def test_a_checkpoint_does_not_grow_with_the_run(tmp_path):
     """It holds the loop's and the optimiser's state; the optimiser keeps a bounded window of returns."""
     sizes = []

@@ -49,6 +49,7 @@ def test_returns_count_through_minus_the_return_and_a_replay_equals_the_live_wat
     assert _observe(replayed, losses[7:]) == _observe(DivergenceWatch(1000.0), losses)[7:]
 
 
+@pytest.mark.slow
 def test_a_diverging_c_cma_es_run_without_restarts_stops_with_the_reason_divergence():
     """A legal batch (50 >= the recommended 48) that diverges: regret 2.2e6 at the first evaluation, past
     2.2e9 from iteration 25 on; stopped at iteration 34. With ``divergence=None`` it runs on."""
@@ -66,6 +67,7 @@ def test_a_diverging_c_cma_es_run_without_restarts_stops_with_the_reason_diverge
     np.testing.assert_array_equal(unchecked.column("eval_regret")[:34], regret)  # nothing else changes
 
 
+@pytest.mark.slow
 def test_with_a_restart_left_the_rule_restarts_the_search_and_the_run_reaches_its_target():
     """The default ``c-cma-es`` (3 restarts): where the rule fires (iteration 34, as above) the runner calls
     ``restart()`` instead of stopping; the Huber restart (C11) then reaches the target, and the samples
@@ -139,6 +141,7 @@ def test_the_factor_is_checked():
     assert RunConfig(**base).divergence == 1000.0 and RunConfig(**base, divergence=None).divergence is None
 
 
+@pytest.mark.slow
 def test_no_committed_study_run_that_reached_its_target_or_budget_would_have_stopped():
     """Replayed on every committed study curve: the rule fires only on runs their optimiser stopped later
     (diverging CREPS-CMA at p = 64, C-CMA-ES with the former restart defaults on Different Powers at z = 3)
@@ -186,6 +189,7 @@ def test_a_resumed_run_replays_its_history_and_stops_where_the_uninterrupted_one
     assert resume(tmp_path / "run").equals(uninterrupted)
 
 
+@pytest.mark.slow
 def test_a_run_resumed_after_the_rule_restarted_its_search_goes_on_as_the_uninterrupted_one(tmp_path):
     from creps_gym.runner import resume
 

@@ -69,6 +69,7 @@ def test_the_final_policy_is_the_recommendation_after_a_restart_that_kept_the_be
 
 
 @pytest.mark.parametrize("name", ["c-cma-es", "c-bo"])
+@pytest.mark.slow
 def test_a_policy_files_evaluation_is_its_own(name, tmp_path):
     """What the runner evaluates is the policy it keeps, also where that policy distils ``recommend``
     (c-bo): ``creps-gym evaluate RUN --run-contexts`` reproduces the recorded ``eval_return``."""
@@ -93,6 +94,7 @@ def _crash_at(iteration: int):
     return callback
 
 
+@pytest.mark.slow
 def test_the_best_policy_is_bit_identical_after_a_resume(tmp_path):
     _run(tmp_path / "whole")
     with pytest.raises(_Crash):  # killed after iteration 26's record: the checkpoint is iteration 24's
@@ -237,6 +239,7 @@ def reacher_run(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 def test_evaluate_video_without_the_extra_exits_4(reacher_run, tmp_path):
     code = (
         "import sys\nsys.modules['imageio'] = None\nfrom creps_gym.cli import main\n"
@@ -250,6 +253,7 @@ def test_evaluate_video_without_the_extra_exits_4(reacher_run, tmp_path):
 
 @EXTRAS
 @pytest.mark.parametrize("suffix", [".gif", ".mp4"])
+@pytest.mark.slow
 def test_evaluate_records_a_video(reacher_run, tmp_path, suffix):
     pytest.importorskip("imageio")
     video = tmp_path / f"v{suffix}"

@@ -88,6 +88,7 @@ def test_every_vector_backend_matches_serial_bit_for_bit(backend):
 
 
 @pytest.mark.parametrize("env_id", marked(registered_ids()))
+@pytest.mark.slow
 def test_every_registered_env_runs_and_a_chunked_vector_backend_matches_serial(env_id):
     space = gym.make(env_id)
     n = minimum_samples("creps-cma-old", space.action_space.shape[0], space.observation_space.shape[0])
@@ -367,6 +368,7 @@ def test_iohanalyzer_export(tmp_path):
     assert [float(r["value"]) for r in rows] == plane.column("eval_return").tolist()
 
 
+@pytest.mark.slow
 def test_plot_median_and_band_over_seeds_with_a_log_regret_axis(tmp_path):
     pytest.importorskip("matplotlib")
     runs = {
@@ -416,6 +418,7 @@ def test_record_round_trip_and_column_errors():
         History([record]).column("nope")
 
 
+@pytest.mark.slow
 def test_the_runner_guide_examples_run_and_print_what_their_comment_says(tmp_path, monkeypatch, capsys):
     pytest.importorskip("matplotlib")
     guide = Path(__file__).resolve().parents[2] / "docs" / "runner.md"

@@ -52,6 +52,7 @@ def _documents(cache: Path) -> dict[str, dict]:
     return {p.stem: json.loads(p.read_text()) for p in sorted(cache.glob("*.json"))}
 
 
+@pytest.mark.slow
 def test_functions_study_writes_table_and_figures_from_its_cached_runs(tmp_path: Path) -> None:
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--functions", "Sphere", "Plane", "--context-dims", "1", "--seeds", "1", "--dim", "4"]
@@ -81,6 +82,7 @@ def test_functions_study_writes_table_and_figures_from_its_cached_runs(tmp_path:
     assert "Partial: 11 of 12 runs have finished." in (out / "results.md").read_text()
 
 
+@pytest.mark.slow
 def test_scaling_study_writes_heatmaps_and_marks_censored_cells(tmp_path: Path) -> None:
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--functions", "Sphere", "Rosenbrock", "--dims", "2", "4", "--context-dims", "1", "2"]
@@ -120,6 +122,7 @@ def test_scaling_study_writes_heatmaps_and_marks_censored_cells(tmp_path: Path) 
     assert any(d["hit"] is not None for d in documents.values())
 
 
+@pytest.mark.slow
 def test_runs_are_deterministic_for_a_seed() -> None:
     spec = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-old", 7, 1000)
     first, second = study_tools.execute(spec), study_tools.execute(spec)
@@ -207,6 +210,7 @@ def _count_calls(calls: list):
     return worker
 
 
+@pytest.mark.slow
 def test_a_larger_budget_recomputes_only_the_censored_runs(tmp_path: Path) -> None:
     hit = study_tools.RunSpec("Sphere", 3, 1, "creps-cma-old", 0, 3000)
     censored = study_tools.RunSpec("Rosenbrock", 4, 1, "creps-cma-old", 0, 500)
@@ -225,6 +229,7 @@ def test_a_larger_budget_recomputes_only_the_censored_runs(tmp_path: Path) -> No
     assert rerun["values"] == first[0]["values"] and rerun["episodes"] == first[0]["episodes"]
 
 
+@pytest.mark.slow
 def test_an_interrupted_run_continues_from_its_checkpoint(tmp_path: Path, monkeypatch) -> None:
     from creps_gym.runner.loop import Runner
 
@@ -332,6 +337,7 @@ def test_a_render_of_a_larger_study_runners_it_partial(tmp_path: Path) -> None:
     assert "3 s wall" in text and "**Partial: 8 of 10 runs have finished.**" in text
 
 
+@pytest.mark.slow
 def test_the_study_tools_import_no_baseline() -> None:
     """The import circle baselines <-> study_tools is gone: the baselines are passed in as a mapping."""
     code = "import sys, benchmarks.study_tools; print('benchmarks.baselines' in sys.modules)"
@@ -394,6 +400,7 @@ COMMITTED_RENDERINGS = [
 @pytest.mark.parametrize(
     ("study", "flags"), COMMITTED_RENDERINGS, ids=lambda v: v if isinstance(v, str) else " ".join(v)
 )
+@pytest.mark.slow
 def test_committed_renderings_are_drawn_from_the_committed_runs(
     study: str, flags: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -410,6 +417,7 @@ def test_committed_renderings_are_drawn_from_the_committed_runs(
     assert (tmp_path / "results.md").read_text() == (committed / "results.md").read_text()
 
 
+@pytest.mark.slow
 def test_ccmaes_study_renders_its_targets_from_the_cached_runs(tmp_path: Path) -> None:
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--dim", "4", "--functions", "Sphere", "--context-dims", "1", "--seeds", "1", "--headline-seeds"]
@@ -539,6 +547,7 @@ def test_the_initial_distribution_and_test_contexts_of_a_spec_reach_every_method
         assert (first[0] != first[2]) == (method == "creps-cma-old"), method
 
 
+@pytest.mark.slow
 def test_issue_12_optimisers_fill_their_columns_once_registered(tmp_path: Path, monkeypatch) -> None:
     """Stand-ins registered as ``c-cma-es`` and ``creps-cma-csa`` (CREPS-CMA aliases) get their own columns in
     the function study and their own tables and heatmap in the scaling study."""
@@ -588,6 +597,7 @@ def test_run_spec_options_are_sorted_validated_and_leave_the_keys_without_them_u
             dataclasses.replace(plain, method=method, options=options)
 
 
+@pytest.mark.slow
 def test_run_spec_divergence_is_validated_ends_the_key_and_reaches_the_runner(tmp_path: Path) -> None:
     plain = study_tools.RunSpec("DifferentPowers", 15, 3, "c-cma-es", 4, 2_000, 50)
     assert "divergence" not in study_tools.result_document(plain, [50], [1.0], None, 1.0)["spec"]
@@ -603,6 +613,7 @@ def test_run_spec_divergence_is_validated_ends_the_key_and_reaches_the_runner(tm
     assert config["divergence"] == 1000.0
 
 
+@pytest.mark.slow
 def test_run_spec_options_reach_the_optimiser(tmp_path: Path) -> None:
     spec = study_tools.RunSpec("Rosenbrock", 4, 1, "c-cma-es", 0, 600, 20, initial="uniform5")
     reuse = study_tools.execute(spec, tmp_path / "default")
@@ -614,6 +625,7 @@ def test_run_spec_options_reach_the_optimiser(tmp_path: Path) -> None:
     assert bare["spec"]["options"] == (("baseline_batches", 1),)  # JSON: [["baseline_batches", 1]]
 
 
+@pytest.mark.slow
 def test_ccmaes_study_sweeps_the_batch_size_on_the_sphere_at_z_1(tmp_path: Path) -> None:
     from benchmarks.ccmaes import report
 
@@ -655,6 +667,7 @@ def test_ccmaes_study_sweeps_the_batch_size_on_the_sphere_at_z_1(tmp_path: Path)
     assert "Batch sizes that meet the target: N = 12, N = 16, N = 20." in text and "Partial" not in text
 
 
+@pytest.mark.slow
 def test_ccmaes_study_renders_the_remedies_from_the_cached_runs(tmp_path: Path) -> None:
     from benchmarks.ccmaes import report
 
@@ -776,6 +789,7 @@ def test_ccmaes_cells_count_a_run_that_ended_early_under_a_smaller_budget() -> N
     assert run.group([("c-cma-es-reuse", other)], [early]) == {}
 
 
+@pytest.mark.slow
 def test_runner_overhead_script_prints_the_ratio_and_the_checkpoint_costs() -> None:
     lines = _python(str(BENCHMARKS / "runner_overhead.py"), "--quick", timeout=300).splitlines()
     first = next(i for i, line in enumerate(lines) if "runner ms" in line) + 1

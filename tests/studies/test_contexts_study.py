@@ -100,6 +100,7 @@ def test_the_kick_figures_quoted_in_the_contexts_doc_are_the_kick_summarys():
     assert [figure for figure in quoted if figure not in summary] == []
 
 
+@pytest.mark.slow
 def test_the_difficulty_probe_measures_cells_and_its_committed_table_and_doc_figures_are_its_own():
     from benchmarks.contexts import difficulty_probe as probe
 

@@ -136,6 +136,7 @@ def test_published_json_holds_every_cell_of_the_published_table_with_its_source(
 
 
 @pytest.mark.parametrize("mode", ["quick", "full"])
+@pytest.mark.slow
 def test_the_committed_results_are_rendered_from_the_committed_runs(tmp_path, mode):
     committed = STUDY / "results" / mode
     if not (committed / "results.md").exists():

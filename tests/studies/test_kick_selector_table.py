@@ -125,6 +125,7 @@ def test_episodes_to_reach_and_to_stay_past_a_target() -> None:
     assert selector_table.episodes_to_stay([[50, 2.0], [100, 0.5], [150, 2.5]], 1.0, 1, False) == 150
 
 
+@pytest.mark.slow
 def test_full_render_only_renders_the_section_when_a_contexts_folder_exists(folders: Path) -> None:
     pytest.importorskip("matplotlib")
     assert run.main(["--full", "--render-only", "--out", str(folders)]) == 0

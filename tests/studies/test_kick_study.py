@@ -30,6 +30,7 @@ def precision_env() -> study.OffsetParams:
 
 
 @pytest.mark.parametrize("name", ["c-cma-es", "creps-cma-old"])
+@pytest.mark.slow
 def test_an_interrupted_run_resumes_bit_identically(name: str, precision_env, tmp_path: Path) -> None:
     spec = study.RunSpec("precision", name, samples=6, iterations=4, options={"ridge": 1e-2})
     straight = study.train_run(spec, precision_env, 0, 7, tmp_path / "straight", checkpoint_every=1)
@@ -41,6 +42,7 @@ def test_an_interrupted_run_resumes_bit_identically(name: str, precision_env, tm
     assert resumed["history"] == straight["history"]
 
 
+@pytest.mark.slow
 def test_a_finished_run_is_read_back_and_the_seed_changes_it(precision_env, tmp_path: Path) -> None:
     spec = study.RunSpec("precision", "creps", samples=6, iterations=2)
     first = study.train_run(spec, precision_env, 0, 0, tmp_path, checkpoint_every=1)
@@ -56,6 +58,7 @@ def test_a_finished_run_is_read_back_and_the_seed_changes_it(precision_env, tmp_
     assert other["history"]["batch"] != first["history"]["batch"]
 
 
+@pytest.mark.slow
 def test_study_files_are_read_bounded_and_a_linked_run_file_is_refused(
     precision_env, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -73,6 +76,7 @@ def test_study_files_are_read_bounded_and_a_linked_run_file_is_refused(
         study.train_run(spec, precision_env, 0, 0, tmp_path / "real", checkpoint_every=1)
 
 
+@pytest.mark.slow
 def test_training_contexts_follow_the_spec_and_a_change_of_them_is_computed_again(
     precision_env, tmp_path: Path
 ) -> None:
@@ -125,6 +129,7 @@ def test_features_choose_the_mean_map_and_the_results_folder(precision_env, tmp_
         run.parse_args(["--features", "cubic"])
 
 
+@pytest.mark.slow
 def test_the_oracle_learns_one_context_and_caches_it(precision_env, tmp_path: Path) -> None:
     result = oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path)
     assert result["context"] == [6.0] and result["episodes"] == 26 and result["population"] == 13
@@ -158,6 +163,7 @@ def flat_flexibility_env() -> study.OffsetParams:
     return study.OffsetParams(study.gym.make(study.LEGACY_ENV_IDS["flexibility"], num_threads=1))
 
 
+@pytest.mark.slow
 def test_the_oracle_restarts_with_twice_the_population_when_a_start_stops(
     flat_flexibility_env, tmp_path
 ) -> None:
@@ -172,6 +178,7 @@ def test_the_oracle_restarts_with_twice_the_population_when_a_start_stops(
     assert result["value"] == max(s["value"] for s in starts)
 
 
+@pytest.mark.slow
 def test_an_old_oracle_record_is_reused_only_if_its_start_ran_its_budget(precision_env, tmp_path) -> None:
     fresh = oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path / "fresh")
     old = {k: v for k, v in fresh.items() if k != "starts"}
@@ -259,6 +266,7 @@ def test_a_finished_run_being_recomputed_under_another_setting_is_in_progress_no
     assert document["in_progress"] == {"precision/c-cma-es-trial1": 3}
 
 
+@pytest.mark.slow
 def test_the_script_runs_by_path_writes_results_summary_and_figures_and_quick_computes_again(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -294,6 +302,7 @@ FOLDERS = sorted({"quick", "full", *(path.parent.name for path in FULL.parent.gl
 
 
 @pytest.mark.parametrize("name", FOLDERS)
+@pytest.mark.slow
 def test_the_committed_summary_is_rendered_from_the_committed_results(name: str, tmp_path: Path) -> None:
     folder = FULL.parent / name
     if not (folder / "results.json").exists():
@@ -321,6 +330,7 @@ def test_the_committed_summary_is_rendered_from_the_committed_results(name: str,
 
 
 @pytest.mark.parametrize("selector", study.SELECTED_CONTEXTS)
+@pytest.mark.slow
 def test_a_learning_selector_trains_resumes_bit_identically_and_is_wired_to_the_command_line(
     selector: str, precision_env, tmp_path: Path
 ) -> None:

@@ -65,6 +65,7 @@ def test_pin_renames_or_copies_and_reads_no_link(tmp_path, monkeypatch):
         restart_defaults.documents("kick")
 
 
+@pytest.mark.slow
 def test_the_committed_pinned_document_is_its_run_and_the_new_defaults_change_it(tmp_path: Path):
     """The check behind ``pin`` on a scaling run that restarts: its committed document, pinned to the
     former defaults, is what the pinned spec computes (the former None restart loss is the squared one:

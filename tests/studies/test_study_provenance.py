@@ -50,6 +50,7 @@ def _study(*args: str) -> str:
     return result.stdout
 
 
+@pytest.mark.slow
 def test_quick_computes_every_run_again_and_render_only_redraws_the_cached_ones(tmp_path: Path) -> None:
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--quick", "--functions", "Sphere", "--context-dims", "1", "--seeds", "1", "--dim", "3"]
@@ -107,6 +108,7 @@ STUDY_RENDERINGS = [
     STUDY_RENDERINGS,
     ids=[f"{s} {' '.join(f)}" for s, f, _ in STUDY_RENDERINGS],
 )
+@pytest.mark.slow
 def test_every_committed_study_records_the_versions_and_cpu_of_its_runs(
     study: str, flags: list[str], recorded: bool
 ) -> None:

@@ -383,6 +383,7 @@ def test_reacher_return_equals_a_hand_rolled_loop_and_the_target_is_the_context(
 
 
 @needs_mujoco
+@pytest.mark.slow
 def test_async_vector_env_runs_converted_episodes_in_subprocesses():
     vec = gym.make_vec(MAZE, num_envs=2, vectorization_mode="async")
     try:
@@ -397,6 +398,7 @@ def test_async_vector_env_runs_converted_episodes_in_subprocesses():
 
 
 @needs_mujoco
+@pytest.mark.slow
 def test_the_runner_vector_backend_runs_episodes_in_parallel_with_the_serial_returns():
     from creps_gym.runner import run
 
@@ -408,6 +410,7 @@ def test_the_runner_vector_backend_runs_episodes_in_parallel_with_the_serial_ret
 
 
 @needs_mujoco
+@pytest.mark.slow
 def test_creps_cma_old_learns_goal_dependent_reaching_in_point_maze():
     env = gym.make(MAZE).unwrapped
     test = env.sample_contexts(np.random.default_rng(123), 16)

@@ -45,6 +45,7 @@ def test_a_registered_native_vector_env_matches_the_single_env(env_id):
 
 
 @pytest.mark.parametrize("env_id", [*IDS, SPHERE])
+@pytest.mark.slow
 def test_seeding_of_native_and_sync_vector_envs_is_as_documented(env_id):
     """Native: n contexts from one generator seeded s; sync/async: sub-env i seeded s + i."""
     native = make_or_skip(env_id, vector=True, num_envs=3)
@@ -59,6 +60,7 @@ def test_seeding_of_native_and_sync_vector_envs_is_as_documented(env_id):
     assert not np.array_equal(native_contexts[1:], sync_contexts[1:])  # as the docs warn
 
 
+@pytest.mark.slow
 def test_making_point_maze_prints_no_gymnasium_robotics_notice():
     script = "import gymnasium as gym, creps_gym; gym.make('creps_gym/PointMazeGoal-v0').reset(seed=0)"
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
@@ -94,6 +96,7 @@ _RENDER_SCRIPT = textwrap.dedent(
 
 
 @pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.slow
 def test_rgb_array_frames_show_the_start_and_the_end_of_the_episode(env_id):
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     out = subprocess.run([sys.executable, "-c", _RENDER_SCRIPT, env_id], capture_output=True, text=True,

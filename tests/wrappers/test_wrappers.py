@@ -396,6 +396,7 @@ def test_doc_examples_run(index, capsys):
 
 @pytest.mark.filterwarnings("ignore:.*(is different from the unwrapped version|symmetric and normalized)")
 @pytest.mark.parametrize("env_id", creps_gym.registered_ids())
+@pytest.mark.slow
 def test_check_env_on_every_wrapped_registered_id(env_id):
     env = make_or_skip(env_id)
     low, high = env.observation_space.low, env.observation_space.high

@@ -34,6 +34,7 @@ def references():
 
 @pytest.mark.parametrize("backend", BACKENDS.values(), ids=BACKENDS)
 @pytest.mark.parametrize("flakes", [{"step_rate": 0.1}, {"reset_rate": 0.1}], ids=["steps", "resets"])
+@pytest.mark.slow
 def test_flaky_steps_and_resets_are_retried_alike_on_every_backend_and_lose_no_sample(
     flakes, backend, references
 ):
@@ -56,6 +57,7 @@ def test_a_reset_that_keeps_failing_stops_the_run_with_an_episode_error(draws, w
 
 
 @pytest.mark.parametrize("backend", BACKENDS.values(), ids=BACKENDS)
+@pytest.mark.slow
 def test_an_episode_that_keeps_failing_gives_the_same_error_on_every_backend(backend):
     def message(**options):
         env = flaky(fail_above=0.5)

@@ -51,6 +51,7 @@ def local_ray():
         ray.shutdown()
 
 
+@pytest.mark.slow
 def test_ray_matches_serial_bit_for_bit_and_keeps_the_users_ray(local_ray):
     serial = run("creps-cma-old", SPHERE, 3, 10, 2, env_kwargs={"dim": 4})
     distributed = run("creps-cma-old", SPHERE, 3, 10, 2, env_kwargs={"dim": 4}, backend="ray")
@@ -59,6 +60,7 @@ def test_ray_matches_serial_bit_for_bit_and_keeps_the_users_ray(local_ray):
     assert ray.is_initialized()  # the runner shuts down only a Ray it started itself
 
 
+@pytest.mark.slow
 def test_a_dead_worker_is_retried_and_no_sample_is_lost(local_ray, tmp_path):
     marker = tmp_path / "deaths"
     reference = run(CREPSCMA(2, 1, seed=0), Target(), 2, 10, 0)
@@ -66,6 +68,7 @@ def test_a_dead_worker_is_retried_and_no_sample_is_lost(local_ray, tmp_path):
     assert marker.read_text() == "x" and survived.equals(reference)
 
 
+@pytest.mark.slow
 def test_failures_after_the_retries_stop_the_run_with_a_clear_error(local_ray, tmp_path):
     with pytest.raises(EpisodeError, match=r"iteration 1, episode \d+ .*failed 2 time\(s\).*simulated crash"):
         run(CREPSCMA(2, 1, seed=0, initial_cov=0.5), Target(fail=True), 2, 10, 0, backend="ray", retries=1)
@@ -74,6 +77,7 @@ def test_failures_after_the_retries_stop_the_run_with_a_clear_error(local_ray, t
         run(CREPSCMA(2, 1, seed=0), Target(str(marker), deaths=5), 2, 10, 0, backend="ray", retries=0)
 
 
+@pytest.mark.slow
 def test_flaky_episodes_and_resets_are_retried_as_on_serial(local_ray):
     """The retry policy of every backend (tests/runner/backends/test_failures.py), on Ray."""
     for seed in (0, 1):

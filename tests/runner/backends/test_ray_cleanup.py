@@ -60,6 +60,7 @@ def test_a_released_watchdog_exits_and_touches_nothing():
     assert Watchdog.start([]) is None
 
 
+@pytest.mark.slow
 def test_the_watchdog_stops_the_watched_tree_when_the_driver_is_killed(tmp_path):
     driver = _driver(
         tmp_path,

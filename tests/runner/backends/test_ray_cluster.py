@@ -288,6 +288,7 @@ def test_unreachable_addresses_fail_at_once_with_their_name(monkeypatch):
 
 
 @EXTRAS
+@pytest.mark.slow
 def test_a_2_node_cluster_gives_the_serial_history_and_is_left_running(cluster, tmp_path, monkeypatch):
     """Run on the cluster, crash the driver, resume there through RAY_ADDRESS: the serial history."""
     import ray
@@ -317,6 +318,7 @@ def test_a_2_node_cluster_gives_the_serial_history_and_is_left_running(cluster, 
 
 
 @EXTRAS
+@pytest.mark.slow
 def test_killing_the_worker_node_mid_run_loses_no_sample(cluster, tmp_path):
     """The worker node's processes are killed while it evaluates a chunk: Ray re-runs it on the head."""
     import ray
@@ -470,6 +472,7 @@ def test_resume_with_a_ray_address_that_is_not_ray_exits_2_at_once(
     assert "RAY_ADDRESS: expected the address of a running Ray cluster" in err and http_server in err
 
 
+@pytest.mark.slow
 def test_a_ray_run_without_ray_installed_exits_4_and_leaves_no_run_folder(tmp_path):
     """Before: the run folder was created before the Ray backend found Ray missing."""
     import subprocess

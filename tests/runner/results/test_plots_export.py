@@ -50,6 +50,7 @@ def legend_texts(figure):
     return [text.get_text() for text in legend.get_texts()]
 
 
+@pytest.mark.slow
 def test_plot_and_export_refuse_to_mix_envs_unless_told(runs, tmp_path, capsys):
     mixed = [str(runs / "a"), str(runs / "c")]
     for command, out in (("plot", "mixed.png"), ("export", "mixed.csv")):

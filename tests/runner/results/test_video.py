@@ -41,6 +41,7 @@ def test_episode_frames_are_drawn_only_when_read():
 
 
 @EXTRAS
+@pytest.mark.slow
 def test_the_reacher_draws_its_motion_as_it_runs():
     pytest.importorskip("matplotlib")
     env = gym.make(REACHER, render_mode="rgb_array_list")
@@ -63,6 +64,7 @@ def _reacher_run(tmp_path):
 
 
 @EXTRAS
+@pytest.mark.slow
 def test_evaluate_video_records_only_the_contexts_asked_for_with_progress(tmp_path, capsys):
     pytest.importorskip("matplotlib")
     pytest.importorskip("imageio_ffmpeg")
@@ -142,6 +144,7 @@ _GL_FRAMES = textwrap.dedent(
         ("creps_gym/KickPrecision-v1", {"width": 96, "height": 64, "num_threads": 1}),
     ],
 )
+@pytest.mark.slow
 def test_mujoco_envs_give_a_frame_per_step_through_the_episode(env_id, kwargs):
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     command = [sys.executable, "-c", _GL_FRAMES, env_id, json.dumps(kwargs)]

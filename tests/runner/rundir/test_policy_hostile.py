@@ -144,6 +144,7 @@ def test_policy_save_follows_a_link_and_names_its_target(tmp_path, capsys, spher
 
 
 @LINUX
+@pytest.mark.slow
 def test_a_policy_save_that_cannot_be_written_names_the_file(tmp_path, sphere_run):
     target = tmp_path / "big.npz"
     result = subprocess.run(
@@ -213,6 +214,7 @@ def test_evaluate_video_refuses_what_o_refuses_and_reports_no_success(
 @EXTRAS
 @LINUX
 @pytest.mark.parametrize("suffix", [".mp4", ".gif"])
+@pytest.mark.slow
 def test_a_video_cut_by_a_full_disk_is_an_error_naming_the_file(
     tmp_path, reacher_run, recorded_episode, suffix
 ):

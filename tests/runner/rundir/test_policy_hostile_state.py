@@ -79,6 +79,7 @@ def _rbf_policy(k: int, p: int = 1) -> Policy:
     return Policy(spec, np.zeros((k, p)), context_dim=1, env=SPHERE, env_kwargs={"dim": p})
 
 
+@pytest.mark.slow
 def test_a_compressed_policy_file_that_declares_many_rbf_centres_is_refused(tmp_path):
     policy = _rbf_policy(1_500_000)
     entries = zipfile.ZipFile(io.BytesIO(policy_bytes(policy.to_dict(arrays=False), policy.arrays())))
@@ -128,6 +129,7 @@ RUN_ARGS = [
     ],
     ids=["evaluate-contexts", "selector-candidates"],
 )
+@pytest.mark.slow
 def test_sizes_set_by_a_flag_are_refused_with_one_line(tmp_path, unfinished, args, expected):
     args = [str(unfinished) if a == "RUN" else str(tmp_path / "new") if a == "NEW" else a for a in args]
     result = _cli(*args)
@@ -135,6 +137,7 @@ def test_sizes_set_by_a_flag_are_refused_with_one_line(tmp_path, unfinished, arg
     assert "Traceback" not in result.stderr and not (tmp_path / "new").exists()
 
 
+@pytest.mark.slow
 def test_selector_candidates_from_a_run_folder_are_refused_before_allocating(tmp_path):
     _unfinished(tmp_path / "run", context_selector="progress")
     document = json.loads((tmp_path / "run" / RunDir.CONFIG).read_text())
@@ -144,6 +147,7 @@ def test_selector_candidates_from_a_run_folder_are_refused_before_allocating(tmp
     assert result.returncode == 3 and "candidates: expected a size whose arrays fit" in result.stderr
 
 
+@pytest.mark.slow
 def test_a_forged_progress_state_with_many_kept_episodes_stays_in_bounded_memory():
     selector = KernelProgressSelector(window=1)
     selector.bind(np.zeros(1), np.ones(1), None)
@@ -376,6 +380,7 @@ def test_a_meta_that_is_not_an_object_is_damage_not_a_crash(tmp_path, capsys, na
 
 
 @EXTRAS  # `plot` needs matplotlib
+@pytest.mark.slow
 def test_a_plot_title_with_bad_mathtext_is_a_usage_error(tmp_path, capsys, unfinished):
     args = ["plot", str(unfinished), "-o", str(tmp_path / "p.png"), "--title", r"$\frac{$"]
     assert main(args) == 2

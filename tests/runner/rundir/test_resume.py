@@ -50,6 +50,7 @@ def _kill_when(process: subprocess.Popen, ready, what: str, timeout: float = 90.
         ("creps-cma-old", "bandit"),
     ],
 )
+@pytest.mark.slow
 def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(
     tmp_path, optimizer, selector
 ):

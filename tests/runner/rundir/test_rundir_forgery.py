@@ -113,6 +113,7 @@ def test_iteration_counts_must_match_the_stop_reason(finished, tmp_path):
 
 
 @pytest.mark.parametrize("text", ["$\\frac{$", "\x1b[31mred\x1b[0m", "a\nb $x$"])
+@pytest.mark.slow
 def test_plot_shows_text_from_a_run_folder_literally(finished, tmp_path, text, capsys):
     """Before: a stop reason or optimiser name with mathtext made ``plot`` exit 2 (matplotlib's parser)."""
     pytest.importorskip("matplotlib")

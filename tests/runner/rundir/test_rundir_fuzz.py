@@ -148,6 +148,7 @@ values = st.one_of(
     ),
     value=values,
 )
+@pytest.mark.slow
 def test_resume_refuses_checkpoint_runner_state_that_no_run_wrote(runs, key, value):
     templates, expected = runs
     with tempfile.TemporaryDirectory() as folder:

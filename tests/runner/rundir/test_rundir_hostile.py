@@ -151,6 +151,7 @@ LINKED = [RunDir.LOCK, RunDir.LOG, RunDir.PLOT, RunDir.CHECKPOINT, RunDir.CONFIG
 
 
 @pytest.mark.parametrize("name", LINKED)
+@pytest.mark.slow
 def test_resume_refuses_a_link_planted_in_the_run_directory(place, tmp_path, capsys, name):
     if name == "learning_curve.png":
         pytest.importorskip("matplotlib")  # written only where it can be drawn
@@ -192,6 +193,7 @@ def test_a_fifo_in_a_run_directory_never_blocks(place, tmp_path, capsys, name, c
     assert "got a FIFO" in one_error_naming(error, out / name)
 
 
+@pytest.mark.slow
 def test_a_log_linked_to_dev_zero_is_not_read_until_memory_runs_out(place, tmp_path):
     out = place("crashed")
     (out / RunDir.LOG).unlink()
@@ -267,6 +269,7 @@ def test_output_not_a_regular_file_or_a_run_file_is_refused(place, tmp_path, cap
     assert snapshot(tmp_path) == before
 
 
+@pytest.mark.slow
 def test_plot_without_an_extension_writes_a_png_to_exactly_that_path(place, tmp_path, capsys):
     pytest.importorskip("matplotlib")
     out = place("finished")
@@ -394,6 +397,7 @@ def test_a_write_that_fails_stops_the_run_with_exit_3_and_resume_is_bit_identica
     assert resume(out).equals(templates["history"])  # nothing lost
 
 
+@pytest.mark.slow
 def test_a_file_size_limit_gives_exit_3_not_a_signal_and_resume_is_bit_identical(tmp_path, templates):
     out = tmp_path / "run"
 

@@ -100,6 +100,7 @@ def _refused_message(module: str) -> str:
 
 @pytest.mark.parametrize("module", ["evil_payload", "this"])
 @pytest.mark.parametrize("entry", ["python-api", "python-m-cli"])
+@pytest.mark.slow
 def test_resume_never_imports_a_module_named_by_config_json(tmp_path, module, entry):
     """In a process started in the run folder (the process boundary; every other name in process below)."""
     out = make_run(tmp_path / "run", stop_after=3)
@@ -223,6 +224,7 @@ def test_env_kwargs_and_optimizer_from_a_run_directory_import_nothing(tmp_path, 
     assert "evil_payload" not in sys.modules and not (out / "PAYLOAD_RAN").exists()
 
 
+@pytest.mark.slow
 def test_a_module_named_with_import_on_the_command_line_is_trusted(tmp_path):
     package = tmp_path / "pkg"
     package.mkdir()
@@ -380,6 +382,7 @@ def test_export_of_a_damaged_history_json_rebuilds_it_and_warns(tmp_path, capsys
 
 
 # -- item 5: one writer per run directory; only the run's own temporaries are removed ---------------------
+@pytest.mark.slow
 def test_a_second_writer_is_refused_while_the_first_lives(tmp_path):
     out = tmp_path / "run"
     # no stagnation stop: with it the run may end within seconds, while the live run must outlast the test
@@ -450,6 +453,7 @@ def test_out_refuses_a_folder_that_is_neither_empty_nor_a_run(tmp_path, capsys):
 
 # -- issue 16.6: Ctrl-C leaves a checkpoint ---------------------------------------------------------------
 @pytest.mark.skipif(sys.platform == "win32", reason="needs SIGINT to a subprocess")
+@pytest.mark.slow
 def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
     out = tmp_path / "run"
     # Long enough that the run is still going when the signal comes (an iteration takes about 2 ms): the
@@ -512,6 +516,7 @@ def limited_memory(gigabytes: float):
     ],
     ids=["function-arrays", "covariance", "batch", "evaluation", "context-arrays"],
 )
+@pytest.mark.slow
 def test_sizes_that_would_exhaust_memory_are_refused_before_allocating(tmp_path, flags, expected):
     args = ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 2, "--samples", 12]
     args += ["--seed", 0, "--out", tmp_path / "run", "--no-plot"]

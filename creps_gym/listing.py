@@ -6,7 +6,7 @@ starts from by default (:func:`initial_hint`: the env-declared initial distribut
 ``creps-gym list`` and ``creps-gym --help`` must start fast, so they print a static table,
 :mod:`creps_gym.cli.table`, instead of importing numpy, Gymnasium and every env. That module is generated
 from the live registry by ``python -m creps_gym.listing --write`` (:func:`live_table`), and
-``python -m creps_gym.listing --check`` (run by ``tests/test_cli_startup.py``) fails when they disagree.
+``python -m creps_gym.listing --check`` (run by ``tests/cli/test_cli_startup.py``) fails when they disagree.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 The notebooks are written from the cell sources below with nbformat, so their source is reviewable here,
 then executed (nbclient, in a temporary folder) so that they are committed with their outputs and the
 figures show on the repository page. Each notebook reads ``CREPS_GYM_QUICK=1`` in its first cell and then
-runs a small configuration (how CI runs them, see ``tests/test_notebooks.py``); the committed outputs come
+runs a small configuration (how CI runs them, see ``tests/docs/test_notebooks.py``); the committed outputs come
 from the full configuration.
 
     python notebooks/make_notebooks.py            # write and execute every notebook (a few minutes)

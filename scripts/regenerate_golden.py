@@ -1,7 +1,8 @@
 """Regenerate the golden numbers of the optimisers (tests/golden/optimizers.json).
 
 Run ``python scripts/regenerate_golden.py`` after an intended change of the optimisers' numerics, check the
-diff, and commit it with the change. ``tests/test_golden.py`` recomputes the same numbers and compares.
+diff, and commit it with the change. ``tests/optimizers/test_golden.py`` recomputes the same numbers and
+compares.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@
 
 Run ``python scripts/render_doc_numbers.py`` after a change that moves these numbers and commit the diff;
 ``--check`` only compares (exit code 1 on a difference), ``--only quickstart|reacher`` limits the work.
-The Reacher example takes about two minutes on 2 cores; ``tests/test_doc_numbers.py`` recomputes the
+The Reacher example takes about two minutes on 2 cores; ``tests/docs/test_doc_numbers.py`` recomputes the
 main job and the Reacher table's first column in CI.
 """
 

@@ -80,6 +80,21 @@ def cli_in_process(*args: Any, cwd: Any = None, env: dict[str, str] | None = Non
 _TEMPORARY = str(Path(__import__("tempfile").gettempdir()).resolve())
 
 
+def study_in_process(study: str, *args: Any) -> str:
+    """``python -m benchmarks.<study>.run ARGS`` run in this process through its ``main``, which must return
+    0; its standard output. The studies' tests start a process once per study and mode (by path, ``-m``), and
+    check the rest of a script's behaviour with this."""
+    import contextlib
+    import importlib
+    import io
+
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        code = importlib.import_module(f"benchmarks.{study}.run").main([str(arg) for arg in args])
+    assert code == 0, stdout.getvalue()[-2000:]
+    return stdout.getvalue()
+
+
 # -- forged checkpoints and crashes: the run-folder attack and recovery tests
 _CHECKPOINT_KEYS = ("format", "fingerprint", "state_crc")
 

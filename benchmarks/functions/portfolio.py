@@ -41,7 +41,7 @@ HERE = Path(__file__).resolve().parent
 CELLS = (("DifferentPowers", 3), ("Rosenbrock", 3), ("ShiftedRotatedElliptic", 3), ("Sphere", 1))
 #: (label, options, the runner's divergence factor, cells or None for all) of ``c-cma-es``; the first is the
 #: default as the studies run it (the divergence rule off), the others are compared with it. The rule fires
-#: on the failure cell only (``tests/test_divergence.py``), so elsewhere it would change nothing.
+#: on the failure cell only (``tests/runner/test_divergence.py``), so elsewhere it would change nothing.
 Cells = tuple[tuple[str, int], ...]
 VARIANTS: tuple[tuple[str, tuple[tuple[str, Any], ...], float | None, Cells | None], ...] = (
     ("default", (), None, None),

@@ -13,7 +13,7 @@ tilted by more than ``FALL_TILT`` (rad), or if at the first chunk boundary after
 moves faster than ``FALL_SPEED`` (m/s): a fall in progress. A fallen episode stops there.
 Phase 2 finishes the ball's roll on the ball-only model until it is slower than ``REST_SPEED`` or the
 episode reaches ``MAX_TIME``. The ball-only roll (4 ms steps) matches a full simulation to within 2 cm over
-an 8 m kick (tested in ``tests/test_kick.py``; measured difference 2 mm).
+an 8 m kick (tested in ``tests/envs/test_kick.py``; measured difference 2 mm).
 """
 
 from __future__ import annotations

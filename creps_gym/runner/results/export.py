@@ -10,9 +10,10 @@ export`` labels each run by its setting group, see :mod:`creps_gym.runner.result
                   "dimension", "run_id", maximization = FALSE)   # TRUE for returns
 
 or upload it in the web interface ("use custom csv format") and map the columns of the same names. The
-file follows IOHanalyzer's documented CSV conventions (tested in ``tests/test_plots_export.py``): one header
-row, the function values as the only required column, one row per (function, algorithm, dimension, run,
-evaluation count), evaluation counts increasing within each run, finite values.
+file follows IOHanalyzer's documented CSV conventions (tested in
+``tests/runner/results/test_plots_export.py``): one header row, the function values as the only required
+column, one row per (function, algorithm, dimension, run, evaluation count), evaluation counts increasing
+within each run, finite values.
 
 Histories of different envs (env id, p or z differ) are refused unless ``mix_envs=True``: a regret and a
 return cannot share one value column, and mixing is usually a mistake.

@@ -1,0 +1,345 @@
+"""Contextual Bayesian optimisation (c-bo): the GP's maths against closed forms, the acquisitions'
+properties, convergence on a small contextual sphere, the distilled policy, options and restored states.
+
+The protocol, determinism and checkpoint contracts are checked for every registered optimiser, c-bo
+included, by the registry-driven tests (test_optimizers.py, test_optimizer_state.py, test_adapters.py,
+test_policy.py)."""
+
+from __future__ import annotations
+
+import copy
+import functools
+import math
+
+import numpy as np
+import pytest
+
+from creps_gym.optimizers import make_optimizer
+from creps_gym.optimizers.acquisitions import gumbel_max_values, mes, ucb
+from creps_gym.optimizers.cbo import ContextualBO
+from creps_gym.optimizers.gp_model import fit_gp, log_marginal_likelihood, matern52, transformed_returns
+
+H = 1e-6
+
+
+def _matern(r: float, signal: float) -> float:
+    return signal * (1 + math.sqrt(5) * r + 5 * r * r / 3) * math.exp(-math.sqrt(5) * r)
+
+
+def test_the_posterior_of_two_points_matches_the_closed_form():
+    """μ = k*ᵀK⁻¹y and σ² = k** − k*ᵀK⁻¹k* with K = k(X, X) + σ_n²I, written out for two 1-D points."""
+    inputs, targets = np.array([[0.1], [0.7]]), np.array([1.0, -0.5])
+    lengthscale, signal, noise = 0.4, 1.5, 0.01
+    model = fit_gp(inputs, targets, np.log([lengthscale, signal, noise]))
+    x = 0.3
+    k12 = _matern(0.6 / lengthscale, signal)
+    gram = np.array([[signal + noise, k12], [k12, signal + noise]])
+    cross = np.array(
+        [_matern(abs(x - 0.1) / lengthscale, signal), _matern(abs(x - 0.7) / lengthscale, signal)]
+    )
+    inverse = np.array([[gram[1, 1], -gram[0, 1]], [-gram[1, 0], gram[0, 0]]]) / np.linalg.det(gram)
+    mean, variance = model.predict(np.array([[x]]))
+    np.testing.assert_allclose(mean[0], cross @ inverse @ targets, rtol=1e-8)
+    np.testing.assert_allclose(variance[0], signal - cross @ inverse @ cross, rtol=1e-6)
+
+
+def test_the_kernel_is_the_matern_52_with_ard_lengthscales():
+    a, b = np.array([[0.0, 0.0]]), np.array([[0.3, -0.8]])
+    lengthscales = np.array([0.5, 2.0])
+    r = math.hypot(0.3 / 0.5, 0.8 / 2.0)
+    np.testing.assert_allclose(matern52(a, b, lengthscales, 2.0)[0, 0], _matern(r, 2.0), rtol=1e-12)
+    np.testing.assert_allclose(matern52(a, a, lengthscales, 2.0)[0, 0], 2.0, rtol=1e-12)
+
+
+def _problem(n: int = 25, d: int = 3, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    inputs = rng.uniform(size=(n, d))
+    targets = np.sin(3 * inputs).sum(axis=1)
+    return inputs, (targets - targets.mean()) / targets.std()
+
+
+def test_the_likelihood_gradient_matches_finite_differences():
+    inputs, targets = _problem()
+    log_hyper = np.log([0.5, 0.3, 0.8, 1.2, 1e-3])
+    _, gradient = log_marginal_likelihood(inputs, targets, log_hyper)
+    steps = np.eye(log_hyper.shape[0]) * H
+    numeric = [
+        (
+            log_marginal_likelihood(inputs, targets, log_hyper + e)[0]
+            - log_marginal_likelihood(inputs, targets, log_hyper - e)[0]
+        )
+        / (2 * H)
+        for e in steps
+    ]
+    np.testing.assert_allclose(gradient, numeric, rtol=1e-5, atol=1e-6)
+
+
+def test_the_posterior_gradients_match_finite_differences_and_condition_equals_a_refit():
+    inputs, targets = _problem()
+    log_hyper = np.log([0.5, 0.3, 0.8, 1.2, 1e-3])
+    model = fit_gp(inputs, targets, log_hyper)
+    x = np.random.default_rng(1).uniform(size=(4, 3))
+    _, _, dmean, dvariance = model.predict_with_gradient(x)
+    for j in range(3):
+        step = np.zeros(3)
+        step[j] = H
+        up, down = model.predict(x + step), model.predict(x - step)
+        np.testing.assert_allclose(dmean[:, j], (up[0] - down[0]) / (2 * H), rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(dvariance[:, j], (up[1] - down[1]) / (2 * H), rtol=1e-5, atol=1e-7)
+    grown = model.condition(x[0], 0.25)
+    refit = fit_gp(np.vstack([inputs, x[:1]]), np.append(targets, 0.25), log_hyper)
+    for a, b in zip(grown.predict(x), refit.predict(x), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+
+
+def test_the_posterior_interpolates_noise_free_data_and_reverts_to_the_prior_far_away():
+    inputs, targets = _problem(n=10)
+    model = fit_gp(inputs, targets, np.log([0.3, 0.3, 0.3, 1.0, 1e-6]))
+    mean, variance = model.predict(inputs)
+    np.testing.assert_allclose(mean, targets, atol=1e-4)
+    assert variance.max() < 1e-4
+    far_mean, far_variance = model.predict(np.full((1, 3), 50.0))
+    assert abs(far_mean[0]) < 1e-9 and far_variance[0] == pytest.approx(1.0)
+
+
+def test_ucb_and_mes_grow_with_the_mean_and_the_uncertainty_and_their_derivatives_are_exact():
+    mean, variance = np.array([-1.0, 0.0, 0.5]), np.array([0.2, 0.5, 1.0])
+    maxima = np.array([1.0, 1.5, 2.5])
+    for name, function in (("ucb", lambda m, v: ucb(m, v, 4.0)), ("mes", lambda m, v: mes(m, v, maxima))):
+        _, by_mean, by_variance = function(mean, variance)
+        assert (by_mean > 0).all() and (by_variance > 0).all(), name
+        numeric_mean = (function(mean + H, variance)[0] - function(mean - H, variance)[0]) / (2 * H)
+        numeric_variance = (function(mean, variance + H)[0] - function(mean, variance - H)[0]) / (2 * H)
+        np.testing.assert_allclose(by_mean, numeric_mean, rtol=1e-5)
+        np.testing.assert_allclose(by_variance, numeric_variance, rtol=1e-5)
+    assert (mes(mean, variance, maxima)[0] > 0).all()  # an entropy reduction
+    np.testing.assert_allclose(ucb(mean, variance, 4.0)[0], mean + 2 * np.sqrt(variance))
+
+
+def test_mes_of_a_point_far_below_the_maximum_is_stable_and_near_zero():
+    value, by_mean, by_variance = mes(np.array([-40.0]), np.array([1e-4]), np.array([1.0]))
+    assert np.isfinite([value, by_mean, by_variance]).all() and 0 <= value[0] < 1e-12
+
+
+def test_sampled_maximum_values_are_at_least_the_best_mean_and_follow_its_spread():
+    rng = np.random.default_rng(0)
+    mean = np.linspace(-1.0, 1.0, 50)
+    tight = gumbel_max_values(mean, np.full(50, 1e-10), 200, rng)
+    assert tight.min() >= 1.0 and tight.max() < 1.0 + 1e-4
+    wide = gumbel_max_values(mean, np.full(50, 0.25), 2000, rng)
+    assert wide.min() >= 1.0 and 1.1 < np.median(wide) < 2.5
+
+
+def test_the_log_transform_keeps_the_order_and_compresses_the_tail():
+    returns = -np.array([0.0, 1.0, 2.0, 1e4])
+    values = transformed_returns(returns, "log", "mean")
+    assert (np.diff(values) < 0).all()
+    assert values[2] - values[3] < 30 * (values[1] - values[2])  # not 9998 times the gap: about 23
+    assert transformed_returns(returns, "none", "min").min() == 0.0
+
+
+def _sphere_regret(optimizer, matrix, contexts):
+    return ((optimizer.recommend(contexts) + contexts @ matrix.T) ** 2).sum(axis=1).mean()
+
+
+@pytest.mark.parametrize("acquisition", ["mes", "ucb"])
+@pytest.mark.slow
+def test_it_solves_a_contextual_sphere_with_two_parameters_in_100_episodes(acquisition):
+    matrix = np.random.default_rng(0).uniform(-1, 1, (2, 1))
+    optimizer = make_optimizer("c-bo", 2, 1, 0, initial_mean=2.0, initial_cov=4.0, acquisition=acquisition)
+    rng, test = np.random.default_rng(1), np.linspace(0, 3, 20)[:, None]
+    start = _sphere_regret(optimizer, matrix, test)
+    for _ in range(25):
+        contexts = rng.uniform(0, 3, (4, 1))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -((params + contexts @ matrix.T) ** 2).sum(axis=1))
+    assert optimizer.evaluations == 100 and _sphere_regret(optimizer, matrix, test) < 0.02 < start / 100
+
+
+def _trained(p: int = 3, z: int = 1, batches: int = 5, **options) -> ContextualBO:
+    optimizer = make_optimizer("c-bo", p, z, 4, **options)
+    rng = np.random.default_rng(2)
+    for _ in range(batches):
+        contexts = rng.uniform(0, 1, (4, z))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -((params - contexts.sum(1, keepdims=True)) ** 2).sum(1))
+    return optimizer
+
+
+@functools.cache
+def _trained_state() -> dict:
+    """``_trained()``'s state, computed once per test process (copy it before changing it)."""
+    return _trained().state_dict()
+
+
+@pytest.mark.slow
+def test_recommend_is_deterministic_stays_in_the_box_and_ignores_the_batch():
+    optimizer = _trained()
+    contexts = np.linspace(0, 1, 5)[:, None]
+    before = optimizer.state_dict()["rng"]
+    batch = optimizer.recommend(contexts)
+    assert batch.tobytes() == optimizer.recommend(contexts).tobytes()
+    assert batch[2].tobytes() == optimizer.recommend(contexts[2:3])[0].tobytes()
+    low, high = optimizer.config.param_box
+    assert (batch >= low).all() and (batch <= high).all() and optimizer.state_dict()["rng"] == before
+
+
+@pytest.mark.slow
+def test_a_batch_at_one_context_holds_distinct_rows_through_the_kriging_believer():
+    optimizer = _trained()
+    params = optimizer.ask(np.full((4, 1), 0.5))
+    distances = np.linalg.norm(params[:, None] - params[None, :], axis=2)[np.triu_indices(4, 1)]
+    assert distances.min() > 0.0 and distances.max() > 0.05  # (the fantasies' own maths: the condition test)
+
+
+def test_the_distilled_policy_fits_the_maximisers_on_the_grid_and_reports_its_error():
+    optimizer = _trained(z=2, distillation_points=3)
+    policy = optimizer.mean_policy()
+    grid = optimizer.distillation_contexts()
+    assert grid.shape == (9, 2)
+    residual = policy(grid, extrapolate=True) - optimizer.recommend(grid)
+    np.testing.assert_allclose(optimizer.diagnostics["distillation_rmse"], np.sqrt(np.mean(residual**2)))
+    np.testing.assert_allclose(optimizer.diagnostics["distillation_max_error"], np.abs(residual).max())
+    features = optimizer.config.mean_map(grid)  # least squares: the residual is orthogonal to the features
+    np.testing.assert_allclose(features.T @ residual, 0.0, atol=1e-8)
+
+
+def test_the_first_asks_draw_the_initial_design_inside_the_box():
+    optimizer = make_optimizer("c-bo", 2, 1, 0, initial_mean=[1.0, -1.0], initial_cov=0.25, initial_samples=6)
+    params = optimizer.ask(np.zeros((6, 1)))
+    assert (params >= [-0.5, -2.5]).all() and (params <= [2.5, 0.5]).all()
+    np.testing.assert_array_equal(optimizer.recommend(np.zeros((2, 1))), [[1.0, -1.0]] * 2)
+
+
+@pytest.mark.parametrize(
+    ("options", "error", "match"),
+    [
+        ({"acquisition": "ei"}, ValueError, r"acquisition: expected one of \('ucb', 'mes'\), got 'ei'"),
+        ({"transform": "sqrt"}, ValueError, "transform: expected one of"),
+        ({"prior_mean": 0.0}, ValueError, "prior_mean: expected one of"),
+        ({"beta": -1.0}, ValueError, "beta: expected a finite value"),
+        ({"refit_growth": 1.0}, ValueError, "refit_growth: expected a finite value in \\(1.0"),
+        ({"initial_samples": 1}, ValueError, "initial_samples: expected an integer >= 2"),
+        ({"param_low": -1.0}, ValueError, "param_low, param_high: expected both or neither"),
+        ({"param_low": 1.0, "param_high": 1.0}, ValueError, "expected low < high"),
+        ({"context_low": [0.0], "context_high": [1.0, 2.0]}, ValueError, "context_high: expected shape"),
+        ({"starts": 0}, ValueError, "starts: expected an integer >= 1"),
+        ({"kappa": 1.0}, TypeError, "options: expected names in .* got unknown \\['kappa'\\]"),
+        ({"candidates": 10**9}, ValueError, "candidates: expected an integer of at most 100000"),
+        ({"distillation_points": 20_000}, ValueError, "distillation_points: expected an integer of at most"),
+    ],
+)
+def test_bad_options_are_refused_naming_them(options, error, match):
+    with pytest.raises(error, match=match):
+        make_optimizer("c-bo", 2, 1, 0, **options)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "match"),
+    [
+        ("log_hyper", np.full(6, 50.0), r"state\['log_hyper'\]: expected values within"),
+        ("log_hyper", np.zeros(3), r"state\['log_hyper'\]: expected shape"),
+        ("fitted_at", 10_000, r"state\['fitted_at'\]: expected at most the 20 stored episodes"),
+        ("data_params", np.zeros((19, 3)), r"state\['data_params'\]: expected shape \(20, 3\)"),
+        ("scale_high", np.array([-5.0]), r"state\['scale_low'\], state\['scale_high'\]: expected low < high"),
+        ("data_returns", np.full(20, np.nan), r"state\['data_returns'\]"),
+    ],
+)
+def test_a_tampered_state_is_refused_naming_the_key(key, value, match):
+    state = copy.deepcopy(_trained_state())
+    state[key] = value
+    with pytest.raises((ValueError, TypeError), match=match):
+        ContextualBO.from_state_dict(state)
+
+
+@pytest.mark.slow
+def test_a_restored_optimizer_rebuilds_the_same_gp_bit_for_bit():
+    optimizer = _trained(context_low=[0.0], context_high=[1.0], param_low=-2.0, param_high=3.0)
+    restored = ContextualBO.from_state_dict(optimizer.state_dict())
+    assert restored.model.chol.tobytes() == optimizer.model.chol.tobytes()
+    assert restored.config.param_box[1].tolist() == [3.0] * 3
+    contexts = np.linspace(0, 1, 4)[:, None]
+    assert restored.ask(contexts).tobytes() == optimizer.ask(contexts).tobytes()
+
+
+@pytest.mark.slow
+def test_no_signal_and_flat_returns_stop_it():
+    optimizer = make_optimizer("c-bo", 2, 1, 0)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        contexts = rng.uniform(0, 3, (20, 1))
+        optimizer.tell(contexts, optimizer.ask(contexts), rng.standard_normal(20))
+    assert optimizer.stop()["no_signal"] >= 0.95
+    flat = make_optimizer("c-bo", 2, 1, 0)
+    for _ in range(3):
+        contexts = rng.uniform(0, 3, (20, 1))
+        flat.tell(contexts, flat.ask(contexts), np.ones(20))
+    assert flat.stop() == {"tolflatfitness": 60}
+
+
+def test_returns_near_the_float_limit_give_finite_asks_and_restore(tmp_path):
+    optimizer = make_optimizer("c-bo", 2, 1, 0, transform="none")
+    contexts = np.linspace(0, 1, 12)[:, None]
+    optimizer.tell(contexts, optimizer.ask(contexts), 1.5e308 - np.arange(12) * 1e295)
+    restored = type(optimizer).load(optimizer.save(tmp_path / "ckpt.npz"))
+    assert np.isfinite(restored.ask(contexts[:3])).all()
+    assert restored.model.chol.tobytes() == optimizer.model.chol.tobytes()
+
+
+@pytest.mark.slow
+def test_a_checkpoint_whose_data_would_not_fit_in_memory_is_refused_before_the_gp_is_built():
+    state = _trained().state_dict()
+    n = 2_000_000  # the kernel matrices would need n² x (p + z + 6) x 8 bytes: about 3e14
+    state.update(data_contexts=np.zeros((n, 1)), data_params=np.zeros((n, 3)), data_returns=np.zeros(n))
+    with pytest.raises(
+        ValueError, match=r"state\['data_returns'\]: expected a size whose arrays fit in memory"
+    ):
+        ContextualBO.from_state_dict(state)
+
+
+def test_many_context_dimensions_distil_on_a_bounded_design():
+    optimizer = make_optimizer("c-bo", 2, 16, 0, context_low=0.0, context_high=1.0)
+    assert optimizer.distillation_contexts().shape == (1000, 16)
+
+
+def test_a_distillation_grid_beyond_its_bound_is_refused():
+    with pytest.raises(
+        ValueError, match=r"distillation_points: expected a grid of at most 10000 .* got 30 \*\* 3"
+    ):
+        make_optimizer("c-bo", 2, 3, 0, distillation_points=30)
+
+
+@pytest.mark.slow
+def test_without_context_dimensions_it_is_plain_bayesian_optimisation():
+    optimizer = make_optimizer("c-bo", 2, 0, 0, initial_cov=4.0)
+    for _ in range(10):
+        contexts = np.zeros((4, 0))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -((params - 1.0) ** 2).sum(axis=1))
+    best = optimizer.recommend(np.zeros((1, 0)))[0]
+    assert np.abs(best - 1.0).max() < 0.05
+    policy = optimizer.mean_policy()
+    assert policy(np.zeros((1, 0))).tobytes() == optimizer.recommend(np.zeros((1, 0))).tobytes()
+    assert optimizer.diagnostics["distillation_rmse"] == 0.0
+
+
+class _Crash(Exception):
+    pass
+
+
+@pytest.mark.slow
+def test_a_run_resumed_after_a_crash_equals_the_uninterrupted_run(tmp_path):
+    from creps_gym.runner import resume, run
+
+    options = {"env_kwargs": {"dim": 2, "context_dim": 1}, "checkpoint_every": 3, "eval_contexts": 4}
+    full = run("c-bo", "creps_gym/Sphere-v0", 10, 4, 5, run_dir=tmp_path / "a", **options)
+
+    def crash(record, history):
+        if record.iteration >= 7:
+            raise _Crash
+
+    with pytest.raises(_Crash):
+        run("c-bo", "creps_gym/Sphere-v0", 10, 4, 5, run_dir=tmp_path / "b", callbacks=[crash], **options)
+    resumed = resume(tmp_path / "b")  # from the checkpoint of iteration 6
+    rows = [[(r.iteration, r.mean_return, r.eval_return) for r in h.records] for h in (full, resumed)]
+    assert rows[0] == rows[1] and rows[0][-1][0] == 10

@@ -49,7 +49,7 @@ def recorded_episode(reacher_run, tmp_path_factory) -> Path:
     (n, h, w, 3)) and replayed by the tests below, which are about the video file written, not the drawing
     (tests/runner/results/test_video.py checks the drawing and the progress)."""
     pytest.importorskip("imageio")
-    from creps_gym.runner import video
+    from creps_gym.runner.results import video
 
     frames = []
     original = video.EpisodeVideo.__iter__
@@ -76,7 +76,7 @@ REPLAY = (
 
 
 def _replay(monkeypatch: pytest.MonkeyPatch, recorded: Path) -> None:
-    from creps_gym.runner import video
+    from creps_gym.runner.results import video
 
     frames = np.load(recorded)
     monkeypatch.setattr(video.EpisodeVideo, "__iter__", lambda self: iter(frames))

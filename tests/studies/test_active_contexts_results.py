@@ -12,7 +12,7 @@ import pytest
 
 from benchmarks.low_budget import active_contexts
 
-RESULTS = Path(__file__).resolve().parent.parent / "benchmarks" / "low_budget" / "results"
+RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 
 
 NAMES = ("active_contexts", "active_steep")

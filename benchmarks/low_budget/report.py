@@ -19,6 +19,7 @@ __all__ = [
     "ANCHORS",
     "anchors_text",
     "cells",
+    "cost_text",
     "grouped_tasks",
     "plot_curves",
     "targets_table",
@@ -160,6 +161,7 @@ def plot_curves(grouped: Cells, tasks: Sequence[str], methods: Sequence[Any], pa
     """The median metric over seeds against the budget (log–log; min–max shaded), one panel per task with
     runs, one line per method; returns ``path``."""
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -179,7 +181,10 @@ def plot_curves(grouped: Cells, tasks: Sequence[str], methods: Sequence[Any], pa
             line = ax.plot(budgets, stats[:, 0], marker="o", ms=3, label=method.name)[0]
             ax.fill_between(budgets, stats[:, 1], stats[:, 2], color=line.get_color(), alpha=0.15)
         metric = task_by_name(task).metric
-        ax.set(xscale="log", title=task, xlabel="episodes", ylabel=metric)
+        ax.set(xscale="log", title=task, xlabel="episodes (budget)", ylabel=metric)
+        ticks = sorted({b for m in methods for r in grouped.get((task, m.name), []) for b in r["budgets"]})
+        ax.set_xticks(ticks, [str(b) for b in ticks])
+        ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
         if metric == "regret":
             ax.set_yscale("log")
     for ax in axes.ravel()[len(shown) :]:
@@ -208,3 +213,52 @@ def grouped_tasks(tasks: Sequence[str]) -> dict[str, list[str]]:
         )
         sections[key].append(task)
     return {k: v for k, v in sections.items() if v}
+
+
+def _families(task: str) -> tuple[str, str, str]:
+    """The keys a run's cost is looked up by, narrowest first: the task, its family (the functions at the
+    same p and z, or both kicks) and its env's cost class (the kicks' MuJoCo episodes, or a cheap env)."""
+    spec = task_by_name(task)
+    if spec.function is None:
+        kick = task.startswith("Kick")
+        return task, "kicks" if kick else task, "MuJoCo env" if kick else "cheap env"
+    kwargs = dict(spec.env_kwargs)
+    return task, f"functions p{kwargs['dim']} z{kwargs['context_dim']}", "cheap env"
+
+
+def cost_text(documents: Sequence[dict[str, Any]], specs: Sequence[Any]) -> str:
+    """The measured seconds per run (wall, optimiser and env) and an estimate of the missing runs' CPU time.
+
+    A missing run is estimated as the median seconds of the finished runs of the same method on the same
+    task, else in the same family, else on an env of the same cost class (:func:`_families`; the last is
+    a rough figure: it ignores how p and z change the cost); a (cost class, method) with no finished run is
+    left out of the estimate and named.
+    """
+    seconds: dict[tuple[int, str, str], list[float]] = {}
+    for document in documents:
+        spec = document["spec"]
+        for level, name in enumerate(_families(spec["task"])):
+            seconds.setdefault((level, name, spec["method"]), []).append(float(document["seconds"]))
+    done = {(d["spec"]["task"], d["spec"]["method"], d["spec"]["seed"]) for d in documents}
+    missing = [s for s in specs if (s.task, s.method, s.seed) not in done]
+    total, unknown = 0.0, set()
+    for spec in missing:
+        for key in ((level, name, spec.method) for level, name in enumerate(_families(spec.task))):
+            if key in seconds:
+                total += float(np.median(seconds[key]))
+                break
+        else:
+            unknown.add(f"{_families(spec.task)[2]}: {spec.method}")
+    lines = ["| task | method | runs | seconds per run: median (min–max) |", "|---|---|---|---|"]
+    for _, task, method in sorted(k for k in seconds if k[0] == 0):
+        values = np.asarray(seconds[(0, task, method)])
+        spread = f"{np.median(values):.3g} ({values.min():.3g}–{values.max():.3g})"
+        lines.append(f"| {task} | `{method}` | {values.size} | {spread} |")
+    text = (
+        f"{len(documents)} runs finished, {len(missing)} missing; estimated time of the missing runs at the "
+        f"finished runs' pace: {total / 3600:.1f} h of one core (medians of their wall seconds, see "
+        "`report.cost_text`)"
+        + (f"; not estimated (no finished run): {', '.join(sorted(unknown))}" if unknown else "")
+        + ".\n\n"
+    )
+    return text + "\n".join(lines) + "\n"

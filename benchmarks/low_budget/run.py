@@ -30,6 +30,7 @@ if not __package__:
 from benchmarks.low_budget.report import (
     anchors_text,
     cells,
+    cost_text,
     grouped_tasks,
     plot_curves,
     targets_table,
@@ -160,6 +161,15 @@ def write_report(args: argparse.Namespace, documents: list[dict[str, Any]], timi
         "computed on a shared machine under `nice`, so they are upper bounds.",
         "",
         timing_table(grouped, tasks, methods, budgets[-1]),
+        "## Cost of a run (wall seconds: the optimiser's and the env's)",
+        "",
+        cost_text(documents, args.specs),
+    ]
+    text += [
+        "## Per task",
+        "",
+        "Median over seeds (min–max) of the recommended policy's metric per budget.",
+        "",
     ]
     for section, names in grouped_tasks(tasks).items():
         text += [f"## {section}", ""]
@@ -182,7 +192,7 @@ def write_report(args: argparse.Namespace, documents: list[dict[str, Any]], timi
 def main(argv: Sequence[str] | None = None) -> int:
     """Run (or resume) the study and write its report."""
     args = parse_args(argv)
-    specs = study_specs(args)
+    specs = args.specs = study_specs(args)
     return run_study(
         args,
         specs,
@@ -190,7 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         baselines={m.name: one_run for m in METHODS},
         title="Low-budget study (issue 44)",
         script="benchmarks/low_budget/run.py",
-        figures_marker="\n## Figures",
+        figures_marker="\n## Per task",
         readme=HERE / "README.md",
     )
 

@@ -34,6 +34,7 @@ def test_quick_mode_writes_runs_with_their_curve_timing_and_provenance(tmp_path:
         assert document["budgets"] == [24] and document["episodes"] == [24]
         assert document["provenance"]["recorded"] is True and document["values"][0] >= 0
         assert document["optimizer_seconds"][0] > 0 and document["last_batch_seconds_per_episode"][0] > 0
+        assert document["optimizer_cpu_seconds"][0] > 0 and document["cpu_seconds"] > 0
     assert "| `c-bo` | 4 |" in table and "Sphere-p2-z1" in table
     assert all(anchor in table for anchor in ANCHORS) and "not computed here" in table
     # A second invocation with more seeds marks the cells whose seeds have not all finished.
@@ -114,7 +115,7 @@ def test_the_cost_estimate_uses_the_finished_runs_of_the_same_method_and_names_w
     from benchmarks.low_budget.report import cost_text
 
     documents = [
-        {"spec": {"task": "Sphere-p2-z1", "method": "creps", "seed": s}, "seconds": 1.0 + 2 * s}
+        {"spec": {"task": "Sphere-p2-z1", "method": "creps", "seed": s}, "cpu_seconds": 1.0 + 2 * s}
         for s in (0, 1)
     ]
     specs = [study.LowBudgetSpec("Sphere-p2-z1", "creps", s) for s in range(3)]

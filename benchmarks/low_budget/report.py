@@ -137,22 +137,26 @@ def _ratio(ours: float | None, other: float | None, lower: bool) -> str:
 
 
 def timing_table(grouped: Cells, tasks: Sequence[str], methods: Sequence[Any], budget: int) -> str:
-    """The optimiser's own seconds per asked episode: the last batch's before ``budget`` (median, and the
-    largest, over seeds), and the run's mean up to it."""
+    """The optimiser's own seconds per asked episode at ``budget``: the last batch's ask + tell per episode
+    in CPU seconds of the run's process (median, and the largest, over seeds), its wall seconds (median),
+    and the run's mean CPU seconds per episode up to ``budget``."""
     names = [m.name for m in methods]
     lines = [f"| task | {' | '.join(f'`{n}`' for n in names)} |", "|---|" + "---|" * len(names)]
     for task in tasks:
         row = []
         for name in names:
             runs = grouped.get((task, name), [])
-            last = _values(runs, budget, "last_batch_seconds_per_episode")
-            total = _values(runs, budget, "optimizer_seconds")
+            last = _values(runs, budget, "last_batch_cpu_seconds_per_episode")
+            wall = _values(runs, budget, "last_batch_seconds_per_episode")
+            total = _values(runs, budget, "optimizer_cpu_seconds")
             episodes = _values(runs, budget, "episodes")
-            if last.size == 0:
+            if last.size == 0 or total.size != episodes.size:
                 row.append("—")
                 continue
-            mean = np.median(total / np.maximum(episodes, 1)) if total.size == episodes.size else np.nan
-            row.append(f"{np.median(last):.2g} (max {last.max():.2g}); mean {mean:.2g}")
+            mean = np.median(total / np.maximum(episodes, 1))
+            row.append(
+                f"{np.median(last):.2g} (max {last.max():.2g}), wall {np.median(wall):.2g}; mean {mean:.2g}"
+            )
         lines.append(f"| {task} | {' | '.join(row)} |")
     return "\n".join(lines) + "\n"
 
@@ -227,9 +231,10 @@ def _families(task: str) -> tuple[str, str, str]:
 
 
 def cost_text(documents: Sequence[dict[str, Any]], specs: Sequence[Any]) -> str:
-    """The measured seconds per run (wall, optimiser and env) and an estimate of the missing runs' CPU time.
+    """The measured CPU seconds per run (the run's process: optimiser, env and evaluations) and an estimate
+    of the missing runs' CPU time.
 
-    A missing run is estimated as the median seconds of the finished runs of the same method on the same
+    A missing run is estimated as the median CPU seconds of the finished runs of the same method on the same
     task, else in the same family, else on an env of the same cost class (:func:`_families`; the last is
     a rough figure: it ignores how p and z change the cost); a (cost class, method) with no finished run is
     left out of the estimate and named.
@@ -238,7 +243,7 @@ def cost_text(documents: Sequence[dict[str, Any]], specs: Sequence[Any]) -> str:
     for document in documents:
         spec = document["spec"]
         for level, name in enumerate(_families(spec["task"])):
-            seconds.setdefault((level, name, spec["method"]), []).append(float(document["seconds"]))
+            seconds.setdefault((level, name, spec["method"]), []).append(float(document["cpu_seconds"]))
     done = {(d["spec"]["task"], d["spec"]["method"], d["spec"]["seed"]) for d in documents}
     missing = [s for s in specs if (s.task, s.method, s.seed) not in done]
     total, unknown = 0.0, set()
@@ -249,14 +254,14 @@ def cost_text(documents: Sequence[dict[str, Any]], specs: Sequence[Any]) -> str:
                 break
         else:
             unknown.add(f"{_families(spec.task)[2]}: {spec.method}")
-    lines = ["| task | method | runs | seconds per run: median (min–max) |", "|---|---|---|---|"]
+    lines = ["| task | method | runs | CPU seconds per run: median (min–max) |", "|---|---|---|---|"]
     for _, task, method in sorted(k for k in seconds if k[0] == 0):
         values = np.asarray(seconds[(0, task, method)])
         spread = f"{np.median(values):.3g} ({values.min():.3g}–{values.max():.3g})"
         lines.append(f"| {task} | `{method}` | {values.size} | {spread} |")
     text = (
-        f"{len(documents)} runs finished, {len(missing)} missing; estimated time of the missing runs at the "
-        f"finished runs' pace: {total / 3600:.1f} h of one core (medians of their wall seconds, see "
+        f"{len(documents)} runs finished, {len(missing)} missing; estimated CPU time of the missing runs: "
+        f"{total / 3600:.1f} h of one core (medians of the finished runs' CPU seconds, see "
         "`report.cost_text`)"
         + (f"; not estimated (no finished run): {', '.join(sorted(unknown))}" if unknown else "")
         + ".\n\n"

@@ -157,11 +157,12 @@ def write_report(args: argparse.Namespace, documents: list[dict[str, Any]], timi
         targets_table(grouped, tasks, methods, target),
         f"## The optimiser's own seconds per asked episode at {budgets[-1]} episodes",
         "",
-        "The last batch's ask + tell per episode (median over seeds, and the largest), and the run's mean; "
-        "computed on a shared machine under `nice`, so they are upper bounds.",
+        "The last batch's ask + tell per episode in CPU seconds (median over seeds, and the largest), its "
+        "wall seconds (median; on a shared machine under `nice`, so larger), and the run's mean CPU seconds "
+        "per asked episode.",
         "",
         timing_table(grouped, tasks, methods, budgets[-1]),
-        "## Cost of a run (wall seconds: the optimiser's and the env's)",
+        "## Cost of a run (CPU seconds: the optimiser's, the env's and the evaluations')",
         "",
         cost_text(documents, args.specs),
     ]

@@ -249,10 +249,14 @@ def _make_selector(method: Method, model: Any) -> Any:
     return selector
 
 
+#: What a run's curve records at each budget: the state's entries (see :func:`_batch`) and the value.
+CURVE_FIELDS = ("episodes", "values", "spent", "spent_cpu", "last", "last_cpu")
+
+
 def one_run(spec: LowBudgetSpec) -> dict[str, Any]:
     """Run ``spec`` and return its result document (see the module docstring and :func:`_document`)."""
     task, method = task_by_name(spec.task), method_by_name(spec.method)
-    start = time.perf_counter()
+    start, start_cpu = time.perf_counter(), time.process_time()
     model = task.make_env(spec.seed)
     mean, std = initial_distribution(task, model)
     start_options = {"initial_mean": mean, "initial_cov": std**2, **dict(method.options)}
@@ -262,51 +266,53 @@ def one_run(spec: LowBudgetSpec) -> dict[str, Any]:
     selector = _make_selector(method, model)
     contexts_rng = np.random.default_rng([spec.seed, 1])  # training contexts (or the selector's stream)
     test = evaluation_contexts(task, model)
-    curve: dict[str, list[Any]] = {k: [] for k in ("episodes", "values", "optimizer_seconds", "last_batch")}
-    state = {"episodes": 0, "spent": 0.0, "last": None}
+    curve: dict[str, list[Any]] = {name: [] for name in CURVE_FIELDS}
+    state: dict[str, Any] = {"episodes": 0, "spent": 0.0, "spent_cpu": 0.0, "last": None, "last_cpu": None}
     pending = list(spec.budgets)
     stop_reason = "budget"
     try:
         while pending:
             if state["episodes"] + spec.samples > pending[0]:
-                value = policy_metric(task, model, test, optimizer.recommend(test))
-                _record(curve, state["episodes"], value, state["spent"], state["last"])
+                _record(curve, state, policy_metric(task, model, test, optimizer.recommend(test)))
                 pending.pop(0)
             else:
                 _batch(spec, model, optimizer, selector, contexts_rng, state)
     except (ArithmeticError, ValueError, RuntimeError, np.linalg.LinAlgError) as error:
         stop_reason = f"error: {type(error).__name__}: {error}"  # the budgets left are recorded as None
         for _ in pending:
-            _record(curve, state["episodes"], None, state["spent"], None)
-    return _document(spec, task, method, curve, stop_reason, time.perf_counter() - start, len(test))
+            _record(curve, {**state, "last": None, "last_cpu": None}, None)
+    seconds = (time.perf_counter() - start, time.process_time() - start_cpu)
+    return _document(spec, task, method, curve, stop_reason, seconds, len(test))
 
 
-def _record(curve: dict[str, list[Any]], *items: Any) -> None:
-    """Append one budget's entries (episodes, value, optimiser seconds, last batch's) to the curve."""
-    for key, item in zip(curve, items, strict=True):
-        curve[key].append(item)
+def _record(curve: dict[str, list[Any]], state: dict[str, Any], value: float | None) -> None:
+    """Append one budget's entries: the state's (episodes, optimiser seconds) and the policy's value."""
+    for name in CURVE_FIELDS:
+        curve[name].append(value if name == "values" else state[name])
 
 
 def _batch(
     spec: LowBudgetSpec, model: Any, optimizer: Any, selector: Any, rng: np.random.Generator, state: dict
 ) -> None:
-    """Ask, evaluate and tell one batch; ``state`` gains its episodes and the optimiser's seconds."""
+    """Ask, evaluate and tell one batch; ``state`` gains its episodes and the optimiser's seconds (wall:
+    ``spent``, ``last``; this process's CPU: ``spent_cpu``, ``last_cpu``; ``last*`` per episode)."""
     contexts = (
         model.sample_contexts(rng, spec.samples) if selector is None else selector.select(rng, spec.samples)
     )
-    clock = time.perf_counter()
+    clock, cpu = time.perf_counter(), time.process_time()
     params = optimizer.ask(contexts)
-    seconds = time.perf_counter() - clock
+    seconds, cpu_seconds = time.perf_counter() - clock, time.process_time() - cpu
     returns = np.asarray(model.evaluate(contexts, params)[0], dtype=np.float64)
-    clock = time.perf_counter()
+    clock, cpu = time.perf_counter(), time.process_time()
     optimizer.tell(contexts, params, returns)
-    seconds += time.perf_counter() - clock
+    seconds, cpu_seconds = seconds + time.perf_counter() - clock, cpu_seconds + time.process_time() - cpu
     if selector is not None:
         diagnostics = {str(k): float(v) for k, v in dict(optimizer.diagnostics).items()}
         selector.tell(contexts, returns, diagnostics)
     state["episodes"] += spec.samples
     state["spent"] += seconds
-    state["last"] = seconds / spec.samples
+    state["spent_cpu"] += cpu_seconds
+    state["last"], state["last_cpu"] = seconds / spec.samples, cpu_seconds / spec.samples
 
 
 def _document(
@@ -315,18 +321,29 @@ def _document(
     method: Method,
     curve: dict[str, list[Any]],
     stop_reason: str,
-    seconds: float,
+    seconds: tuple[float, float],
     test_count: int,
 ) -> dict[str, Any]:
     """A run's JSON document.
 
     ``budgets``, and per budget: ``episodes`` (those spent: whole batches), ``values`` (the task's metric of
-    ``recommend`` on the test contexts), ``optimizer_seconds`` (its ask and tell so far) and
-    ``last_batch_seconds_per_episode`` (the last batch's ask and tell per episode: what a robot waits for
-    at that budget). ``final`` is the value at the largest budget; ``hit`` is None (the study has no
-    target; :func:`benchmarks.study_runner.run_all` logs it).
+    ``recommend`` on the test contexts), ``optimizer_seconds`` and ``optimizer_cpu_seconds`` (its ask and
+    tell so far: wall, and this process's CPU time) and ``last_batch_seconds_per_episode`` and
+    ``last_batch_cpu_seconds_per_episode`` (the last batch's ask and tell per episode: what a robot waits
+    for at that budget). ``seconds`` and ``cpu_seconds`` are the whole run's (env and evaluations
+    included). ``final`` is the value at the largest budget; ``hit`` is None (the study has no target;
+    :func:`benchmarks.study_runner.run_all` logs it).
     """
     values = [v if v is None or np.isfinite(v) else None for v in curve["values"]]
+    rounded = {
+        name: [None if v is None else round(v, digits) for v in curve[field]]
+        for name, field, digits in (
+            ("optimizer_seconds", "spent", 4),
+            ("optimizer_cpu_seconds", "spent_cpu", 4),
+            ("last_batch_seconds_per_episode", "last", 5),
+            ("last_batch_cpu_seconds_per_episode", "last_cpu", 5),
+        )
+    }
     return {
         "spec": asdict(spec),
         "task": task.name,
@@ -342,11 +359,11 @@ def _document(
         "budgets": list(spec.budgets),
         "episodes": curve["episodes"],
         "values": values,
-        "optimizer_seconds": [round(s, 4) for s in curve["optimizer_seconds"]],
-        "last_batch_seconds_per_episode": [None if s is None else round(s, 5) for s in curve["last_batch"]],
+        **rounded,
         "hit": None,
         "final": values[-1],
         "total_episodes": curve["episodes"][-1],
         "stop_reason": stop_reason,
-        "seconds": round(seconds, 3),
+        "seconds": round(seconds[0], 3),
+        "cpu_seconds": round(seconds[1], 3),
     }

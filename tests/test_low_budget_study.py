@@ -127,3 +127,19 @@ def test_the_cost_estimate_uses_the_finished_runs_of_the_same_method_and_names_w
     assert "2 runs finished, 3 missing" in text and "0.0 h" in text  # 2 s + 2 s (the same p and z)
     assert "not estimated (no finished run): cheap env: c-bo." in text
     assert "| Sphere-p2-z1 | `creps` | 2 | 2 (1–3) |" in text
+
+
+def test_the_report_says_which_tasks_are_complete_partial_or_not_started() -> None:
+    from benchmarks.low_budget.report import completeness_text
+
+    specs = [
+        study.LowBudgetSpec(t, "creps", s)
+        for t in ("Sphere-p2-z1", "Sphere-p4-z1", "Sphere-p8-z1")
+        for s in (0, 1)
+    ]
+    documents = [{"spec": {"task": "Sphere-p2-z1", "method": "creps", "seed": s}} for s in (0, 1)]
+    documents.append({"spec": {"task": "Sphere-p4-z1", "method": "creps", "seed": 1}})
+    assert completeness_text(documents, specs) == (
+        "Complete tasks: Sphere-p2-z1. Partial: Sphere-p4-z1 (1 of 2 runs). "
+        "Not started: 1 task(s) (Sphere-p8-z1).\n"
+    )

@@ -19,6 +19,7 @@ __all__ = [
     "ANCHORS",
     "anchors_text",
     "cells",
+    "completeness_text",
     "cost_text",
     "grouped_tasks",
     "plot_curves",
@@ -267,3 +268,20 @@ def cost_text(documents: Sequence[dict[str, Any]], specs: Sequence[Any]) -> str:
         + ".\n\n"
     )
     return text + "\n".join(lines) + "\n"
+
+
+def completeness_text(documents: Sequence[dict[str, Any]], specs: Sequence[Any]) -> str:
+    """Which tasks have all their runs, which some (how many) and how many have none, in the study's order."""
+    done = {(d["spec"]["task"], d["spec"]["method"], d["spec"]["seed"]) for d in documents}
+    counts: dict[str, list[int]] = {}
+    for spec in specs:
+        count = counts.setdefault(spec.task, [0, 0])
+        count[0] += (spec.task, spec.method, spec.seed) in done
+        count[1] += 1
+    complete = [task for task, (k, n) in counts.items() if k == n]
+    partial = [f"{task} ({k} of {n} runs)" for task, (k, n) in counts.items() if 0 < k < n]
+    empty = [task for task, (k, _) in counts.items() if k == 0]
+    return (
+        f"Complete tasks: {', '.join(complete) or 'none'}. Partial: {', '.join(partial) or 'none'}. "
+        f"Not started: {len(empty)} task(s)" + (f" ({', '.join(empty)})" if empty else "") + ".\n"
+    )

@@ -31,6 +31,7 @@ if not __package__:
 from benchmarks.low_budget.report import (
     anchors_text,
     cells,
+    completeness_text,
     cost_text,
     grouped_tasks,
     plot_curves,
@@ -158,6 +159,7 @@ def write_report(args: argparse.Namespace, documents: list[dict[str, Any]], timi
         "",
         "Cells: median over seeds (min–max); `[k/n]`: only k of the n seeds have finished; `—`: not run yet.",
         "",
+        completeness_text(documents, args.specs),
         anchors_text(),
         *targets,
         f"## The optimiser's own seconds per asked episode at {budgets[-1]} episodes",

@@ -1,5 +1,6 @@
-"""The low-budget studies (issue 44): ``compare.py`` (regret after a fixed episode budget) and
-``gp_backends.py`` (the GP's cost against scikit-learn's)."""
+"""The low-budget studies (issue 44): ``run.py`` (the 50–500 episode study of item 5: ``study.py``,
+``report.py``), ``compare.py`` (regret after a fixed episode budget) and ``gp_backends.py`` (the GP's cost
+against scikit-learn's)."""
 
 from __future__ import annotations
 

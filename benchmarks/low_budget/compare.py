@@ -8,8 +8,8 @@ recommend; the env's time excluded). Writes one JSON document with provenance an
 
     OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.compare --out results.json
 
-This is the quick measurement of issue 44's first item, not the study of its item 5 (``benchmarks/
-low_budget/`` will hold that one).
+This is the quick measurement of issue 44's first item, not the study of its item 5 (``run.py`` in this
+folder).
 """
 
 from __future__ import annotations

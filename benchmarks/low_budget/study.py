@@ -1,0 +1,371 @@
+"""The low-budget study's methods, tasks and runs (issue 44, item 5): one run is one (task, method, seed).
+
+A run asks its optimiser for whole batches of its recommended size until the next batch would pass the run's
+budget (500 episodes in the study). Before the first batch that would pass each of the curve's budgets
+(:data:`BUDGETS`: 50, 100, 200, 300, 500) it evaluates ``optimizer.recommend`` on the task's fixed test
+contexts, so one run gives the whole curve. It also times the optimiser's own work (``ask`` and ``tell``; the
+env's episodes and the evaluations excluded) per asked episode. Every method starts from the same
+distribution: on the contextual functions mean 0 and σ = 2 (the issue's setting, that of ``compare.py``: the
+box of ±3σ holds every context's optimum), on the low-dimensional robot ids their declared
+``initial_distribution()``.
+
+Methods are rows of :data:`METHODS` (:class:`Method`: a registered optimiser, its options and an optional
+context selector), so a variant, e.g. c-bo with an active context selector, is one more entry.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+import creps_gym  # noqa: F401  (registers the ids)
+from creps_gym.envs.evaluation import contextual_model, test_contexts
+from creps_gym.optimizers import make_optimizer, recommended_samples
+from creps_gym.selectors import make_selector
+
+__all__ = [
+    "BUDGETS",
+    "FUNCTIONS",
+    "METHODS",
+    "NON_QUADRATIC",
+    "ROBOT_TASKS",
+    "LowBudgetSpec",
+    "Method",
+    "Task",
+    "method_by_name",
+    "one_run",
+    "task_by_name",
+]
+
+Array = NDArray[np.float64]
+#: The curve's budgets (episodes): the recommended policy is evaluated at each (the issue's 50, 100, 200 and
+#: 500, and 300, where its kick targets are set).
+BUDGETS = (50, 100, 200, 300, 500)
+#: The contextual functions' test contexts (``compare.py``'s: 100, seed 12345) and the robot ids' seed.
+TEST_SEED, FUNCTION_TEST_CONTEXTS, ROBOT_TEST_CONTEXTS = 12_345, 100, 16
+#: The functions' initial distribution: mean 0, σ = 2 (the issue's setting).
+FUNCTION_MEAN, FUNCTION_STD = 0.0, 2.0
+#: The quadratic functions and the non-quadratic ones of the suite (Rastrigin: multimodal).
+QUADRATIC = ("Sphere", "ShiftedRotatedElliptic")
+NON_QUADRATIC = ("Rosenbrock", "DifferentPowers", "Rastrigin")
+FUNCTIONS = NON_QUADRATIC + QUADRATIC
+
+
+@dataclass(frozen=True)
+class Method:
+    """One column of the study: a registered optimiser with options, and an optional context selector.
+
+    ``name`` is the column's label and part of every run's key (letters, digits, ``-``, ``+``, ``=``).
+    ``selector`` names a registered :mod:`creps_gym.selectors` selector (built with ``selector_options``)
+    that picks every batch's training contexts instead of the env's sampler; it is bound to the env's
+    context box and told each batch's returns and the optimiser's diagnostics, as the runner does. An
+    active selector for c-bo is one more entry, e.g. ``Method("c-bo+active", "c-bo", selector="active")``.
+    """
+
+    name: str
+    optimizer: str
+    options: tuple[tuple[str, Any], ...] = ()
+    selector: str | None = None
+    selector_options: tuple[tuple[str, Any], ...] = ()
+    note: str = ""
+
+
+#: The study's methods (columns), in the order of the tables.
+METHODS = (
+    Method("c-bo", "c-bo", note="max-value entropy search (c-bo's default acquisition)"),
+    Method("c-bo-ucb", "c-bo", (("acquisition", "ucb"),), note="GP-UCB"),
+    Method("creps", "creps", (("epsilon", 1.0),), note="ε = 1, as Fabisch (GECCO 2019)"),
+    Method("creps-cma-old", "creps-cma-old", note="the paper's CREPS-CMA"),
+    Method("c-cma-es", "c-cma-es"),
+    Method("c-cma-es-surrogate", "c-cma-es-surrogate"),
+)
+
+
+@dataclass(frozen=True)
+class Task:
+    """A row of the study: a registered env id, its keyword arguments, and the metric of a policy.
+
+    ``metric``: ``"regret"`` (the functions' mean regret), ``"error"`` (the kick precision's distance (m)
+    from the ball's rest point to the target), ``"distance"`` (the kick flexibility's forward distance (m),
+    0 after a fall; higher is better) or ``"cost"`` (minus the mean return, the reacher's).
+    """
+
+    name: str
+    env_id: str
+    metric: str
+    env_kwargs: tuple[tuple[str, Any], ...] = ()
+    function: str | None = None
+
+    @property
+    def lower_is_better(self) -> bool:
+        """Whether a smaller metric is better (all but the kick flexibility's distance)."""
+        return self.metric != "distance"
+
+    def make_env(self, seed: int) -> Any:
+        """The env's model (a function's instance is the run's seed, as in the other function studies)."""
+        kwargs = dict(self.env_kwargs)
+        if self.function is not None:
+            kwargs["instance"] = seed
+        return contextual_model(gym.make(self.env_id, **kwargs))
+
+
+def function_task(function: str, dim: int, context_dim: int) -> Task:
+    """The contextual function ``creps_gym/<function>-v0`` with p = ``dim``, z = ``context_dim``."""
+    kwargs = (("context_dim", context_dim), ("dim", dim))
+    return Task(f"{function}-p{dim}-z{context_dim}", f"creps_gym/{function}-v0", "regret", kwargs, function)
+
+
+#: The low-dimensional robot tasks.
+ROBOT_TASKS = (
+    Task("KickPrecisionLowDim", "creps_gym/KickPrecisionLowDim-v0", "error"),
+    Task("KickFlexibilityLowDim", "creps_gym/KickFlexibilityLowDim-v0", "distance"),
+    Task("PlanarReacherLowDim", "creps_gym/PlanarReacherLowDim-v0", "cost"),
+)
+
+
+def task_by_name(name: str) -> Task:
+    """The task called ``name``: a robot task's, or ``<Function>-p<p>-z<z>``."""
+    for task in ROBOT_TASKS:
+        if task.name == name:
+            return task
+    function, _, rest = name.partition("-p")
+    dim, _, context_dim = rest.partition("-z")
+    if function not in FUNCTIONS or not (dim.isdigit() and context_dim.isdigit()):
+        robots = [t.name for t in ROBOT_TASKS]
+        raise ValueError(
+            f"task: expected one of {robots} or '<Function>-p<p>-z<z>' of {FUNCTIONS}, got {name!r}"
+        )
+    return function_task(function, int(dim), int(context_dim))
+
+
+def method_by_name(name: str) -> Method:
+    """The method (row of :data:`METHODS`) called ``name``."""
+    for method in METHODS:
+        if method.name == name:
+            return method
+    raise ValueError(f"method: expected one of {[m.name for m in METHODS]}, got {name!r}")
+
+
+@dataclass(frozen=True)
+class LowBudgetSpec:
+    """One run: ``task`` and ``method`` (names) with ``seed``, up to ``budget`` episodes.
+
+    ``samples`` is the method's batch size (its optimiser's recommended one for the task's dimensions, set
+    on construction). The fields ``key``, ``prefix``, ``samples`` and ``method`` are those
+    :func:`benchmarks.study_runner.run_all` uses (the cache's file names).
+    """
+
+    task: str
+    method: str
+    seed: int
+    budget: int = BUDGETS[-1]
+    samples: int = field(default=0)
+
+    def __post_init__(self) -> None:
+        task, method = task_by_name(self.task), method_by_name(self.method)
+        for name, low in (("seed", 0), ("budget", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+        if self.samples == 0:
+            dim, context_dim = _dimensions(task)
+            object.__setattr__(self, "samples", int(recommended_samples(method.optimizer, dim, context_dim)))
+
+    @property
+    def prefix(self) -> str:
+        """The key without the budget."""
+        return f"{self.task}-{self.method}-s{self.seed}"
+
+    @property
+    def key(self) -> str:
+        """The cache file's name (without ``.json``)."""
+        return f"{self.prefix}-b{self.budget}-n{self.samples}"
+
+    @property
+    def budgets(self) -> tuple[int, ...]:
+        """The budgets the run records: those of :data:`BUDGETS` below its budget, and its budget."""
+        return (*(b for b in BUDGETS if b < self.budget), self.budget)
+
+
+_DIMENSIONS: dict[str, tuple[int, int]] = {}
+
+
+def _dimensions(task: Task) -> tuple[int, int]:
+    """(p, z) of a task (a robot id's are read from its env once)."""
+    if task.function is not None:
+        kwargs = dict(task.env_kwargs)
+        return kwargs["dim"], kwargs["context_dim"]
+    if task.name not in _DIMENSIONS:
+        model = task.make_env(0)
+        _DIMENSIONS[task.name] = (model.param_dim, model.context_dim)
+    return _DIMENSIONS[task.name]
+
+
+def evaluation_contexts(task: Task, model: Any) -> Array:
+    """The fixed test contexts: the kick precision's 10 targets 3, 4, ..., 12 m, the kick flexibility's 28
+    ball positions (the paper's, as ``benchmarks/kick``), else ``test_contexts`` with seed 12345."""
+    if task.name.startswith("Kick"):
+        from benchmarks.kick.study import evaluation_contexts as kick_contexts
+
+        return kick_contexts("precision" if task.metric == "error" else "flexibility")
+    count = FUNCTION_TEST_CONTEXTS if task.function is not None else ROBOT_TEST_CONTEXTS
+    return test_contexts(model, count, TEST_SEED)
+
+
+def policy_metric(task: Task, model: Any, contexts: Array, params: Array) -> float:
+    """The task's metric of the parameters ``params`` (n, p) at ``contexts`` (n, z), a mean over them."""
+    if task.metric == "regret":
+        return float(np.mean(model.regret(contexts, params)))
+    returns, info = model.evaluate(contexts, params)
+    if task.metric == "cost":
+        return -float(np.mean(returns))
+    from benchmarks.kick.study import episode_metric
+
+    return float(
+        np.mean(episode_metric("precision" if task.metric == "error" else "flexibility", contexts, info))
+    )
+
+
+def initial_distribution(task: Task, model: Any) -> tuple[Array, Array]:
+    """Mean and standard deviations (p,) every method starts from (see the module docstring)."""
+    if task.function is not None:
+        return np.full(model.param_dim, FUNCTION_MEAN), np.full(model.param_dim, FUNCTION_STD)
+    mean, std = model.initial_distribution()
+    return np.asarray(mean, dtype=np.float64), np.asarray(std, dtype=np.float64)
+
+
+def _make_selector(method: Method, model: Any) -> Any:
+    """The method's context selector bound to the env's context box, or None."""
+    if method.selector is None:
+        return None
+    selector = make_selector(method.selector, dict(method.selector_options))
+    space = model.observation_space  # the context box
+    selector.bind(
+        np.asarray(space.low, np.float64), np.asarray(space.high, np.float64), model.sample_contexts
+    )
+    return selector
+
+
+#: What a run's curve records at each budget: the state's entries (see :func:`_batch`) and the value.
+CURVE_FIELDS = ("episodes", "values", "spent", "spent_cpu", "last", "last_cpu")
+
+
+def one_run(spec: LowBudgetSpec) -> dict[str, Any]:
+    """Run ``spec`` and return its result document (see the module docstring and :func:`_document`)."""
+    task, method = task_by_name(spec.task), method_by_name(spec.method)
+    start, start_cpu = time.perf_counter(), time.process_time()
+    model = task.make_env(spec.seed)
+    mean, std = initial_distribution(task, model)
+    start_options = {"initial_mean": mean, "initial_cov": std**2, **dict(method.options)}
+    optimizer = make_optimizer(
+        method.optimizer, model.param_dim, model.context_dim, spec.seed, **start_options
+    )
+    selector = _make_selector(method, model)
+    contexts_rng = np.random.default_rng([spec.seed, 1])  # training contexts (or the selector's stream)
+    test = evaluation_contexts(task, model)
+    curve: dict[str, list[Any]] = {name: [] for name in CURVE_FIELDS}
+    state: dict[str, Any] = {"episodes": 0, "spent": 0.0, "spent_cpu": 0.0, "last": None, "last_cpu": None}
+    pending = list(spec.budgets)
+    stop_reason = "budget"
+    try:
+        while pending:
+            if state["episodes"] + spec.samples > pending[0]:
+                _record(curve, state, policy_metric(task, model, test, optimizer.recommend(test)))
+                pending.pop(0)
+            else:
+                _batch(spec, model, optimizer, selector, contexts_rng, state)
+    except (ArithmeticError, ValueError, RuntimeError, np.linalg.LinAlgError) as error:
+        stop_reason = f"error: {type(error).__name__}: {error}"  # the budgets left are recorded as None
+        for _ in pending:
+            _record(curve, {**state, "last": None, "last_cpu": None}, None)
+    seconds = (time.perf_counter() - start, time.process_time() - start_cpu)
+    return _document(spec, task, method, curve, stop_reason, seconds, len(test))
+
+
+def _record(curve: dict[str, list[Any]], state: dict[str, Any], value: float | None) -> None:
+    """Append one budget's entries: the state's (episodes, optimiser seconds) and the policy's value."""
+    for name in CURVE_FIELDS:
+        curve[name].append(value if name == "values" else state[name])
+
+
+def _batch(
+    spec: LowBudgetSpec, model: Any, optimizer: Any, selector: Any, rng: np.random.Generator, state: dict
+) -> None:
+    """Ask, evaluate and tell one batch; ``state`` gains its episodes and the optimiser's seconds (wall:
+    ``spent``, ``last``; this process's CPU: ``spent_cpu``, ``last_cpu``; ``last*`` per episode)."""
+    contexts = (
+        model.sample_contexts(rng, spec.samples) if selector is None else selector.select(rng, spec.samples)
+    )
+    clock, cpu = time.perf_counter(), time.process_time()
+    params = optimizer.ask(contexts)
+    seconds, cpu_seconds = time.perf_counter() - clock, time.process_time() - cpu
+    returns = np.asarray(model.evaluate(contexts, params)[0], dtype=np.float64)
+    clock, cpu = time.perf_counter(), time.process_time()
+    optimizer.tell(contexts, params, returns)
+    seconds, cpu_seconds = seconds + time.perf_counter() - clock, cpu_seconds + time.process_time() - cpu
+    if selector is not None:
+        diagnostics = {str(k): float(v) for k, v in dict(optimizer.diagnostics).items()}
+        selector.tell(contexts, returns, diagnostics)
+    state["episodes"] += spec.samples
+    state["spent"] += seconds
+    state["spent_cpu"] += cpu_seconds
+    state["last"], state["last_cpu"] = seconds / spec.samples, cpu_seconds / spec.samples
+
+
+def _document(
+    spec: LowBudgetSpec,
+    task: Task,
+    method: Method,
+    curve: dict[str, list[Any]],
+    stop_reason: str,
+    seconds: tuple[float, float],
+    test_count: int,
+) -> dict[str, Any]:
+    """A run's JSON document.
+
+    ``budgets``, and per budget: ``episodes`` (those spent: whole batches), ``values`` (the task's metric of
+    ``recommend`` on the test contexts), ``optimizer_seconds`` and ``optimizer_cpu_seconds`` (its ask and
+    tell so far: wall, and this process's CPU time) and ``last_batch_seconds_per_episode`` and
+    ``last_batch_cpu_seconds_per_episode`` (the last batch's ask and tell per episode: what a robot waits
+    for at that budget). ``seconds`` and ``cpu_seconds`` are the whole run's (env and evaluations
+    included). ``final`` is the value at the largest budget; ``hit`` is None (the study has no target;
+    :func:`benchmarks.study_runner.run_all` logs it).
+    """
+    values = [v if v is None or np.isfinite(v) else None for v in curve["values"]]
+    rounded = {
+        name: [None if v is None else round(v, digits) for v in curve[field]]
+        for name, field, digits in (
+            ("optimizer_seconds", "spent", 4),
+            ("optimizer_cpu_seconds", "spent_cpu", 4),
+            ("last_batch_seconds_per_episode", "last", 5),
+            ("last_batch_cpu_seconds_per_episode", "last_cpu", 5),
+        )
+    }
+    return {
+        "spec": asdict(spec),
+        "task": task.name,
+        "env_id": task.env_id,
+        "env_kwargs": dict(task.env_kwargs),
+        "method": {
+            "optimizer": method.optimizer,
+            "options": dict(method.options),
+            "selector": method.selector,
+        },
+        "metric": task.metric,
+        "test_contexts": test_count,
+        "budgets": list(spec.budgets),
+        "episodes": curve["episodes"],
+        "values": values,
+        **rounded,
+        "hit": None,
+        "final": values[-1],
+        "total_episodes": curve["episodes"][-1],
+        "stop_reason": stop_reason,
+        "seconds": round(seconds[0], 3),
+        "cpu_seconds": round(seconds[1], 3),
+    }

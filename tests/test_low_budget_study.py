@@ -1,0 +1,145 @@
+"""The low-budget study (``benchmarks/low_budget/run.py``, issue 44 item 5): its runs, its cache, its report,
+and the committed renderings, which must be what ``--render-only`` draws from the committed runs."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from benchmarks.low_budget import run as study_run
+from benchmarks.low_budget import study
+from benchmarks.low_budget.report import ANCHORS
+
+TINY = ["--functions", "Sphere", "--robots", "--methods", "creps", "c-bo", "--workers", "1"]
+
+
+def _tiny(tmp_path: Path, *flags: str) -> Path:
+    out = tmp_path / "out"
+    argv = ["--quick", *TINY, "--cache", str(tmp_path / "runs"), "--out", str(out), *flags]
+    assert study_run.main(argv) == 0
+    return out / "results.md"
+
+
+def test_quick_mode_writes_runs_with_their_curve_timing_and_provenance(tmp_path: Path) -> None:
+    table = _tiny(tmp_path, "--seeds", "1", "--budget", "24").read_text()
+    documents = {p.stem: json.loads(p.read_text()) for p in (tmp_path / "runs").glob("*.json")}
+    assert sorted(documents) == ["Sphere-p2-z1-c-bo-s0-b24-n4", "Sphere-p2-z1-creps-s0-b24-n12"]
+    for document in documents.values():
+        assert document["budgets"] == [24] and document["episodes"] == [24]
+        assert document["provenance"]["recorded"] is True and document["values"][0] >= 0
+        assert document["optimizer_seconds"][0] > 0 and document["last_batch_seconds_per_episode"][0] > 0
+        assert document["optimizer_cpu_seconds"][0] > 0 and document["cpu_seconds"] > 0
+    assert "| `c-bo` | 4 |" in table and "Sphere-p2-z1" in table
+    assert all(anchor in table for anchor in ANCHORS) and "not computed here" in table
+    # A second invocation with more seeds marks the cells whose seeds have not all finished.
+    partial = _tiny(tmp_path, "--seeds", "2", "--budget", "24", "--render-only").read_text()
+    assert "[1/2]" in partial and "Partial: 2 of 4 runs" in partial
+
+
+def test_a_run_is_deterministic_and_its_budgets_come_from_one_run() -> None:
+    spec = study.LowBudgetSpec("Rosenbrock-p2-z1", "creps", 3, 100)
+    first, second = study.one_run(spec), study.one_run(spec)
+    assert first["values"] == second["values"] and spec.budgets == (50, 100)
+    assert first["episodes"] == [48, 96] and first["budgets"] == [50, 100]  # whole batches of 12
+    shorter = study.one_run(dataclasses.replace(spec, budget=50))
+    assert shorter["values"] == first["values"][:1]  # the curve's first point is the 50-episode run's end
+    assert spec.key == "Rosenbrock-p2-z1-creps-s3-b100-n12"
+
+
+def test_every_method_starts_from_the_same_distribution(monkeypatch: pytest.MonkeyPatch) -> None:
+    seen = []
+
+    def spy(name, p, z, seed, **options):
+        seen.append((name, options["initial_mean"].tolist(), options["initial_cov"].tolist()))
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(study, "make_optimizer", spy)
+    for method in ("c-bo", "c-cma-es"):
+        with pytest.raises(RuntimeError):
+            study.one_run(study.LowBudgetSpec("Sphere-p4-z1", method, 0, 50))
+    assert seen == [(m, [0.0] * 4, [4.0] * 4) for m in ("c-bo", "c-cma-es")]
+
+
+def test_a_selector_variant_is_one_more_method_entry(monkeypatch: pytest.MonkeyPatch) -> None:
+    variant = study.Method("creps+arcsine", "creps", (("epsilon", 1.0),), selector="arcsine")
+    monkeypatch.setattr(study, "METHODS", (*study.METHODS, variant))
+    document = study.one_run(study.LowBudgetSpec("Sphere-p2-z1", "creps+arcsine", 0, 50))
+    assert document["method"]["selector"] == "arcsine" and document["stop_reason"] == "budget"
+    plain = study.one_run(study.LowBudgetSpec("Sphere-p2-z1", "creps", 0, 50))
+    assert document["values"] != plain["values"]  # the selector's contexts, not the env's draws
+
+
+def test_unknown_tasks_methods_and_bad_budgets_are_rejected() -> None:
+    with pytest.raises(ValueError, match="task"):
+        study.LowBudgetSpec("Sphere-p4", "creps", 0)
+    with pytest.raises(ValueError, match="task"):
+        study.LowBudgetSpec("Plane-p4-z1", "creps", 0)
+    with pytest.raises(ValueError, match="method"):
+        study.LowBudgetSpec("Sphere-p4-z1", "cma", 0)
+    with pytest.raises(ValueError, match="budget"):
+        study.LowBudgetSpec("Sphere-p4-z1", "creps", 0, 0)
+
+
+def test_the_full_study_computes_the_issues_target_cells_first() -> None:
+    specs = study_run.study_specs(study_run.parse_args(["--full"]))
+    assert len(specs) == 33 * 6 * 10 and len({s.key for s in specs}) == len(specs)
+    first = [s.task for s in specs[: 4 * 60 : 60]]
+    assert first == ["Rosenbrock-p4-z1", "DifferentPowers-p4-z1", "Rastrigin-p4-z1", "KickPrecisionLowDim"]
+    assert [(s.method, s.seed) for s in specs[:7]][-1] == ("c-bo", 1)  # seed by seed, every method
+
+
+@pytest.mark.parametrize("mode", ["quick", "full"])
+def test_committed_renderings_are_drawn_from_the_committed_runs(
+    mode: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--render-only`` on the committed runs reproduces the committed table (the figure, which depends on
+    the matplotlib version, is not drawn here)."""
+    committed = study_run.parse_args([f"--{mode}"]).out
+    if not (committed / "results.md").exists():
+        pytest.skip(f"{committed} is not rendered yet: python benchmarks/low_budget/run.py --{mode}")
+    monkeypatch.setattr(study_run, "plot_curves", lambda *args: args[-1])
+    shutil.copy(committed / "timing.json", tmp_path / "timing.json")
+    assert study_run.main([f"--{mode}", "--render-only", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "results.md").read_text() == (committed / "results.md").read_text()
+
+
+def test_the_cost_estimate_uses_the_finished_runs_of_the_same_method_and_names_what_it_cannot_estimate() -> (
+    None
+):
+    from benchmarks.low_budget.report import cost_text
+
+    documents = [
+        {"spec": {"task": "Sphere-p2-z1", "method": "creps", "seed": s}, "cpu_seconds": 1.0 + 2 * s}
+        for s in (0, 1)
+    ]
+    specs = [study.LowBudgetSpec("Sphere-p2-z1", "creps", s) for s in range(3)]
+    specs += [
+        study.LowBudgetSpec("Rosenbrock-p2-z1", "creps", 0),
+        study.LowBudgetSpec("Sphere-p4-z1", "c-bo", 0),
+    ]
+    text = cost_text(documents, specs)
+    assert "2 runs finished, 3 missing" in text and "0.0 h" in text  # 2 s + 2 s (the same p and z)
+    assert "not estimated (no finished run): cheap env: c-bo." in text
+    assert "| Sphere-p2-z1 | `creps` | 2 | 2 (1–3) |" in text
+
+
+def test_the_report_says_which_tasks_are_complete_partial_or_not_started() -> None:
+    from benchmarks.low_budget.report import completeness_text
+
+    specs = [
+        study.LowBudgetSpec(t, "creps", s)
+        for t in ("Sphere-p2-z1", "Sphere-p4-z1", "Sphere-p8-z1")
+        for s in (0, 1)
+    ]
+    documents = [{"spec": {"task": "Sphere-p2-z1", "method": "creps", "seed": s}} for s in (0, 1)]
+    documents.append({"spec": {"task": "Sphere-p4-z1", "method": "creps", "seed": 1}})
+    assert completeness_text(documents, specs) == (
+        "Complete tasks: Sphere-p2-z1. Partial: Sphere-p4-z1 (1 of 2 runs). "
+        "Not started: 1 task(s) (Sphere-p8-z1).\n"
+    )

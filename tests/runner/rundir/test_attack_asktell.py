@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 from helpers import cli_in_process
-from test_rundir_hostile import hostile, one_error_naming, rewrite_checkpoint
+from rundir_setup import hostile, one_error_naming, rewrite_checkpoint
 
 from creps_gym.cli import main
 from creps_gym.runner import RunDir
@@ -119,7 +119,7 @@ def test_edited_spaces_in_config_json_are_refused(place, tmp_path, capsys, space
 hypothesis = pytest.importorskip("hypothesis")
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
-from test_rundir_fuzz import corrupt, corruptions  # noqa: E402
+from rundir_setup import corrupt, corruptions  # noqa: E402
 
 FILES = [RunDir.CONFIG, RunDir.CHECKPOINT, RunDir.LOG, RunDir.POLICY, RunDir.VERSIONS]
 

@@ -69,7 +69,8 @@ def recorded_episode(reacher_run, tmp_path_factory) -> Path:
 
 #: ``creps-gym ARGS`` in a process whose videos replay the frames of a ``.npy`` file (sys.argv[1]).
 REPLAY = (
-    "import sys\nimport numpy as np\nfrom creps_gym.cli import main\nfrom creps_gym.runner import video\n"
+    "import sys\nimport numpy as np\nfrom creps_gym.cli import main\n"
+    "from creps_gym.runner.results import video\n"
     "frames = np.load(sys.argv[1])\nvideo.EpisodeVideo.__iter__ = lambda self: iter(frames)\n"
     "sys.exit(main(sys.argv[2:]))"
 )

@@ -37,6 +37,7 @@ SELECTOR_ENV = {"dim": 4, "context_dim": 2}
 SELECTOR_OPTIONS = {"fixed": {"contexts": [[0.5, 1.0], [2.0, 3.0]]}}
 ENV_RUN = {"iterations": 5, "samples": None, "seed": 3, "checkpoint_every": 2}
 CRASH = 7  # between the checkpoints of iterations 6 and 9: iteration 7 is done again
+AFTER_CHECKPOINT = 4  # the first iteration after the checkpoint of iteration 3
 UNSHARED = ("elapsed", "log_crc")  # checkpoint entries an interrupted run cannot share
 CHEAP_ENVS = [name for name in gym.registry if name.startswith("creps_gym/") and not needs_extra(name)]
 
@@ -102,18 +103,29 @@ def _optimizer_arguments(name: str) -> dict[str, Any]:
 
 
 def _optimizer_params() -> list[Any]:
-    """Every registered optimiser, c-bo (about 20 s: its model grows with every episode) marked ``slow``."""
-    params = marked(optimizer_names())
-    return [pytest.param(p, marks=pytest.mark.slow) if p == "c-bo" else p for p in params]
+    """Every registered optimiser crashed after iteration 7 (re-doing iteration 7) and after iteration 4 (the
+    first after a checkpoint); c-bo (about 20 s a case: its model grows with every episode) only after 7,
+    marked ``slow``."""
+    params = []
+    for param in marked(optimizer_names()):
+        name = param if isinstance(param, str) else param.values[0]
+        marks = () if isinstance(param, str) else param.marks
+        if name == "c-bo":
+            params.append(pytest.param(name, CRASH, marks=[*marks, pytest.mark.slow]))
+        else:
+            params += [pytest.param(name, crash, marks=marks) for crash in (AFTER_CHECKPOINT, CRASH)]
+    return params
 
 
-@pytest.mark.parametrize("name", _optimizer_params())
-def test_every_optimiser_resumes_to_the_uninterrupted_history_and_state(name, reference, tmp_path):
+@pytest.mark.parametrize(("name", "crash"), _optimizer_params())
+def test_every_optimiser_resumes_to_the_uninterrupted_history_and_state(name, crash, reference, tmp_path):
     arguments = _optimizer_arguments(name)
     expected = reference(f"optimizer:{name}", **arguments)
     with pytest.raises(RuntimeError, match="crash"):
-        run(run_dir=tmp_path / "run", callbacks=[crash_at(CRASH)], **arguments)
-    assert RunDir.open(tmp_path / "run").load_checkpoint()[0]["iteration"] == 6
+        run(run_dir=tmp_path / "run", callbacks=[crash_at(crash)], **arguments)
+    checkpointed = RunDir.open(tmp_path / "run").load_checkpoint()[0]["iteration"]
+    every = OPTIMIZER_RUN["checkpoint_every"]
+    assert checkpointed == (crash - 1) // every * every  # 6 (crash after 7) or 3 (after 4)
     resumed = _check_resume(expected, tmp_path / "run", OPTIMIZER_RUN["iterations"])
     assert resumed.records[-1].iteration == OPTIMIZER_RUN["iterations"]
 

@@ -130,6 +130,39 @@ def test_every_optimiser_resumes_to_the_uninterrupted_history_and_state(name, cr
     assert resumed.records[-1].iteration == OPTIMIZER_RUN["iterations"]
 
 
+def _mid_iteration_params() -> list[Any]:
+    """Every registered optimiser but c-bo (whose after-7 case is already ``slow``)."""
+    return [p for p in marked(optimizer_names()) if p != "c-bo"]
+
+
+@pytest.mark.parametrize("name", _mid_iteration_params())
+def test_every_optimiser_resumes_after_a_crash_inside_an_iteration(name, reference, tmp_path, monkeypatch):
+    """Interrupted inside iteration 7's batch of episodes, between the optimiser's ask and its tell."""
+    arguments = _optimizer_arguments(name)
+    expected = reference(f"optimizer:{name}", **arguments)
+    env_class = type(gym.make(SPHERE, **OPTIMIZER_ENV).unwrapped)
+    objective, calls = env_class._objective, {"made": 0, "crash": None}
+
+    def crashing(self: Any, contexts: Any, params: Any) -> Any:
+        calls["made"] += 1
+        if calls["made"] == calls["crash"]:
+            raise KeyboardInterrupt
+        return objective(self, contexts, params)
+
+    def after_six(record: Any, history: Any) -> None:  # the next evaluation is iteration 7's batch
+        if record.iteration == CRASH - 1:
+            calls["crash"] = calls["made"] + 1
+
+    monkeypatch.setattr(env_class, "_objective", crashing)
+    with pytest.raises(KeyboardInterrupt):
+        run(run_dir=tmp_path / "run", callbacks=[after_six], **arguments)
+    monkeypatch.undo()
+    assert calls["made"] == calls["crash"]
+    assert RunDir.open(tmp_path / "run").load_checkpoint()[0]["iteration"] == 6
+    assert len(RunDir.open(tmp_path / "run").read_log()[0]) == 6  # iteration 7 left no record
+    _check_resume(expected, tmp_path / "run", OPTIMIZER_RUN["iterations"])
+
+
 # -- every context selector --------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", selector_names())
 def test_every_selector_resumes_to_the_uninterrupted_history_and_state(name, reference, tmp_path):

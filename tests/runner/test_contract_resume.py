@@ -1,10 +1,11 @@
 """Contract: a run interrupted and resumed gives the uninterrupted run's history and final state, bit for bit.
 
 Driven by the registries: every registered optimiser (the bundled adapters of pycma, nevergrad and optuna
-included, marked ``extras``), every registered context selector and every cheap registered env id. Each case
-crashes a run after an iteration's record, between two checkpoints (the iterations since the last one are
-done again), resumes it, and compares it with one uninterrupted run built once per module and setting: the
-History (``History.equals``), the kept policies and the final checkpoint's state.
+included, marked ``extras``), every registered context selector and every env id that needs no optional
+extra. Each case interrupts a run (an exception after an iteration's record, between two checkpoints or just
+after one, so that the iterations since the last checkpoint are done again; for the optimisers also inside an
+iteration's batch of episodes), resumes it, and compares it with one uninterrupted run built once per module
+and setting: the History (``History.equals``), the kept policies and the final checkpoint's state.
 
 Tests that check more stay beside their subject: a real SIGKILL at several moments and the old run-folder
 formats (``rundir/test_resume.py``), the log's re-done records and object resumes (``test_runner.py``), the

@@ -321,25 +321,3 @@ def test_without_context_dimensions_it_is_plain_bayesian_optimisation():
     policy = optimizer.mean_policy()
     assert policy(np.zeros((1, 0))).tobytes() == optimizer.recommend(np.zeros((1, 0))).tobytes()
     assert optimizer.diagnostics["distillation_rmse"] == 0.0
-
-
-class _Crash(Exception):
-    pass
-
-
-@pytest.mark.slow
-def test_a_run_resumed_after_a_crash_equals_the_uninterrupted_run(tmp_path):
-    from creps_gym.runner import resume, run
-
-    options = {"env_kwargs": {"dim": 2, "context_dim": 1}, "checkpoint_every": 3, "eval_contexts": 4}
-    full = run("c-bo", "creps_gym/Sphere-v0", 10, 4, 5, run_dir=tmp_path / "a", **options)
-
-    def crash(record, history):
-        if record.iteration >= 7:
-            raise _Crash
-
-    with pytest.raises(_Crash):
-        run("c-bo", "creps_gym/Sphere-v0", 10, 4, 5, run_dir=tmp_path / "b", callbacks=[crash], **options)
-    resumed = resume(tmp_path / "b")  # from the checkpoint of iteration 6
-    rows = [[(r.iteration, r.mean_return, r.eval_return) for r in h.records] for h in (full, resumed)]
-    assert rows[0] == rows[1] and rows[0][-1][0] == 10

@@ -173,25 +173,6 @@ def test_the_bandit_practises_the_hard_region_once_the_easy_part_is_learnt():
 
 
 # -- in the runner -----------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name", selector_names())
-def test_an_interrupted_run_resumes_bit_identically_with_every_selector(tmp_path, name):
-    kwargs = {"env_kwargs": SPHERE_2D, "context_selector": name, "checkpoint_every": 3, "eval_every": 2}
-    kwargs["context_selector_options"] = {"fixed": {"contexts": [[0.5, 1.0], [2.0, 3.0]]}}.get(name, {})
-    uninterrupted = run("creps-cma-old", SPHERE, 10, 16, 2, **kwargs)
-
-    def crash(record, history):
-        if record.iteration == 7:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        run("creps-cma-old", SPHERE, 10, 16, 2, run_dir=tmp_path, callbacks=[crash], **kwargs)
-    state = RunDir.open(tmp_path).load_checkpoint()[0]
-    assert state["iteration"] == 6 and "selector" in state and "selector_rng" in state
-    assert resume(tmp_path).equals(uninterrupted)
-    config = json.loads((tmp_path / RunDir.CONFIG).read_text())["config"]
-    assert config["context_selector"] == name
-
-
 def test_runs_without_a_selector_keep_their_stream_checkpoint_and_fingerprint(tmp_path):
     plain = run("creps-cma-old", SPHERE, 4, 16, 2, env_kwargs=SPHERE_2D)
     assert plain.equals(run("creps-cma-old", SPHERE, 4, 16, 2, env_kwargs=SPHERE_2D, context_selector=None))

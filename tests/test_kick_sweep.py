@@ -126,6 +126,13 @@ def test_a_sweep_row_compares_with_the_study_s_same_trial_and_lists_runs_in_prog
         "| 0.65 ± 0.00 m | 0.65 | 2.00 | 1.00 | 0.25 (50) | 0.25 ± 0.00 | 2.00 ± 0.00 | 4.0 ± 0.0 |" in text
     )
     assert "| 2.50 (100) |" not in text and "| 1.00 (50) |" in text  # the study's best mean evaluation
+    line = (
+        "- `epsilon=2.0` (`results/full-opt-epsilon-2.0`, 1 trial, 50 of 50 iterations): final 0.65 m "
+        "(per trial 0.65; far point 2.00); the study's same trials at the same iteration 1.00 m; falls "
+        "0.25, final spread 2.00, ESS 4.0"
+    )
+    assert sweep_table.row_line(row) == line and f"\n{line}\n" in text
+    assert "- the study's own options (`results/full`, 2 trials, 100 of 100 iterations): final 0.65 m" in text
     assert (
         "In progress in `results/full-opt-epsilon-2.0` (checkpoint, no result yet): creps-cma-old-trial0"
         in text

@@ -32,7 +32,7 @@ import numpy as np
 from benchmarks.kick.spread import COLUMNS, KEYS, final_ess, mean_and_std
 from benchmarks.kick.study import EVAL_EVERY
 
-__all__ = ["SWEEP_SECTION", "sweep", "sweep_folders", "sweep_section"]
+__all__ = ["SWEEP_SECTION", "row_line", "sweep", "sweep_folders", "sweep_section"]
 
 #: The title of the summary's sweep section.
 SWEEP_SECTION = "Optimiser options (`run.py --opt`, issue 45)"
@@ -149,6 +149,34 @@ def _row_text(row: dict[str, Any], unit: str) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
+def _numbers(values: list[float | None], digits: int = 2) -> str:
+    return ", ".join("—" if v is None else f"{v:.{digits}f}" for v in values)
+
+
+def row_line(row: dict[str, Any], unit: str = "m") -> str:
+    """One row in words, the form the README quotes (a test checks each quote against the rendering)::
+
+    - `epsilon=2.0` (`results/full-opt-epsilon-2.0`, 1 trial, 200 of 200 iterations): final 1.23 m
+      (per trial 1.23; far point 3.45); the study's same trials at the same iteration 1.03 m; falls
+      0.25, final spread 1.10, ESS 3.1
+    """
+    trials = len(row["finals"])
+    iterations = f"{min(row['iterations'])}–{max(row['iterations'])}"
+    if min(row["iterations"]) == max(row["iterations"]):
+        iterations = str(row["iterations"][0])
+    same = [v for v in row["study_same"] if v is not None]
+    same_text = f"{np.mean(same):.2f} {unit}" if len(same) == trials else "—"
+    falls, spread_, ess = (mean_and_std(row[key], digits).split(" ±")[0] for key, digits in
+                           (*((key, 2) for key in KEYS), ("final_ess", 1)))  # fmt: skip
+    options = _options_text(row["options"]) if row["options"] else "the study's own options"
+    return (
+        f"- {options} (`results/{row['folder']}`, {trials} trial{'s' * (trials > 1)}, "
+        f"{iterations} of {row['budget_iterations']} iterations): final {np.mean(row['finals']):.2f} {unit} "
+        f"(per trial {_numbers(row['finals'])}; far point {_numbers(row['far_target'])}); the study's same "
+        f"trials at the same iteration {same_text}; falls {falls}, final spread {spread_}, ESS {ess}"
+    )
+
+
 def sweep_section(data: dict[str, Any]) -> list[str]:
     """The summary's section :data:`SWEEP_SECTION`."""
     lines = [
@@ -177,6 +205,8 @@ def sweep_section(data: dict[str, Any]) -> list[str]:
             f"| best of the mean curve | {COLUMNS} | ESS, final update |"
         )
         lines += [header, "|---" * 15 + "|", *(_row_text(row, "m") for row in part["rows"]), ""]
+        lines += ["The same rows in words (falls, spread and ESS: means over the trials):", ""]
+        lines += [*(row_line(row) for row in part["rows"]), ""]
         for folder, runs in part["in_progress"].items():
             listed = ", ".join(f"{run} ({done} iterations)" for run, done in runs.items())
             lines += [f"In progress in `results/{folder}` (checkpoint, no result yet): {listed}.", ""]

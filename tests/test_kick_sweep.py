@@ -97,12 +97,20 @@ def test_an_opt_run_records_its_options_resumes_bit_identically_and_joins_the_sw
 def test_a_sweep_row_compares_with_the_study_s_same_trial_and_lists_runs_in_progress(tmp_path: Path) -> None:
     def finished(folder: Path, trial: int, options: dict, iterations: int, curve: list) -> None:
         document = {
-            "experiment": "precision", "name": "creps-cma-old", "features": "rbf", "options": options,
-            "trial": trial, "samples": 20, "budget_iterations": iterations, "iterations": iterations,
-            "episodes": 20 * iterations, "stopped": [], "values": [0.5] * 9 + [2.0],
+            "experiment": "precision",
+            "name": "creps-cma-old",
+            "features": "rbf",
+            "options": options,
+            "trial": trial,
+            "samples": 20,
+            "budget_iterations": iterations,
+            "iterations": iterations,
+            "episodes": 20 * iterations,
+            "stopped": [],
+            "values": [0.5] * 9 + [2.0],
             "setting": {"env": study.ENV_IDS["precision"], "contexts": "arcsine"},
             "history": {"batch": [[-1.0, 0.25]] * iterations, "evaluations": curve},
-        }  # fmt: skip
+        }
         runs = folder / "runs" / "precision"
         runs.mkdir(parents=True, exist_ok=True)
         (runs / f"creps-cma-old-trial{trial}.json").write_text(json.dumps(document))

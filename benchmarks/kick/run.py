@@ -121,9 +121,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--methods", nargs="+", default=None, help="registry names to run (default: all)")
     parser.add_argument("--trials", type=int, default=None, help="override the mode's number of trials")
     parser.add_argument(
-        "--iterations", type=int, default=None,
+        "--iterations",
+        type=int,
+        default=None,
         help="override the mode's iterations (a screening budget; rerun without it to resume to the mode's)",
-    )  # fmt: skip
+    )
     parser.add_argument(
         "--trial-indices", type=int, nargs="+", default=None,
         help="run only these trials (0-based; e.g. one trial per process on another core)",
@@ -142,10 +144,14 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="mean features of every method (default: METHODS'); runs go to results/<mode>-features-<NAME>",
     )  # fmt: skip
     parser.add_argument(
-        "--opt", action="append", type=key_value, default=[], metavar="KEY=VALUE",
+        "--opt",
+        action="append",
+        type=key_value,
+        default=[],
+        metavar="KEY=VALUE",
         help="optimiser option of every selected method, VALUE in JSON or a string (repeatable); "
         "runs go to results/<mode>-opt-<slug>",
-    )  # fmt: skip
+    )
     args = parser.parse_args(argv)
     args.mode = "full" if args.full else "quick"
     args.options = _options(parser, args)

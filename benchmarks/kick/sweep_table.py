@@ -37,8 +37,10 @@ __all__ = ["SWEEP_SECTION", "row_line", "sweep", "sweep_folders", "sweep_section
 #: The title of the summary's sweep section.
 SWEEP_SECTION = "Optimiser options (`run.py --opt`, issue 45)"
 #: The metric's key per trial in a collected entry, and its unit, per experiment (``report.METRIC``).
-PER_TRIAL = {"precision": ("trial_errors", "target_errors", "error"),
-             "flexibility": ("trial_distances", "position_distances", "forward distance")}  # fmt: skip
+PER_TRIAL = {
+    "precision": ("trial_errors", "target_errors", "error"),
+    "flexibility": ("trial_distances", "position_distances", "forward distance"),
+}
 
 
 def sweep_folders(out: Path) -> list[Path]:
@@ -47,8 +49,11 @@ def sweep_folders(out: Path) -> list[Path]:
     candidates = sorted(out.parent.glob(f"{out.name}-*"))
     if "-opt-" in out.name:  # a sweep folder has no sweep of its own
         return []
-    return [path for path in candidates if "-opt-" in path.name[len(out.name) :] and path.is_dir()
-            and not path.is_symlink()]  # fmt: skip
+    return [
+        path
+        for path in candidates
+        if "-opt-" in path.name[len(out.name) :] and path.is_dir() and not path.is_symlink()
+    ]
 
 
 def _differences(options: dict[str, Any], reference: dict[str, Any] | None) -> dict[str, Any]:
@@ -81,18 +86,31 @@ def _rows(
         options = (
             {} if own else _differences(entry["options"], None if reference is None else reference["options"])
         )
-        rows.append({
-            "folder": folder.name, "method": method, "options": options, "features": entry["features"],
-            "contexts": ", ".join(sorted(set(entry["training_contexts"]))), "samples": entry["samples"],
-            "budget_iterations": entry["budget_iterations"], "trials": entry["trials"],
-            "iterations": entry["iterations"], "finals": entry[per_trial],
-            "far_target": [float(values[-1]) for values in entry[per_point]], "curves": entry["curves"],
-            "study_same": [_study_at(reference, t, i) for t, i in zip(entry["trials"], entry["iterations"],
-                                                                      strict=True)],
-            **{key: entry[key] for key in KEYS},
-            "final_ess": [final_ess(folder / "runs" / experiment / f"{method}-trial{t}.npz", i)
-                          for t, i in zip(entry["trials"], entry["iterations"], strict=True)],
-        })  # fmt: skip
+        rows.append(
+            {
+                "folder": folder.name,
+                "method": method,
+                "options": options,
+                "features": entry["features"],
+                "contexts": ", ".join(sorted(set(entry["training_contexts"]))),
+                "samples": entry["samples"],
+                "budget_iterations": entry["budget_iterations"],
+                "trials": entry["trials"],
+                "iterations": entry["iterations"],
+                "finals": entry[per_trial],
+                "far_target": [float(values[-1]) for values in entry[per_point]],
+                "curves": entry["curves"],
+                "study_same": [
+                    _study_at(reference, t, i)
+                    for t, i in zip(entry["trials"], entry["iterations"], strict=True)
+                ],
+                **{key: entry[key] for key in KEYS},
+                "final_ess": [
+                    final_ess(folder / "runs" / experiment / f"{method}-trial{t}.npz", i)
+                    for t, i in zip(entry["trials"], entry["iterations"], strict=True)
+                ],
+            }
+        )
     return rows
 
 
@@ -104,10 +122,13 @@ def sweep(out: Path, study: dict[str, Any], documents: dict[str, dict[str, Any]]
     for experiment in PER_TRIAL:
         prefix = f"{experiment}/"
         in_progress = {
-            name: {run.removeprefix(prefix): done for run, done in document["in_progress"].items()
-                   if run.startswith(prefix)}
+            name: {
+                run.removeprefix(prefix): done
+                for run, done in document["in_progress"].items()
+                if run.startswith(prefix)
+            }
             for name, document in documents.items()
-        }  # fmt: skip
+        }
         in_progress = {name: runs for name, runs in in_progress.items() if runs}
         methods = {run.rsplit("-trial", 1)[0] for runs in in_progress.values() for run in runs}
         methods |= {m for document in documents.values() for m in document[experiment]} - {"oracle"}
@@ -166,8 +187,8 @@ def row_line(row: dict[str, Any], unit: str = "m") -> str:
         iterations = str(row["iterations"][0])
     same = [v for v in row["study_same"] if v is not None]
     same_text = f"{np.mean(same):.2f} {unit}" if len(same) == trials else "—"
-    falls, spread_, ess = (mean_and_std(row[key], digits).split(" ±")[0] for key, digits in
-                           (*((key, 2) for key in KEYS), ("final_ess", 1)))  # fmt: skip
+    digits = {**dict.fromkeys(KEYS, 2), "final_ess": 1}
+    falls, spread_, ess = (mean_and_std(row[key], n).split(" ±")[0] for key, n in digits.items())
     options = _options_text(row["options"]) if row["options"] else "the study's own options"
     return (
         f"- {options} (`results/{row['folder']}`, {trials} trial{'s' * (trials > 1)}, "

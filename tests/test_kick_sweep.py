@@ -13,6 +13,7 @@ import pytest
 pytest.importorskip("mujoco")
 
 from benchmarks.kick import report, run, spread, study, sweep_table
+from creps_gym.optimizers.registry import make_optimizer
 from creps_gym.optimizers.state_files import save_state
 
 pytestmark = pytest.mark.extras
@@ -160,3 +161,35 @@ def test_final_ess_reads_the_checkpoint_s_diagnostics(tmp_path: Path) -> None:
     link.symlink_to(path)
     with pytest.raises(ValueError, match="checkpoint: expected a regular file"):
         spread.final_ess(link, 5)
+
+
+def test_the_readme_s_sweep_quotes_the_rendered_rows() -> None:
+    readme = (Path(run.__file__).resolve().parent / "README.md").read_text(encoding="utf-8")
+    section = readme.split("\n### The sweep\n", 1)[1].split("\n## ", 1)[0]
+    quotes = [line for line in section.splitlines() if line.startswith("- ") and "(`results/" in line]
+    summary = (run.RESULTS / "full" / "summary.md").read_text(encoding="utf-8").splitlines()
+    assert quotes and all(line in summary for line in quotes), [q for q in quotes if q not in summary]
+
+
+@pytest.mark.parametrize("divide_by_z", [True, False])
+def test_without_selection_the_z_divisor_alone_grows_the_old_mean_covariance(divide_by_z: bool) -> None:
+    """README, "The sweep": with returns that say nothing about θ, E[S] = Σ/Z around the old mean, so each
+    update multiplies Σ by 1 − λ + λ/Z = 1 + ESS/(p²(ESS − 1)) > 1 + 1/p² (Eqs. 14–16); without Z by 1."""
+    p = 25
+    optimizer = make_optimizer("creps-cma-old", p, 1, seed=0, divide_by_z=divide_by_z, epsilon=2.0)
+    rng = np.random.default_rng(1)
+    log_factor = 0.0
+    for _ in range(100):
+        contexts = rng.uniform(3.0, 12.0, size=(20, 1))
+        optimizer.tell(contexts, optimizer.ask(contexts), rng.normal(size=20))  # returns independent of θ
+        ess, interpolation = optimizer.diagnostics["ess"], optimizer.diagnostics["interpolation"]
+        assert interpolation == pytest.approx(ess / p**2)  # λ of Eq. (14): far below any cap ≥ N/p²
+        if divide_by_z:
+            log_factor += np.log1p(interpolation / (ess - 1.0))  # λ(1/Z − 1) with Z = 1 − 1/ESS
+            assert np.log1p(interpolation / (ess - 1.0)) > np.log1p(1.0 / p**2)
+    variance = float(np.mean(np.diag(optimizer.policy.covariance)))
+    assert variance == pytest.approx(np.exp(log_factor), rel=0.05)
+    assert (variance > 1.2) == divide_by_z
+    readme = (Path(run.__file__).resolve().parent / "README.md").read_text(encoding="utf-8")
+    bound = f"(1 + 1/{p**2})^500 = {(1 + 1 / p**2) ** 500:.2f}"  # the standard deviation after 1000 updates
+    assert bound in readme

@@ -11,7 +11,8 @@ figures from ``results.json`` alone (a test checks the committed summary against
                                          "position_distances": [[28 per trial]], ...},
                      "oracle": {"position_distances": [...]}},
      "in_progress": {"<experiment>/<name>-trial<k>": iterations done},
-     "selectors": {...}}  # if a results/<mode>-<contexts> folder exists (:mod:`.selector_table`)
+     "selectors": {...},  # if a results/<mode>-<contexts> folder exists (:mod:`.selector_table`)
+     "sweep": {...}}  # if a results/<mode>-opt-<slug> folder exists (:mod:`.sweep_table`)
 
 A "±" in the summary is the standard deviation across trials (population, ddof = 0) unless it says otherwise.
 """
@@ -29,6 +30,7 @@ from benchmarks.kick.oracle import read_oracle
 from benchmarks.kick.selector_table import comparison, comparison_folders, comparison_section, oracle_mean
 from benchmarks.kick.spread import COLUMNS, KEYS, LATE_BATCHES, final_spread, late_fall_rate, mean_and_std
 from benchmarks.kick.study import ENV_IDS, EVAL_EVERY, GRID_X, GRID_Y, TARGETS, read_json, stored_setting
+from benchmarks.kick.sweep_table import sweep, sweep_folders, sweep_section
 from benchmarks.provenance import group_by_record, provenance_text
 
 __all__ = ["collect", "render", "summary_text"]
@@ -123,6 +125,9 @@ def collect(out: Path, mode: str, budgets: dict[str, Any], selectors: bool = Tru
     if selectors and (folders := comparison_folders(out)):
         others = {folder.name: collect(folder, mode, budgets, selectors=False) for folder in folders}
         document["selectors"] = comparison({out.name: document, **others}, METRIC)
+    if selectors and (folders := sweep_folders(out)):
+        others = {folder.name: collect(folder, mode, budgets, selectors=False) for folder in folders}
+        document["sweep"] = sweep(out, document, others)
     return document
 
 
@@ -174,6 +179,8 @@ def summary_text(document: dict[str, Any]) -> str:
     lines += _precision_section(document) + _flexibility_section(document)
     if "selectors" in document:
         lines += comparison_section(document["selectors"], document["mode"])
+    if "sweep" in document:
+        lines += sweep_section(document["sweep"])
     if document["in_progress"]:
         lines += ["## Runs in progress (iterations done at the last checkpoint)", ""]
         lines += [f"- {run}: {done}" for run, done in document["in_progress"].items()] + [""]
@@ -377,9 +384,9 @@ def _plot_heatmaps(plt: Any, document: dict[str, Any], out: Path) -> None:
 
 def render(out: Path, mode: str, budgets: dict[str, Any]) -> str:
     """Rebuild ``results.json`` from the finished runs, then ``summary.md`` and the figures from it; the
-    ``--contexts`` and ``--features`` folders beside ``out`` (:func:`.selector_table.comparison_folders`) are
-    rendered again too, so that their files and ``out``'s comparison come from the same run files. Returns
-    ``out``'s summary."""
+    ``--contexts``, ``--features`` and ``--opt`` folders beside ``out``
+    (:func:`.selector_table.comparison_folders`, :func:`.sweep_table.sweep_folders`) are rendered again too,
+    so that their files and ``out``'s tables come from the same run files. Returns ``out``'s summary."""
     out.mkdir(parents=True, exist_ok=True)
     document = collect(out, mode, budgets)
     tmp = out / "results.json.tmp"
@@ -388,6 +395,6 @@ def render(out: Path, mode: str, budgets: dict[str, Any]) -> str:
     text = summary_text(read_json(out / "results.json"))
     (out / "summary.md").write_text(text)
     plot(document, out)
-    for folder in comparison_folders(out):
+    for folder in [*comparison_folders(out), *sweep_folders(out)]:
         render(folder, mode, budgets)
     return text

@@ -32,6 +32,13 @@ learning selector of :mod:`creps_gym.selectors` (``bandit``, ``progress``); its 
 :meth:`~benchmarks.kick.study.RunSpec.mean_features`); its runs go to ``results/<mode>-features-<NAME>``
 (``results/<mode>-<contexts>-features-<NAME>`` with ``--contexts``), e.g.
 ``python benchmarks/kick/run.py --full --only flexibility --methods c-cma-es --features quadratic``.
+
+``--opt KEY=VALUE`` (repeatable; VALUE is JSON or a plain string) gives every selected method these optimiser
+options on top of ``METHODS``' own, checked by the optimiser's config before anything runs; its runs go to
+``results/<mode>[-<contexts>][-features-<NAME>]-opt-<slug>`` (:func:`~benchmarks.kick.study.options_slug`) and
+their run files record the merged options. A trial draws the study's seeds and contexts, so its run differs
+from the study's run of the same trial in the options only, e.g.
+``python benchmarks/kick/run.py --full --only precision --methods creps-cma-old --opt epsilon=1.0``.
 """
 
 from __future__ import annotations
@@ -39,12 +46,15 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 # Run by path: the repository root first on sys.path, as `python -m` puts it (see benchmarks/__init__.py).
 if not __package__:
     sys.path[0] = str(Path(__file__).resolve().parents[2])
+
+import numpy as np
 
 from benchmarks.kick.oracle import oracle_point
 from benchmarks.kick.report import render
@@ -60,6 +70,9 @@ from benchmarks.kick.study import (
     train_run,
 )
 from benchmarks.study_tools import NO_STAGNATION
+from creps_gym.cli.types import key_value
+from creps_gym.optimizers.registry import make_optimizer
+from creps_gym.runner.protocol import check_batch_size
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: Budgets per mode: (iterations, trials) per experiment, and the oracle's episodes per position.
@@ -108,6 +121,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--methods", nargs="+", default=None, help="registry names to run (default: all)")
     parser.add_argument("--trials", type=int, default=None, help="override the mode's number of trials")
     parser.add_argument(
+        "--iterations",
+        type=int,
+        default=None,
+        help="override the mode's iterations (a screening budget; rerun without it to resume to the mode's)",
+    )
+    parser.add_argument(
         "--trial-indices", type=int, nargs="+", default=None,
         help="run only these trials (0-based; e.g. one trial per process on another core)",
     )  # fmt: skip
@@ -124,10 +143,25 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "--features", choices=FEATURES, default=None,
         help="mean features of every method (default: METHODS'); runs go to results/<mode>-features-<NAME>",
     )  # fmt: skip
+    parser.add_argument(
+        "--opt",
+        action="append",
+        type=key_value,
+        default=[],
+        metavar="KEY=VALUE",
+        help="optimiser option of every selected method, VALUE in JSON or a string (repeatable); "
+        "runs go to results/<mode>-opt-<slug>",
+    )
     args = parser.parse_args(argv)
     args.mode = "full" if args.full else "quick"
+    args.options = _options(parser, args)
     if args.out is None:
-        args.out = RESULTS / results_folder(args.mode, args.contexts, args.features)
+        try:
+            args.out = RESULTS / results_folder(args.mode, args.contexts, args.features, args.options)
+        except ValueError as exc:
+            parser.error(f"argument --opt: {exc}")
+    if args.iterations is not None and args.iterations < 1:
+        parser.error(f"--iterations: expected an int >= 1, got {args.iterations}")
     if args.trials is not None and args.trials < 1:
         parser.error(f"--trials: expected an int >= 1, got {args.trials}")
     if args.trial_indices is not None and min(args.trial_indices) < 0:
@@ -135,15 +169,43 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def run_specs(args: argparse.Namespace) -> list[tuple[RunSpec, int]]:
-    """(spec, trials) of every training run the arguments select."""
+def _options(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict[str, Any]:
+    """The ``--opt`` options as a dict, each checked by one ask/tell of every selected method with them on a
+    synthetic batch of the experiment's size (:func:`creps_gym.runner.protocol.check_batch_size`); a repeated
+    KEY, or an option a method refuses, is a usage error naming it."""
+    keys = [key for key, _ in args.opt]
+    if repeated := sorted({key for key in keys if keys.count(key) > 1}):
+        parser.error(f"argument --opt: expected each KEY once, got {repeated} more than once")
+    options = dict(args.opt)
+    for spec, _ in run_specs(args, options) if options else []:
+        points = evaluation_contexts(spec.experiment)
+        contexts = points[np.arange(spec.samples) % len(points)]
+        try:
+            check_batch_size(partial(_synthetic_optimizer, spec), contexts, spec.options, spec.name)
+        except (TypeError, ValueError) as exc:
+            parser.error(f"argument --opt: {spec.name}: {exc}")
+    return options
+
+
+def _synthetic_optimizer(spec: RunSpec) -> Any:
+    """``spec``'s optimiser with its options on a two-parameter problem of the experiment's contexts."""
+    z = evaluation_contexts(spec.experiment).shape[1]
+    return make_optimizer(spec.name, 2, z, 0, mean_features=spec.mean_features(), **spec.options)
+
+
+def run_specs(args: argparse.Namespace, options: dict[str, Any] | None = None) -> list[tuple[RunSpec, int]]:
+    """(spec, trials) of every training run the arguments select, with the ``--opt`` ``options`` (default:
+    ``args.options``) on top of ``METHODS``' own."""
+    extra = getattr(args, "options", {}) if options is None else options
     runs = []
     for experiment, methods in METHODS.items():
         if args.only not in (None, experiment):
             continue
         iterations, trials = MODES[args.mode][experiment]
-        for name, features, options in methods:
+        iterations = getattr(args, "iterations", None) or iterations
+        for name, features, method_options in methods:
             if args.methods is None or name in args.methods:
+                options = {**method_options, **extra}
                 spec = RunSpec(experiment, name, SAMPLES[experiment], iterations, args.features or features,
                                options, args.contexts or TRAINING[experiment])  # fmt: skip
                 runs.append((spec, args.trials or trials))

@@ -3,6 +3,8 @@ spread of its final search distribution, per run, for the study's tables (:mod:`
 
 * ``late_fall_rate``: the mean fall rate of the last :data:`LATE_BATCHES` training batches (of all of them
   if the run has fewer), from the run file's history (``batch`` rows are ``[mean return, fall rate]``).
+* ``final_ess``: the effective sample size 1/Σd² of the last update's weights, from the diagnostics saved
+  in the run's final checkpoint (CREPS methods; None for an optimiser that records none).
 * ``final_spread``: the RMS per coordinate of the policy's standard deviation at the run's final
   checkpoint, σ·√(mean of diag(C)), in the offset parameters' σ units (every method starts at 1.0). σ is the
   optimiser's step size (``step_size`` in the checkpoint; 1.0 for an optimiser without step-size control,
@@ -29,6 +31,7 @@ __all__ = [
     "KEYS",
     "LATE_BATCHES",
     "MAX_CHECKPOINT_BYTES",
+    "final_ess",
     "final_spread",
     "late_fall_rate",
     "mean_and_std",
@@ -72,6 +75,27 @@ def final_spread(checkpoint: Path, iterations: int) -> float | None:
     checkpoint with a square finite ``cov`` and a positive finite ``step_size`` raises ``ValueError`` naming
     the file.
     """
+    state = _final_state(checkpoint, iterations)
+    return None if state is None else _spread(state, checkpoint)
+
+
+def final_ess(checkpoint: Path, iterations: int) -> float | None:
+    """The effective sample size ``ess`` (1/Σd²) of the last update, from the diagnostics of the final
+    checkpoint ``checkpoint``, or None if there is no such file, it is of another iteration than
+    ``iterations``, or its optimiser records no ``ess``; read as :func:`final_spread` reads it. An ``ess``
+    that is not a finite positive number raises ``ValueError`` naming the file."""
+    state = _final_state(checkpoint, iterations)
+    diagnostics = {} if state is None else state.get("diagnostics", {})
+    if not isinstance(diagnostics, dict) or "ess" not in diagnostics:
+        return None
+    ess = diagnostics["ess"]
+    if isinstance(ess, bool) or not isinstance(ess, (int, float)) or not (math.isfinite(ess) and ess > 0.0):
+        raise ValueError(f"checkpoint {checkpoint}: expected a finite positive 'ess', got {ess!r:.200}")
+    return float(ess)
+
+
+def _final_state(checkpoint: Path, iterations: int) -> dict[str, Any] | None:
+    """The state of ``checkpoint`` if it exists and was written at ``iterations``, else None."""
     try:
         stream = files.open_binary(checkpoint, limit=MAX_CHECKPOINT_BYTES)
     except FileNotFoundError:
@@ -83,9 +107,7 @@ def final_spread(checkpoint: Path, iterations: int) -> float | None:
             state = load_state(stream)
     except ValueError as exc:
         raise ValueError(f"checkpoint {checkpoint}: {exc}") from None
-    if state.get("iteration") != iterations:
-        return None
-    return _spread(state, checkpoint)
+    return state if state.get("iteration") == iterations else None
 
 
 def _spread(state: dict[str, Any], checkpoint: Path) -> float:

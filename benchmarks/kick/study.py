@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 import zlib
 from dataclasses import dataclass, field
@@ -58,6 +59,7 @@ __all__ = [
     "grid_contexts",
     "make_env",
     "mean_policy_metric",
+    "options_slug",
     "read_json",
     "results_folder",
     "stored_setting",
@@ -127,11 +129,34 @@ class RunSpec:
         return RBFFeatures.grid([GRID_X[0], GRID_Y[0]], [GRID_X[-1], GRID_Y[-1]], 3)
 
 
-def results_folder(mode: str, contexts: str | None, features: str | None) -> str:
-    """The name of a results folder: ``<mode>``, then ``-<contexts>`` and ``-features-<features>`` for
-    training contexts and mean features other than the study's (``run.py --contexts``, ``--features``)."""
+def results_folder(
+    mode: str, contexts: str | None, features: str | None, options: dict[str, Any] | None = None
+) -> str:
+    """The name of a results folder: ``<mode>``, then ``-<contexts>``, ``-features-<features>`` and
+    ``-opt-<slug>`` for training contexts, mean features and optimiser options other than the study's
+    (``run.py --contexts``, ``--features``, ``--opt``; the slug is :func:`options_slug`)."""
     name = mode if contexts is None else f"{mode}-{contexts}"
-    return name if features is None else f"{name}-features-{features}"
+    name = name if features is None else f"{name}-features-{features}"
+    return name if not options else f"{name}-opt-{options_slug(options)}"
+
+
+#: Longest options slug of a results folder's name (``run.py --opt``).
+MAX_SLUG = 100
+
+
+def options_slug(options: dict[str, Any]) -> str:
+    """The options as part of a folder name: ``KEY-VALUE`` per option in key order, joined by ``+``, each
+    value its JSON text with every character other than letters, digits, ``.`` and ``-`` turned into ``_``
+    (``{"epsilon": 1.0, "step_size": "csa"}`` -> ``epsilon-1.0+step_size-csa``). A slug over
+    :data:`MAX_SLUG` characters raises ``ValueError``."""
+    parts = []
+    for key in sorted(options):
+        value = re.sub(r"[^A-Za-z0-9.-]+", "_", json.dumps(options[key])).strip("_") or "_"
+        parts.append(f"{re.sub(r'[^A-Za-z0-9_]+', '_', key)}-{value}")
+    slug = "+".join(parts)
+    if len(slug) > MAX_SLUG:
+        raise ValueError(f"options: expected a folder slug of at most {MAX_SLUG} characters, got {slug!r}")
+    return slug
 
 
 def make_env(experiment: str, threads: int) -> OffsetParams:

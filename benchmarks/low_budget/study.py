@@ -79,6 +79,14 @@ class Method:
 METHODS = (
     Method("c-bo", "c-bo", note="max-value entropy search (c-bo's default acquisition)"),
     Method("c-bo-ucb", "c-bo", (("acquisition", "ucb"),), note="GP-UCB"),
+    Method("c-bo+active", "c-bo", selector="active", note="max-value entropy search, active contexts"),
+    Method(
+        "c-bo-ucb+active",
+        "c-bo",
+        (("acquisition", "ucb"),),
+        selector="active",
+        note="GP-UCB, active contexts",
+    ),
     Method("creps", "creps", (("epsilon", 1.0),), note="ε = 1, as Fabisch (GECCO 2019)"),
     Method("creps-cma-old", "creps-cma-old", note="the paper's CREPS-CMA"),
     Method("c-cma-es", "c-cma-es"),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 import sys
 from pathlib import Path
@@ -67,7 +68,7 @@ def cli_in_process(*args: Any, cwd: Any = None, env: dict[str, str] | None = Non
         os.chdir(saved_cwd)
         sys.path[:] = saved_path
         for name in set(sys.modules) - saved_modules:  # a test folder's module must not outlive its test
-            if str(getattr(sys.modules[name], "__file__", None) or "").startswith(_TEMPORARY):
+            if _in_a_test_folder(getattr(sys.modules[name], "__file__", None)):
                 del sys.modules[name]
         for key, value in saved_env.items():
             if value is None:
@@ -78,6 +79,15 @@ def cli_in_process(*args: Any, cwd: Any = None, env: dict[str, str] | None = Non
 
 
 _TEMPORARY = str(Path(__import__("tempfile").gettempdir()).resolve())
+#: This checkout: its modules (the package, ``benchmarks``) stay imported even when it lies in the temporary
+#: folder, as a clean CI clone may (deleting them would leave two copies of the package in one process).
+_REPOSITORY = str(Path(__file__).resolve().parents[1])
+
+
+def _in_a_test_folder(file: str | None) -> bool:
+    """Whether a module's ``__file__`` is in a temporary test folder (an ``--import`` module of a test)."""
+    path = str(file or "")
+    return path.startswith(_TEMPORARY) and not path.startswith(_REPOSITORY + os.sep)
 
 
 def study_in_process(study: str, *args: Any) -> str:

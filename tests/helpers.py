@@ -33,6 +33,34 @@ def cli_command(*args: Any) -> list[str]:
     return [sys.executable, "-m", "creps_gym.cli", *map(str, args)]
 
 
+def run_argv(
+    out: Any,
+    *extra: Any,
+    env: str = SPHERE,
+    env_kwargs: tuple[str, ...] = (),
+    optimizer: str = "c-cma-es",
+    iterations: int = 2,
+    seed: int = 0,
+) -> list[str]:
+    """The arguments of ``creps-gym run`` for a short run into ``out``, then ``extra``."""
+    kwargs = [item for pair in env_kwargs for item in ("--env-kwarg", pair)]
+    return [
+        "run",
+        "--env",
+        env,
+        *kwargs,
+        "--optimizer",
+        optimizer,
+        "--iterations",
+        str(iterations),
+        "--seed",
+        str(seed),
+        "--out",
+        str(out),
+        *map(str, extra),
+    ]
+
+
 def cli_in_process(*args: Any, cwd: Any = None, env: dict[str, str] | None = None, timeout: float = 0):
     """``creps-gym args`` run in this process through :func:`creps_gym.cli.main`, as a
     :class:`subprocess.CompletedProcess` (``returncode``, ``stdout``, ``stderr``), in ``cwd`` and with ``env``

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import cli_command
+from helpers import cli_command, run_argv
 
 #: A module that leaves a mark when it is imported, and fails loudly.
 SHADOW = (
@@ -49,22 +49,7 @@ def _marks(folder: Path) -> list[str]:
 def shadowed_run(tmp_path_factory) -> Path:
     """A finished run whose folder then gets a shadow for every module name the CLI could import."""
     folder = tmp_path_factory.mktemp("hole") / "run"
-    command = cli_command(
-        "run",
-        "--env",
-        "creps_gym/Sphere-v0",
-        "--env-kwarg",
-        "dim=2",
-        "--optimizer",
-        "c-cma-es",
-        "--iterations",
-        "2",
-        "--seed",
-        "0",
-        "--out",
-        folder,
-        "--no-plot",
-    )
+    command = cli_command(*run_argv(folder, "--no-plot", env_kwargs=("dim=2",)))
     made = subprocess.run(command, capture_output=True, text=True, timeout=180)
     assert made.returncode == 0, made.stderr
     names = _shadow_everything(folder)

@@ -12,7 +12,7 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 import pytest
-from helpers import EXTRAS, marked, python_blocks
+from helpers import EXTRAS, marked, python_blocks, run_argv
 
 from creps_gym import cli
 from creps_gym.envs.evaluation import evaluate_policy, test_contexts
@@ -402,27 +402,15 @@ def test_cma_options_that_are_data_still_reach_pycma():
 @EXTRAS
 def test_the_cli_refuses_a_cma_option_that_is_not_data_with_exit_2_before_writing(tmp_path, capsys):
     """Before: ``--opt tolfun=abc`` failed with exit 1 after writing the run folder."""
-    argv = [
-        "run",
-        "--env",
-        "creps_gym/Sphere-v0",
-        "--env-kwarg",
-        "dim=2",
-        "--optimizer",
-        "cma",
-        "--seed",
-        "0",
-    ]
-    argv += [
-        "--iterations",
-        "2",
-        "--out",
-        str(tmp_path / "run"),
+    argv = run_argv(
+        tmp_path / "run",
         "--no-progress",
         "--no-plot",
         "--opt",
         "tolfun=abc",
-    ]
+        env_kwargs=("dim=2",),
+        optimizer="cma",
+    )
     assert cli.main(argv) == 2
     err = capsys.readouterr().err
     assert "argument --opt: tolfun: expected a number, a boolean, None or a list of them" in err

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import EXTRAS, SPHERE, cli_command, crash_at, forge
+from helpers import EXTRAS, SPHERE, cli_command, crash_at, forge, run_argv
 
 import creps_gym
 from creps_gym.cli import main
@@ -100,19 +100,7 @@ def test_contexts_whose_policy_features_exceed_memory_are_refused_before_allocat
         policy(np.zeros((100_000, 1)))  # 100 k x 200 k x 3 floats: 480 GB
 
 
-RUN_ARGS = [
-    "run",
-    "--env",
-    SPHERE,
-    "--optimizer",
-    "c-cma-es",
-    "--iterations",
-    "2",
-    "--seed",
-    "0",
-    "--out",
-    "NEW",
-]
+RUN_ARGS = run_argv("NEW")
 
 
 @pytest.mark.parametrize(

@@ -22,8 +22,26 @@ cli = cli_in_process  # the commands' behaviour; a process only where the test i
 
 
 def run_args(out, *extra, seed=0):
-    return ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 6, "--samples", 10,
-            "--seed", seed, "--out", out, "--env-kwarg", "dim=4", "--eval-every", 2, *extra]  # fmt: skip
+    return [
+        "run",
+        "--env",
+        SPHERE,
+        "--optimizer",
+        "creps-cma-old",
+        "--iterations",
+        6,
+        "--samples",
+        10,
+        "--seed",
+        seed,
+        "--out",
+        out,
+        "--env-kwarg",
+        "dim=4",
+        "--eval-every",
+        2,
+        *extra,
+    ]
 
 
 def test_console_script_is_installed():

@@ -64,8 +64,24 @@ def test_the_python_api_checks_the_batch_before_writing_the_run_directory(tmp_pa
 
 def test_the_small_batch_command_of_issue_31_exits_2_naming_the_minimum(tmp_path, capsys):
     """``--samples 5`` for c-cma-es on a 5-D Sphere diverged (regret 11.5 -> 3.5e9, exit 0); now refused."""
-    args = ["run", "--env", SPHERE, "--env-kwarg", "dim=5", "--optimizer", "c-cma-es", "--samples", "5",
-            "--iterations", "400", "--seed", "0", "--out", str(tmp_path / "s5"), "--no-plot"]  # fmt: skip
+    args = [
+        "run",
+        "--env",
+        SPHERE,
+        "--env-kwarg",
+        "dim=5",
+        "--optimizer",
+        "c-cma-es",
+        "--samples",
+        "5",
+        "--iterations",
+        "400",
+        "--seed",
+        "0",
+        "--out",
+        str(tmp_path / "s5"),
+        "--no-plot",
+    ]
     assert main(args) == EXIT_CODES["usage"]
     error = capsys.readouterr().err
     assert "argument --samples: expected at least 10 episodes per iteration for 'c-cma-es'" in error

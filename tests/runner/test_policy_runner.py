@@ -245,8 +245,9 @@ def test_evaluate_video_without_the_extra_exits_4(reacher_run, tmp_path):
         "import sys\nsys.modules['imageio'] = None\nfrom creps_gym.cli import main\n"
         f"sys.exit(main(['evaluate', {str(reacher_run)!r}, '--contexts', '2', '--video', 'v.gif']))"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=180,
-                            cwd=tmp_path)  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=180, cwd=tmp_path
+    )
     assert result.returncode == 4 and "creps-gym[video]" in result.stderr
     assert not (tmp_path / "v.gif").exists()
 

@@ -62,8 +62,24 @@ def test_a_write_that_fails_stops_the_run_with_exit_3_and_resume_is_bit_identica
             return real_save(flat, path)
 
         monkeypatch.setattr(rundir, "save_state", save)
-    flags = ["--env", SPHERE, "--env-kwarg", "dim=2", "--optimizer", "creps-cma-old", "--iterations", "6",
-             "--samples", "10", "--eval-every", "2", "--checkpoint-every", "2", "--seed", "0"]  # fmt: skip
+    flags = [
+        "--env",
+        SPHERE,
+        "--env-kwarg",
+        "dim=2",
+        "--optimizer",
+        "creps-cma-old",
+        "--iterations",
+        "6",
+        "--samples",
+        "10",
+        "--eval-every",
+        "2",
+        "--checkpoint-every",
+        "2",
+        "--seed",
+        "0",
+    ]
     exit_code, error = checked_cli(capsys, "run", *flags, "--out", out, "--no-progress", "--no-plot")
     assert exit_code == 3
     name = RunDir.LOG if failing == "log" else RunDir.CHECKPOINT
@@ -81,8 +97,24 @@ def test_a_file_size_limit_gives_exit_3_not_a_signal_and_resume_is_bit_identical
     def limit_file_size():
         resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))  # `ulimit -f 2`: log.jsonl outgrows it
 
-    flags = ["--env", SPHERE, "--env-kwarg", "dim=2", "--optimizer", "creps-cma-old", "--iterations", "6",
-             "--samples", "10", "--eval-every", "2", "--checkpoint-every", "2", "--seed", "0"]  # fmt: skip
+    flags = [
+        "--env",
+        SPHERE,
+        "--env-kwarg",
+        "dim=2",
+        "--optimizer",
+        "creps-cma-old",
+        "--iterations",
+        "6",
+        "--samples",
+        "10",
+        "--eval-every",
+        "2",
+        "--checkpoint-every",
+        "2",
+        "--seed",
+        "0",
+    ]
     command = cli_command("run", *flags, "--out", out, "--no-progress", "--no-plot")
     done = subprocess.run(command, capture_output=True, text=True, timeout=120, preexec_fn=limit_file_size)
     assert done.returncode == 3, (done.returncode, done.stderr)  # not -SIGXFSZ
@@ -117,8 +149,20 @@ def iterations_logged(path: Path) -> int:
 def test_a_second_writer_is_refused_while_the_first_lives(tmp_path):
     out = tmp_path / "run"
     # no stagnation stop: with it the run may end within seconds, while the live run must outlast the test
-    args = ["--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 100000, "--samples", 12,
-            "--seed", 0, "--opt", f"tolstagnation={NO_STAGNATION}"]  # fmt: skip
+    args = [
+        "--env",
+        SPHERE,
+        "--optimizer",
+        "creps-cma-old",
+        "--iterations",
+        100000,
+        "--samples",
+        12,
+        "--seed",
+        0,
+        "--opt",
+        f"tolstagnation={NO_STAGNATION}",
+    ]
     live = subprocess.Popen(
         cli_command("run", *args, "--out", out, "--checkpoint-every", 1, "--no-plot"),
         stdout=subprocess.DEVNULL,
@@ -157,8 +201,28 @@ def test_only_the_runs_own_temporary_files_are_removed(place, tmp_path):
     assert sorted(p.name for p in out.iterdir() if p.name.endswith(".tmp")) == sorted(mine)
     for name in theirs:
         (out / name).write_text("x")
-    assert main(["run", "--env", SPHERE, "--optimizer", "creps", "--iterations", "2", "--samples", "12",
-                 "--seed", "0", "--out", str(out), "--overwrite", "--no-plot"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "--env",
+                SPHERE,
+                "--optimizer",
+                "creps",
+                "--iterations",
+                "2",
+                "--samples",
+                "12",
+                "--seed",
+                "0",
+                "--out",
+                str(out),
+                "--overwrite",
+                "--no-plot",
+            ]
+        )
+        == 0
+    )
     assert sorted(p.name for p in out.iterdir() if p.name.endswith(".tmp")) == sorted(mine)
 
 
@@ -169,9 +233,26 @@ def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
     out = tmp_path / "run"
     # Long enough that the run is still going when the signal comes (an iteration takes about 2 ms): the
     # stagnation stop is off, since with it the run would end on its own after 186 iterations.
-    args = ["--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 3000, "--samples", 10,
-            "--seed", 3, "--env-kwarg", "dim=3", "--checkpoint-every", 100000, "--eval-every", 2,
-            "--opt", f"tolstagnation={NO_STAGNATION}"]  # fmt: skip
+    args = [
+        "--env",
+        SPHERE,
+        "--optimizer",
+        "creps-cma-old",
+        "--iterations",
+        3000,
+        "--samples",
+        10,
+        "--seed",
+        3,
+        "--env-kwarg",
+        "dim=3",
+        "--checkpoint-every",
+        100000,
+        "--eval-every",
+        2,
+        "--opt",
+        f"tolstagnation={NO_STAGNATION}",
+    ]
     process = subprocess.Popen(
         cli_command("run", *args, "--out", out, "--no-plot"),
         stdout=subprocess.PIPE,
@@ -190,9 +271,15 @@ def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
     assert 5 <= state["iteration"] == records[-1].iteration < 3000  # nothing done after the checkpoint
     assert main(["resume", str(out), "--no-plot"]) == 0
     expected = run(
-        "creps-cma-old", SPHERE, 3000, 10, 3, env_kwargs={"dim": 3}, eval_every=2,
+        "creps-cma-old",
+        SPHERE,
+        3000,
+        10,
+        3,
+        env_kwargs={"dim": 3},
+        eval_every=2,
         optimizer_options={"tolstagnation": NO_STAGNATION},
-    )  # fmt: skip
+    )
     assert History.from_json(out / RunDir.HISTORY_JSON).equals(expected)
 
 

@@ -59,10 +59,28 @@ def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(
     s = SETTINGS
     chosen = ["--context-selector", selector, "--selector-opt", "cells=5"] if selector else []
     start = cli_command(
-        "run", "--env", SPHERE, "--optimizer", optimizer, "--iterations", s["iterations"],
-        "--samples", s["samples"], "--seed", s["seed"], "--out", out, "--env-kwarg", "dim=6",
-        "--checkpoint-every", s["checkpoint_every"], "--eval-every", s["eval_every"], "--no-plot", *chosen,
-    )  # fmt: skip
+        "run",
+        "--env",
+        SPHERE,
+        "--optimizer",
+        optimizer,
+        "--iterations",
+        s["iterations"],
+        "--samples",
+        s["samples"],
+        "--seed",
+        s["seed"],
+        "--out",
+        out,
+        "--env-kwarg",
+        "dim=6",
+        "--checkpoint-every",
+        s["checkpoint_every"],
+        "--eval-every",
+        s["eval_every"],
+        "--no-plot",
+        *chosen,
+    )
     resume = cli_command("resume", out, "--no-plot")
     popen = {"stdout": subprocess.DEVNULL, "stderr": subprocess.PIPE, "text": True}
     # 1) killed as soon as the run directory exists (most likely before the first checkpoint);
@@ -85,9 +103,18 @@ def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(
 
     whole = tmp_path / "whole"
     options = {"context_selector": selector, "context_selector_options": {"cells": 5}} if selector else {}
-    expected = run(optimizer, SPHERE, s["iterations"], s["samples"], s["seed"], env_kwargs={"dim": 6},
-                   checkpoint_every=s["checkpoint_every"], eval_every=s["eval_every"],
-                   run_dir=whole, **options)  # fmt: skip
+    expected = run(
+        optimizer,
+        SPHERE,
+        s["iterations"],
+        s["samples"],
+        s["seed"],
+        env_kwargs={"dim": 6},
+        checkpoint_every=s["checkpoint_every"],
+        eval_every=s["eval_every"],
+        run_dir=whole,
+        **options,
+    )
     for name in (RunDir.BEST_POLICY, RunDir.POLICY):  # the policies too, bit for bit
         assert (out / name).read_bytes() == (whole / name).read_bytes()
     resumed = History.from_json(out / RunDir.HISTORY_JSON)

@@ -11,7 +11,7 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
-from helpers import EXTRAS, SPHERE, cli_in_process
+from helpers import SPHERE, cli_in_process
 
 import creps_gym
 from creps_gym.optimizers import Policy
@@ -250,17 +250,6 @@ def test_evaluate_video_without_the_extra_exits_4(reacher_run, tmp_path):
     )
     assert result.returncode == 4 and "creps-gym[video]" in result.stderr
     assert not (tmp_path / "v.gif").exists()
-
-
-@EXTRAS
-@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
-@pytest.mark.slow
-def test_evaluate_records_a_video(reacher_run, tmp_path, suffix):
-    pytest.importorskip("imageio")
-    video = tmp_path / f"v{suffix}"
-    result = _cli("evaluate", reacher_run, "--contexts", "1", "--video", video)
-    assert result.returncode == 0, result.stderr
-    assert json.loads(result.stdout)["video"] == str(video) and video.stat().st_size > 1000
 
 
 def test_the_policy_files_temporaries_are_the_runs_own():

@@ -230,16 +230,16 @@ def test_only_the_runs_own_temporary_files_are_removed(place, tmp_path):
 @pytest.mark.skipif(sys.platform == "win32", reason="needs SIGINT to a subprocess")
 @pytest.mark.slow
 def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
-    out = tmp_path / "run"
-    # Long enough that the run is still going when the signal comes (an iteration takes about 2 ms): the
-    # stagnation stop is off, since with it the run would end on its own after 186 iterations.
+    out, iterations = tmp_path / "run", 1000
+    # Long enough that the run is still going when the signal comes (an iteration takes about 2 ms, so 1,000
+    # take 2 s after the 5th): the stagnation stop is off, since with it the run would end after 186.
     args = [
         "--env",
         SPHERE,
         "--optimizer",
         "creps-cma-old",
         "--iterations",
-        3000,
+        iterations,
         "--samples",
         10,
         "--seed",
@@ -268,12 +268,12 @@ def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
     assert b"interrupted" in stderr and b"Traceback" not in stderr
     records, _ = RunDir.open(out).read_log()
     state = RunDir.open(out).load_checkpoint()[0]
-    assert 5 <= state["iteration"] == records[-1].iteration < 3000  # nothing done after the checkpoint
+    assert 5 <= state["iteration"] == records[-1].iteration < iterations  # nothing done after the checkpoint
     assert main(["resume", str(out), "--no-plot"]) == 0
     expected = run(
         "creps-cma-old",
         SPHERE,
-        3000,
+        iterations,
         10,
         3,
         env_kwargs={"dim": 3},

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import EXTRAS, SPHERE, cli_command, cli_in_process, needs_extra
+from helpers import SPHERE, cli_command, cli_in_process
 
 from creps_gym.runner import History, RunDir, resume, run
 
@@ -42,18 +42,11 @@ def _kill_when(process: subprocess.Popen, ready, what: str, timeout: float = 90.
     assert process.returncode == -signal.SIGKILL
 
 
-@pytest.mark.parametrize(
-    ("optimizer", "selector"),
-    [
-        ("creps-cma-old", None),
-        pytest.param("cma", None, marks=[EXTRAS] if needs_extra("cma") else []),
-        ("creps-cma-old", "bandit"),
-    ],
-)
 @pytest.mark.slow
-def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(
-    tmp_path, optimizer, selector
-):
+def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(tmp_path):
+    """The process boundary, once: a learning selector's state is checkpointed beside the optimiser's. Every
+    optimiser and selector resumes after a crash at any moment in tests/runner/test_contract_resume.py."""
+    optimizer, selector = "creps-cma-old", "bandit"
     out = tmp_path / "run"
     log = out / RunDir.LOG
     s = SETTINGS

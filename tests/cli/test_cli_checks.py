@@ -4,7 +4,7 @@ directory is written (issue 15, item 11)."""
 from __future__ import annotations
 
 import pytest
-from helpers import SPHERE
+from helpers import SPHERE, run_argv
 
 from creps_gym.cli import EXIT_CODES, main
 from creps_gym.optimizers import CCMAES
@@ -12,19 +12,9 @@ from creps_gym.runner import run
 
 
 def run_args(out, *extra, samples=10):
-    sizes = ["--iterations", "2", "--samples", str(samples), "--seed", "0", "--env-kwarg", "dim=3"]
-    return [
-        "run",
-        "--env",
-        SPHERE,
-        "--optimizer",
-        "creps-cma-old",
-        *sizes,
-        "--out",
-        str(out),
-        "--no-plot",
-        *extra,
-    ]
+    """A 2-iteration CREPS-CMA run of the 3-D sphere into ``out``, then ``extra``."""
+    short = ("--samples", samples, "--env-kwarg", "dim=3", "--no-plot")
+    return run_argv(out, *short, *extra, optimizer="creps-cma-old")
 
 
 def test_an_epsilon_too_large_for_the_batch_is_a_usage_error_and_leaves_nothing_behind(tmp_path, capsys):

@@ -10,7 +10,9 @@ One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N
 
 1. Advantages (C1): a_k = R_k − V(s_k), with V a ridge least-squares fit of the returns on a full quadratic in
    s (cross terms included); smaller batches fall back to an affine or a constant baseline. Optionally
-   (C1'') V is a local, kernel-weighted median of the recent returns (``baseline_bandwidth``).
+   (C1'') V is a local, kernel-weighted median of the recent returns (``baseline_bandwidth``), or (C1s) the
+   ridge scales with the fraction of the returns that the context leaves unexplained
+   (``baseline_ridge_scale``).
 2. Weights (C2): CMA-ES rank weights on the advantages, positive for the best ⌊N/2⌋, negative for the rest
    (active CMA, ``active=True``).
 3. Mean (C3): A = weighted least squares of θ on ϕ(s) over the positively weighted samples; optionally
@@ -197,6 +199,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             *past,
             config.standardise_advantages,
             self._baseline_loss(),
+            config.baseline_ridge_scale,  # Eq. (C1s) with "unexplained"
         )
 
     def _step(self, contexts: Array, params: Array, weights: Array, constants: CMAConstants) -> _Step:

@@ -22,6 +22,7 @@ __all__ = [
     "RESTART_LOSSES",
     "RIDGE_CENTRES",
     "SIGNALS",
+    "UNUSED_BY_DETRENDED_BASELINE",
     "UNUSED_BY_LOCAL_BASELINE",
     "CCMAESConfig",
     "options_doc",
@@ -37,6 +38,8 @@ UNUSED_BY_LOCAL_BASELINE = (
     "baseline_ridge",
     "baseline_ridge_scale",
 )
+#: Those of them that the detrended local baseline (C1d) ignores too (it uses the degree and the ridges).
+UNUSED_BY_DETRENDED_BASELINE = ("standardise_advantages", "baseline_loss")
 SIGNALS = ("coefficients", "mean")
 #: What the mean fit's ridge shrinks towards: 0 (C3, the classic ridge) or the old coefficients (C3r).
 RIDGE_CENTRES = ("zero", "old")
@@ -65,6 +68,9 @@ class CCMAESConfig:
         to a few outlying returns such as falls) for the fit of V (C1).
     baseline_bandwidth : float      0: the polynomial V above; h > 0: a local V, the kernel-weighted median of
         the recent returns with a Gaussian bandwidth of h context standard deviations (C1'').
+    baseline_detrend : bool         with ``baseline_bandwidth`` > 0: V is the polynomial fit of C1
+        (``baseline_degree``, ``baseline_ridge``, ``baseline_ridge_scale``) plus the local median of its
+        residuals (C1d), which has no slope bias at the ends of the context range.
     ridge, baseline_ridge : float   relative ridges of the mean fit (C3) and of the baseline (C1).
     baseline_ridge_scale : str      ``"fixed"`` (C1) or ``"unexplained"`` (C1s: the baseline's ridge times the
         fraction of the returns' variance a first fit leaves unexplained, so its bias, ``baseline_ridge``
@@ -105,6 +111,7 @@ class CCMAESConfig:
     standardise_advantages: bool = False
     baseline_loss: str = "squared"
     baseline_bandwidth: float = 0.0
+    baseline_detrend: bool = False
     restarts: int = 3
     keep_best: bool = True
     restart_baseline_loss: str | None = OTHER_LOSS
@@ -153,6 +160,7 @@ class CCMAESConfig:
         object.__setattr__(self, "keep_best", check_bool(self.keep_best, "keep_best"))
         standardise = check_bool(self.standardise_advantages, "standardise_advantages")
         object.__setattr__(self, "standardise_advantages", standardise)
+        object.__setattr__(self, "baseline_detrend", check_bool(self.baseline_detrend, "baseline_detrend"))
 
     def _check_choices(self) -> None:
         if self.baseline_loss not in LOSSES:
@@ -196,7 +204,10 @@ class CCMAESConfig:
         if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
             raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
         defaults = {option.name: option.default for option in fields(self)}
-        unused = {name: (getattr(self, name), defaults[name]) for name in UNUSED_BY_LOCAL_BASELINE}
+        if self.baseline_detrend and self.baseline_bandwidth == 0.0:  # C1d detrends the local baseline
+            raise ValueError("baseline_detrend: expected False with baseline_bandwidth = 0, got True")
+        names = UNUSED_BY_DETRENDED_BASELINE if self.baseline_detrend else UNUSED_BY_LOCAL_BASELINE
+        unused = {name: (getattr(self, name), defaults[name]) for name in names}
         check_local_baseline(self.baseline_bandwidth, unused)
         if self.baseline_bandwidth > 0.0 and self.restart_baseline_loss in LOSSES:  # C1'' has no loss
             got = self.restart_baseline_loss

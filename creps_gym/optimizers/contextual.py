@@ -27,6 +27,7 @@ __all__ = [
     "coefficient_shift",
     "context_advantages",
     "contextual_mean",
+    "detrended_local_advantages",
     "local_advantages",
     "recent_samples",
     "robust_refit",
@@ -34,11 +35,9 @@ __all__ = [
 ]
 
 LOSSES = ("squared", "huber")
-#: How the baseline's ridge scales (C1, C1s): ``"fixed"``, or by the fraction of the returns' variance that a
-#: first fit leaves unexplained (``"unexplained"``), so that it vanishes as the context's effect dominates.
+#: How the baseline's ridge scales: ``"fixed"`` (C1) or ``"unexplained"`` (C1s, :func:`scaled_ridge`).
 BASELINE_RIDGE_SCALES = ("fixed", "unexplained")
-#: The smallest factor of the C1s scaling: the ridge stays >= 1e-6 of its value (conditioning).
-MIN_UNEXPLAINED = 1e-6
+MIN_UNEXPLAINED = 1e-6  # the smallest factor of C1s: the ridge stays >= 1e-6 of its value (conditioning)
 MIN_BANDWIDTH = 1e-3  # the local baseline's smallest bandwidth: below it the kernel weighs nothing but s_k
 HUBER_K = 1.345  # the Huber threshold in robust standard deviations: 95 % efficiency for Gaussian residuals
 
@@ -151,8 +150,7 @@ def scaled_ridge(ridge: float, targets: Array, fitted: Array) -> float:
     ``ridge`` times the context's effect on the returns. Where that effect does not vanish at the optimum
     (a best return that depends on s), a fixed ridge floors the ranking once the part of the returns that θ
     decides falls below it; scaled by 1 − R², the error is about ``ridge`` times that part squared over the
-    context's effect, so it shrinks with the search. Like the fit, the factor does not change when the
-    returns are scaled or shifted.
+    context's effect, so it shrinks with the search. Scaling or shifting the returns does not change it.
 
     Parameters
     ----------
@@ -243,6 +241,44 @@ def local_advantages(
             f" ±{scale:.3g} against a local baseline of the opposite sign); rescale the returns"
         )
     return advantages, explained
+
+
+def detrended_local_advantages(
+    contexts: Array,
+    returns: Array,
+    bandwidth: float,
+    degree: int,
+    ridge: float,
+    past_contexts: Array | None = None,
+    past_returns: Array | None = None,
+    ridge_scale: str = "fixed",
+) -> tuple[Array, float]:
+    """a_k = R_k − V(s_k) with V the polynomial fit of Eq. (C1) plus the local median (C1'') of its residuals,
+    Eq. (C1d), and the fraction of the batch returns' variance V explains.
+
+    The polynomial takes the trend of the returns over the contexts, which a local median follows only to
+    about its slope times the bandwidth (more at the ends of the context range, where the kernel is
+    one-sided); the median of the residuals follows what the polynomial cannot, such as the kink of a
+    cone-shaped optimum's E[R | s] (issue 45: GECCO 2019's Different Powers). Both are fitted on the batch
+    and the reused samples, whose residuals are those of this batch's polynomial.
+
+    Parameters
+    ----------
+    contexts, returns, past_contexts, past_returns
+        As in :func:`context_advantages`.
+    bandwidth : float
+        The local median's h, as in :func:`local_advantages`.
+    degree, ridge, ridge_scale
+        The polynomial fit's, as in :func:`context_advantages`.
+    """
+    all_contexts, all_returns = _with_past(contexts, returns, past_contexts, past_returns)
+    residuals, _ = context_advantages(all_contexts, all_returns, degree, ridge, ridge_scale=ridge_scale)
+    reused = all_returns.shape[0] - returns.shape[0]
+    advantages, _ = local_advantages(
+        contexts, residuals[reused:], bandwidth, all_contexts[:reused], residuals[:reused]
+    )
+    scale = float(np.abs(all_returns).max()) or 1.0
+    return advantages, _explained(returns / scale, advantages / scale)
 
 
 def robust_refit(

@@ -48,6 +48,11 @@ FLOOR_TABLE = (
     ("`baseline_ridge=1e-16`", "c3-baseline-ridge1e-16.json"),
     ("`ridge=1e-14`", "c3-ridge1e-14.json"),
     ('`ridge_centre="old"` (C3r)', "c3r.json"),
+    ("C3r, `baseline_ridge=0`", "c3r-baseline-ridge0.json"),
+    ('`baseline_ridge_scale="unexplained"` (C1s)', "c1s.json"),
+    ("C3r and C1s", "c3r-c1s.json"),
+    ("C3r, `baseline_bandwidth=0.1` (C1″)", "c3r-bandwidth0.1.json"),
+    ("C3r, `baseline_bandwidth=0.1, baseline_detrend=True` (C1d)", "c3r-c1d-bandwidth0.1.json"),
 )
 FLOOR_FOLDER = Path(__file__).resolve().parent / "results" / "floor"
 

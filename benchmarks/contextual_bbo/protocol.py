@@ -10,6 +10,13 @@ the returns −f_s(θ), and records after every generation:
   running search's mean (``policy.mean``), which differs from ``recommend`` only where a restart kept a
   better policy (``c-cma-es``'s ``keep_best``): it is what ``keep_best=False`` recommends on the same run.
 
+The optimiser gets the protocol's budget (generations × N episodes) in the option its class names
+(``budget_option``: C-CMA-ES's ``budget``, Eq. (C12), which restarts a converged search only while the
+episodes left can carry a new one), unless the spec's options set it (``budget=None``: the restarts before
+C12). An optimiser that wants a larger batch after a restart (``wanted_batch_size``, C-CMA-ES's
+``restart_population_factor``, Eq. (C13)) gets it, the last batch cut to the budget; the stored curves stay
+per 50 episodes (a larger batch's values stand for each generation of 50 it spans).
+
 Every episode counted is a true evaluation of f_s. A run that ends before its budget (the optimiser's stop
 criteria fire with no restart left, or its update fails) keeps its last generation's values for the rest of
 the budget, and its ``stop_reason`` says why.
@@ -30,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.contextual_bbo.problems import GENERATION, N_PARAMS, PROBLEMS, draw_run
-from creps_gym.optimizers import make_optimizer
+from creps_gym.optimizers.registry import make_optimizer, optimizer_class
 
 __all__ = ["CURVE_POINTS", "TARGET", "ProtocolSpec", "environment_record", "run_protocol"]
 
@@ -104,30 +111,56 @@ def _curve_indices(generations: int) -> list[int]:
     return sorted(set(points.tolist()) | {generations - 1})
 
 
-def run_protocol(spec: ProtocolSpec, checkpoint_dir: Path | None = None) -> dict[str, Any]:
-    """Run ``spec`` to its budget and return its result document (``checkpoint_dir`` is unused: a run takes
-    seconds, the study resumes run by run)."""
+def _make(spec: ProtocolSpec, draw: Any) -> Any:
+    """The run's optimiser: the spec's method and options, the protocol's start and seed, and the protocol's
+    budget in the option the method's class names (``budget_option``: C-CMA-ES's C12) unless given."""
     problem = PROBLEMS[spec.function]
-    draw = draw_run(problem, spec.seed)
-    start = time.perf_counter()
-    optimizer = make_optimizer(
+    options = dict(spec.options)
+    budget_option = getattr(optimizer_class(spec.method), "budget_option", None)
+    if budget_option is not None and budget_option not in options:
+        options[budget_option] = problem.episodes
+    return make_optimizer(
         spec.method,
         N_PARAMS,
         problem.context_dim,
         seed=draw.optimizer_seed,
         initial_mean=draw.initial_mean,
         initial_cov=problem.sigma0**2,
-        **dict(spec.options),
+        **options,
     )
-    averages, regrets, running, hit, stop_reason = [], [], [], None, "budget"
-    for generation in range(problem.generations):
-        contexts = draw.contexts(GENERATION)
+
+
+def _per_generation(values: list[float], ends: list[int], generations: int) -> list[float]:
+    """Per generation of N = 50 episodes: the value of the last batch that ended by its last episode (the
+    batches themselves, N each, unless the optimiser grows its batch after a restart, C13), the last one
+    after an early end."""
+    slots = np.arange(1, generations + 1) * GENERATION
+    index = np.maximum(np.searchsorted(np.asarray(ends), slots, side="right") - 1, 0)
+    return [values[i] for i in index]
+
+
+def run_protocol(spec: ProtocolSpec, checkpoint_dir: Path | None = None) -> dict[str, Any]:
+    """Run ``spec`` to its budget and return its result document (``checkpoint_dir`` is unused: a run takes
+    seconds, the study resumes run by run). The batch is N = 50, or what the optimiser's
+    ``wanted_batch_size(50)`` asks for (C-CMA-ES's population growth, C13), the last one cut to the budget."""
+    problem = PROBLEMS[spec.function]
+    draw = draw_run(problem, spec.seed)
+    start = time.perf_counter()
+    optimizer = _make(spec, draw)
+    wanted = getattr(optimizer, "wanted_batch_size", lambda base: base)
+    averages, regrets, running, ends, hit, stop_reason = [], [], [], [], None, "budget"
+    episodes = 0
+    while episodes < problem.episodes:
+        n = min(wanted(GENERATION), problem.episodes - episodes)
+        contexts = draw.contexts(n)
         params = optimizer.ask(contexts)
         values = draw.evaluate(contexts, params)
         try:
             optimizer.tell(contexts, params, -values)
         except RuntimeError as error:
             stop_reason = f"error: {error}"
+        episodes += n
+        ends.append(episodes)
         averages.append(-float(values.mean()))
         recommended = optimizer.recommend(draw.test_contexts)
         regrets.append(float(draw.regret(draw.test_contexts, recommended).mean()))
@@ -135,16 +168,16 @@ def run_protocol(spec: ProtocolSpec, checkpoint_dir: Path | None = None) -> dict
         means = recommended if policy is None else policy.mean(draw.test_contexts)
         running.append(float(draw.regret(draw.test_contexts, means).mean()))
         if hit is None and regrets[-1] <= TARGET:
-            hit = (generation + 1) * GENERATION
+            hit = episodes
         met = optimizer.stop() if stop_reason == "budget" else {}
         if met:
             stop_reason = "optimizer: " + ", ".join(sorted(met))
         if stop_reason != "budget":
             break
     ran = len(averages)
-    averages += [averages[-1]] * (problem.generations - ran)  # an early end keeps its last values
-    regrets += [regrets[-1]] * (problem.generations - ran)
-    running += [running[-1]] * (problem.generations - ran)
+    averages, regrets, running = (
+        _per_generation(values, ends, problem.generations) for values in (averages, regrets, running)
+    )
     indices = _curve_indices(problem.generations)
     return {
         "spec": {**asdict(spec), "options": dict(spec.options), "budget": problem.episodes},
@@ -154,7 +187,7 @@ def run_protocol(spec: ProtocolSpec, checkpoint_dir: Path | None = None) -> dict
         "final_running": running[-1],
         "protocol_last": averages[-1],
         "generations_run": ran,
-        "total_episodes": ran * GENERATION,
+        "total_episodes": episodes,
         "stop_reason": stop_reason,
         "restarts": float(getattr(optimizer, "restarts_done", 0)),
         "curve": {

@@ -29,6 +29,10 @@ One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N
 7. A restart portfolio (C11, ``restart_baseline_loss``): by default the searches after a restart fit the
    baseline with the other loss (Huber's after the squared fit), so a restart does not repeat a search that
    failed with the first fit.
+8. Restarts that can pay off (C12, ``budget``): with a known episode budget a restart is made only while the
+   episodes left carry a new search as far as the ended one went; IPOP's growth (C13,
+   ``restart_population_factor``): after r restarts the optimiser wants N₀ · F^r samples per batch
+   (:mod:`creps_gym.optimizers.ccmaes_restarts`).
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ from scipy import linalg
 from creps_gym._validation import as_float_array, check_count, check_generator_state, check_positive_int
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.ccmaes_config import CCMAESConfig, options_doc, options_signature
+from creps_gym.optimizers.ccmaes_restarts import Restarts
 from creps_gym.optimizers.cma_rules import (
     CMAConstants,
     csa_step,
@@ -76,8 +81,6 @@ __all__ = [
 Array = NDArray[np.float64]
 
 recommended_batch_size = PolicyAccess.recommended_batch_size
-#: Batches whose mean returns score a search's mean policy (C10): a few, to average the context draw's noise.
-BEST_WINDOW = 3
 
 
 class _Step(NamedTuple):
@@ -87,7 +90,7 @@ class _Step(NamedTuple):
     diagnostics: dict[str, float]
 
 
-class CCMAES(PolicyAccess, ContextualOptimizer):
+class CCMAES(Restarts, PolicyAccess, ContextualOptimizer):
     """Contextual CMA-ES with cumulative step-size adaptation and active covariance updates.
 
     ``CCMAES(n_params, n_context_dims, **options)``, the options (listed below, keyword-only) validated by
@@ -99,6 +102,8 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
     kind: ClassVar[str] = "c-cma-es"
     #: The options' dataclass (a subclass of :class:`CCMAESConfig` for a variant with more options).
     config_class: ClassVar[type[CCMAESConfig]] = CCMAESConfig
+    #: The option a caller (the runner) sets to the run's episode budget unless given (C12).
+    budget_option: ClassVar[str | None] = "budget"
 
     def __init__(self, n_params: int, n_context_dims: int, **options: Any) -> None:
         check_option_names(self.config_class, options)
@@ -110,6 +115,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         self.n_params, self.n_context_dims = config.n_params, config.n_context_dims
         self.rng = np.random.default_rng(config.seed)
         self.restarts_done = 0
+        self.search_start = 0  # the episodes told before the running search began (C12)
         self.best_coefficients: Array | None = None  # the kept mean policy (C10) and its score
         self.best_score = -math.inf
         self._eigen_of: Array | None = None
@@ -150,35 +156,8 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
                 self.past_contexts, self.past_returns, contexts, returns, config.baseline_batches - 1
             )
         self._diagnostics = dict(step.diagnostics, baseline_r2=explained, mean_return=self.mean_returns[-1])
-        if self.restarts_done < config.restarts and self.stop():
-            self._restart()
+        self._restart_if_due()  # Eqs. (C10)-(C13)
         self._diagnostics["restarts"] = float(self.restarts_done)
-
-    def _restart(self) -> None:
-        """Keep the ending search's mean policy if it scored best (C10), then start again from the initial
-        distribution; the searches after it fit the baseline with the restart loss (C11)."""
-        self._keep_if_best()
-        self._reset_search()
-        self.restarts_done += 1
-        for stale in ("cond_cov", "max_std", "search_scale"):  # they described the abandoned distribution
-            self._diagnostics.pop(stale, None)
-        if self._diagnostics:  # the new search's σ and (empty) path, not the abandoned search's
-            self._diagnostics.update(step_size=self.step_size, path_sigma_ratio=0.0)
-
-    def restart(self) -> bool:
-        """Restart now, as the stop criteria would (C10, C11), if a restart is left; returns whether it did.
-
-        The runner calls it when its divergence rule fires, so a diverging search is abandoned early
-        instead of ending the run. Raises ``RuntimeError`` between ``ask`` and ``tell`` (the asked samples
-        belong to the search it would abandon); with no restart left it returns False and changes nothing.
-        """
-        if self._pending is not None:
-            raise RuntimeError("restart(): expected no pending ask(); tell() its samples first")
-        if self.restarts_done >= self.config.restarts:
-            return False
-        self._restart()
-        self._diagnostics["restarts"] = float(self.restarts_done)
-        return True
 
     def _baseline_loss(self) -> str:
         """The running search's baseline loss: ``baseline_loss`` until the first restart, then the one
@@ -266,26 +245,6 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         }
         return _Step(policy, path_sigma, path_cov, diagnostics)
 
-    def _search_score(self) -> float:
-        """The running search's score (C10): the mean of its last ``BEST_WINDOW`` batch mean returns (−inf
-        before it has told that many)."""
-        recent = self.mean_returns[-BEST_WINDOW:]
-        return float(np.mean(recent)) if len(recent) == BEST_WINDOW else -math.inf
-
-    def _keep_if_best(self) -> None:
-        """Eq. (C10): before a restart, keep the ending search's mean policy if it scores best so far."""
-        score = self._search_score()
-        if self.config.keep_best and score > self.best_score:
-            self.best_coefficients, self.best_score = self.policy.coefficients.copy(), score
-
-    def recommended_coefficients(self) -> Array:
-        """The coefficients, shape (k, p), of the mean policy that ``recommend`` and ``mean_policy`` give:
-        the running search's, or with ``keep_best`` the best one a restart left (C10) while the running
-        search scores below it."""
-        if self.best_coefficients is None or self._search_score() >= self.best_score:
-            return self.policy.coefficients
-        return self.best_coefficients  # Eq. (C10)
-
     def _eigen(self) -> tuple[Array, Array]:
         """``eigh`` of C, computed once per update: the diagnostics, the stop criteria and the next update's
         C^(−1/2) share it."""
@@ -336,6 +295,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             past_contexts=self.past_contexts.copy(),
             past_returns=self.past_returns.copy(),
             restarts_done=self.restarts_done,
+            search_start=self.search_start,
             best_coefficients=np.zeros((0, self.n_params)) if best is None else best.copy(),
             best_score=np.asarray([] if best is None else [self.best_score]),
         )
@@ -368,6 +328,8 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         optimizer.restarts_done = check_count(
             state["restarts_done"], "state['restarts_done']", config.restarts
         )
+        if "search_start" in state:  # absent before C12: the budget rule was unknown (budget None)
+            optimizer.search_start = check_count(state["search_start"], "state['search_start']")
         if "best_coefficients" in state and np.asarray(state["best_coefficients"]).size:  # absent before C10
             k = config.mean_map.n_features
             optimizer.best_coefficients = read("best_coefficients", (k, p))

@@ -96,6 +96,14 @@ class CCMAESConfig:
         ``baseline_loss``. The first search uses ``baseline_loss``, so a run that never restarts does not
         depend on it. The local baseline (C1'') has no loss: with ``baseline_bandwidth > 0`` only None and
         ``"other"`` are accepted, and both keep it.
+    budget : int or None            the run's episode budget (true episodes told), or None (unknown: every
+        stop criterion restarts while restarts are left). Given, a stop criterion restarts only while the
+        episodes left can carry the new search as far as the ended one went (C12): B − E ≥ F · E_search,
+        with F = ``restart_population_factor``; otherwise the converged search goes on sampling and
+        ``stop()`` keeps reporting its criterion. The runner and the protocol set it to their budget.
+    restart_population_factor : float   F ≥ 1 (C13, IPOP): after the r-th restart the optimiser wants
+        batches of N₀ · F^r samples (``wanted_batch_size(N₀)``; the caller chooses the batch it asks for).
+        1: the batch stays the caller's; IPOP-CMA-ES uses 2.
     tolx, tolupsigma, max_condition, tolstagnation, tolflatfitness : stop criteria like pycma's
         (``tolstagnation=None`` means 100 + 100·p^1.5/N iterations).
     """
@@ -115,6 +123,8 @@ class CCMAESConfig:
     restarts: int = 3
     keep_best: bool = True
     restart_baseline_loss: str | None = OTHER_LOSS
+    budget: int | None = None
+    restart_population_factor: float = 1.0
     step_size_signal: str = "mean"
     ridge: float = 1e-8
     baseline_ridge: float = 1e-10
@@ -154,8 +164,9 @@ class CCMAESConfig:
             ("restarts", 0),
         ):
             object.__setattr__(self, name, check_positive_int(getattr(self, name), name, minimum))
-        if self.tolstagnation is not None:
-            object.__setattr__(self, "tolstagnation", check_positive_int(self.tolstagnation, "tolstagnation"))
+        for name in ("tolstagnation", "budget"):  # None: the default rule / no known budget
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, check_positive_int(getattr(self, name), name))
         object.__setattr__(self, "active", check_bool(self.active, "active"))
         object.__setattr__(self, "keep_best", check_bool(self.keep_best, "keep_best"))
         standardise = check_bool(self.standardise_advantages, "standardise_advantages")
@@ -198,6 +209,10 @@ class CCMAESConfig:
             if getattr(self, name) is not None:  # None: the tutorial's default; else in (0, high]
                 object.__setattr__(self, name, check_real_in_range(getattr(self, name), name, 0.0, high))
         object.__setattr__(self, "c_m", check_real_in_range(self.c_m, "c_m", 0.0, 1.0))
+        factor = check_real_in_range(
+            self.restart_population_factor, "restart_population_factor", 1.0, 100.0, low_inclusive=True
+        )
+        object.__setattr__(self, "restart_population_factor", factor)
 
     def _check_combinations(self) -> None:
         """The options that constrain each other (checked after each is valid on its own)."""

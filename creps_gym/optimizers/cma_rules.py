@@ -22,8 +22,10 @@ __all__ = [
     "distribution_stops",
     "expected_norm",
     "inverse_sqrt",
+    "population_size",
     "rank_weights",
     "record_mean_return",
+    "restart_pays_off",
     "scaled_mean",
     "stagnated",
     "stagnation_window",
@@ -245,3 +247,18 @@ def stagnated(mean_returns: Sequence[float], window: int) -> bool:
     recent = np.asarray(mean_returns[-window:], dtype=np.float64)
     fifth = max(window // 5, 1)
     return bool(np.median(recent[-fifth:]) <= np.median(recent[:fifth]))
+
+
+def restart_pays_off(budget: int | None, used: int, search_episodes: int, factor: float) -> bool:
+    """Whether a restart can pay off (Eq. (C12)): the ``budget`` − ``used`` episodes left carry a new search
+    at least as far as the ended one went, ``factor`` (its population's growth, C13) times its
+    ``search_episodes``; always True with no known ``budget`` (None)."""
+    if budget is None:
+        return True
+    return budget - used >= factor * search_episodes  # Eq. (C12)
+
+
+def population_size(base: int, factor: float, restarts: int) -> int:
+    """The batch a search wants after ``restarts`` restarts (Eq. (C13), IPOP): ``base`` · ``factor``^r,
+    rounded to the nearest integer (``base`` itself with ``factor`` = 1 or before the first restart)."""
+    return max(base, round(base * factor**restarts))  # Eq. (C13)

@@ -157,3 +157,134 @@ def test_different_powers_at_z3_is_solved_after_a_restart_with_huber():
     assert huber[-1] <= 1e-5 and restarts[-1] == 1
     squared, restarts = regrets(restart_baseline_loss=None)
     assert squared.min() > 1e-5 and restarts[-1] >= 1
+
+
+# -- C12 (a restart only when it can pay off) and C13 (IPOP's population growth) ----------------------------
+def _tell_clean(optimizer: CCMAES, contexts: np.ndarray) -> None:
+    """Ask and tell a batch of the contextual sphere θ*(s) = s·1 (no outlier: the search converges)."""
+    params = optimizer.ask(contexts)
+    optimizer.tell(contexts, params, -((params - contexts) ** 2).sum(axis=1))
+
+
+def _first_stop(**options) -> tuple[CCMAES, np.random.Generator]:
+    """The sphere until tolx = 1e-3 fires in the first search (83 batches of 16), restarted or not."""
+    optimizer = CCMAES(4, 1, initial_mean=3.0, initial_cov=1.0, tolx=1e-3, restarts=1, seed=5, **options)
+    rng = np.random.default_rng(6)
+    while optimizer.restarts_done == 0 and not optimizer.stop():
+        _tell_clean(optimizer, _contexts(rng))
+        assert optimizer.iteration < 400
+    return optimizer, rng
+
+
+@pytest.fixture(scope="module")
+def first_search_episodes() -> int:
+    """The episodes the first search takes to its stop (the same with every budget: C12 decides after it)."""
+    optimizer, _ = _first_stop()
+    assert optimizer.restarts_done == 1 and optimizer.search_start == optimizer.evaluations
+    return optimizer.evaluations
+
+
+def test_the_new_options_are_validated():
+    for bad, error in (
+        (0, ValueError),
+        (-5, ValueError),
+        (1.5, TypeError),
+        (True, TypeError),
+        ("9", TypeError),
+    ):
+        with pytest.raises(error, match=r"budget: expected an integer >= 1"):
+            CCMAES(3, 1, budget=bad)
+    for bad, error in ((0.5, ValueError), (101.0, ValueError), (float("nan"), ValueError), ("2", TypeError)):
+        with pytest.raises(error, match=r"restart_population_factor: expected"):
+            CCMAES(3, 1, restart_population_factor=bad)
+    config = CCMAES(3, 1, budget=np.int64(100), restart_population_factor=2).config
+    assert (config.budget, config.restart_population_factor) == (100, 2.0)
+    assert (CCMAES(3, 1).config.budget, CCMAES(3, 1).config.restart_population_factor) == (None, 1.0)
+    with pytest.raises(ValueError, match="base: expected an integer >= 1"):
+        CCMAES(3, 1).wanted_batch_size(0)
+
+
+def test_a_converged_search_near_the_budgets_end_keeps_sampling(first_search_episodes):
+    """C12: with fewer episodes left than the first search took, no restart; ``stop()`` reports its
+    criterion (a caller that stops on it stops), and the search goes on sampling its tight distribution."""
+    budget = first_search_episodes + 16  # one batch left after the stop
+    optimizer, rng = _first_stop(budget=budget)
+    assert optimizer.evaluations == first_search_episodes and optimizer.restarts_done == 0
+    assert "tolx" in optimizer.stop() and optimizer.diagnostics["restarts"] == 0.0
+    for _ in range(3):  # a caller that does not stop on stop() (the budget overrun is the caller's choice)
+        contexts = _contexts(rng)
+        spread = np.abs(optimizer.ask(contexts) - optimizer.policy.mean(contexts)).max()
+        assert spread < 0.01  # the converged distribution (max std 1.1e-3), not the initial one (σ0 = 1)
+        _tell_clean(optimizer, contexts)
+        assert optimizer.restarts_done == 0  # tolx may fire again or not: it never restarts
+
+
+def test_early_in_the_budget_it_restarts_as_without_one(first_search_episodes):
+    """C12: with at least the first search's episodes left, the restart is today's, bit for bit."""
+    today, _ = _first_stop()
+    for budget in (2 * first_search_episodes, 10**9):
+        early, _ = _first_stop(budget=budget)
+        assert early.restarts_done == 1 and early.search_start == first_search_episodes
+        assert _same_state_but_config(today, early)
+    short, _ = _first_stop(budget=2 * first_search_episodes - 1)
+    assert short.restarts_done == 0
+
+
+def _same_state_but_config(a: CCMAES, b: CCMAES) -> bool:
+    return _same_state(a, b) and a.rng.bit_generator.state == b.rng.bit_generator.state
+
+
+def test_the_population_grows_by_the_factor_after_each_restart(first_search_episodes):
+    """C13: N₀ · F^r after r restarts; C12 asks for F times the ended search's episodes; the weights follow
+    the batch told."""
+    enough = 2 * first_search_episodes
+    assert _first_stop(budget=enough, restart_population_factor=2.0)[0].restarts_done == 0  # needs 2×
+    optimizer, rng = _first_stop(budget=3 * first_search_episodes, restart_population_factor=2.0)
+    assert optimizer.restarts_done == 1 and optimizer.wanted_batch_size(16) == 32
+    contexts = rng.uniform(0.0, 1.0, (optimizer.wanted_batch_size(16), 1))
+    _tell_clean(optimizer, contexts)
+    assert optimizer.diagnostics["mu_eff"] == optimizer.config.constants(32).mu_eff
+    assert CCMAES(3, 1).wanted_batch_size(16) == 16  # F = 1: the caller's batch
+    grown = CCMAES(3, 1, restart_population_factor=1.5, restarts=2)
+    grown.restarts_done = 2
+    assert grown.wanted_batch_size(16) == 36  # 16 · 1.5² = 36
+
+
+def test_the_budget_and_the_factor_survive_a_checkpoint_bit_identically(tmp_path, first_search_episodes):
+    options = {"budget": 3 * first_search_episodes, "restart_population_factor": 2.0}
+    optimizer, rng = _first_stop(**options)
+    restored = CCMAES.load(optimizer.save(tmp_path / "c.npz"))
+    assert (restored.config.budget, restored.config.restart_population_factor) == (
+        3 * first_search_episodes,
+        2.0,
+    )
+    assert restored.search_start == optimizer.search_start == first_search_episodes
+    for _ in range(3):
+        contexts = rng.uniform(0.0, 1.0, (optimizer.wanted_batch_size(16), 1))
+        _tell_clean(optimizer, contexts)
+        _tell_clean(restored, contexts)
+    assert _same_state_but_config(optimizer, restored)
+
+
+def test_a_checkpoint_from_before_c12_loads_with_todays_restarts(first_search_episodes):
+    optimizer, _ = _first_stop()
+    state = optimizer.state_dict()
+    del state["search_start"]
+    state["config"] = {
+        k: v for k, v in state["config"].items() if k not in ("budget", "restart_population_factor")
+    }
+    old = CCMAES.from_state_dict(state)
+    assert (old.config.budget, old.config.restart_population_factor, old.search_start) == (None, 1.0, 0)
+    with pytest.raises(ValueError, match=r"state\['search_start'\]"):
+        CCMAES.from_state_dict({**optimizer.state_dict(), "search_start": -1})
+
+
+def test_the_runner_gives_c_cma_es_its_budget_unless_given():
+    from creps_gym.runner.config import RunConfig
+    from creps_gym.runner.loop import Runner
+
+    for max_episodes, expected in ((None, 120), (50, 50)):
+        config = RunConfig("creps_gym/Sphere-v0", "c-cma-es", 6, 20, 0, max_episodes=max_episodes)
+        assert Runner(config).optimizer.config.budget == expected  # min(iterations × samples, max_episodes)
+    given = RunConfig("creps_gym/Sphere-v0", "c-cma-es", 6, 20, 0, optimizer_options={"budget": None})
+    assert Runner(given).optimizer.config.budget is None  # the user's setting wins

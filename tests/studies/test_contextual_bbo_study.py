@@ -72,6 +72,23 @@ def test_a_run_counts_true_episodes_and_records_its_stack(monkeypatch):
     assert {"numpy", "scipy", "python", "cpu", "creps_gym"} <= set(document["environment"])
 
 
+def test_the_protocol_passes_its_budget_and_grows_the_batch_the_optimiser_wants(monkeypatch):
+    """C12: the optimiser gets the protocol's budget unless the spec sets it; C13: the batch after each
+    restart is the optimiser's wanted one, the curves stay per 50 episodes and the budget is never passed."""
+    monkeypatch.setitem(PROBLEMS, "Sphere", problems.Problem("Sphere", 2, 12))
+    draw = draw_run(PROBLEMS["Sphere"], 0)
+    assert protocol._make(protocol.ProtocolSpec("Sphere", "c-cma-es", 0), draw).config.budget == 600
+    unknown = protocol.ProtocolSpec("Sphere", "c-cma-es", 0, (("budget", None),), "today")
+    assert protocol._make(unknown, draw).config.budget is None
+    options = (("max_condition", 1.0001), ("restart_population_factor", 2.0))  # a stop after every batch
+    document = protocol.run_protocol(protocol.ProtocolSpec("Sphere", "c-cma-es", 0, options, "ipop"))
+    # batches of 50, 100, 200: after 350 episodes the 250 left cannot carry 2 × 200, so no third restart
+    assert document["restarts"] == 2 and document["total_episodes"] == 350
+    assert document["generations_run"] == 3 and document["stop_reason"] == "optimizer: max_condition"
+    average = document["curve"]["average_return"]
+    assert len(average) == 12 and average[0] == average[1] != average[2] and average[6] == average[-1]
+
+
 def test_the_floor_probe_runs_cells_and_measures_the_baseline_against_the_context_effect(
     monkeypatch, tmp_path
 ):

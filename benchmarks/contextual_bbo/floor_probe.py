@@ -16,7 +16,8 @@ mean removed, since only differences between contexts rank), the spread of the p
 (1: the advantages rank θ as the returns do at a fixed context), the condition number of C and the rms of
 the mean's error m(s) − θ*(s) over the batch (the mean regression's error across contexts). ``--out``
 writes the rows with the provenance record (``benchmarks/provenance.py``). Nothing here changes the study's
-cache.
+cache. ``floor_table`` and ``restart_tables`` render docs/algorithms.md's tables from the committed
+``results/floor`` and ``results/restarts`` files.
 """
 
 from __future__ import annotations
@@ -40,7 +41,15 @@ from benchmarks.contextual_bbo.protocol import ProtocolSpec, run_protocol
 from benchmarks.provenance import provenance
 from creps_gym.optimizers import make_optimizer
 
-__all__ = ["FLOOR_TABLE", "advantage_rows", "cell_rows", "floor_table", "main"]
+__all__ = [
+    "FLOOR_TABLE",
+    "RESTART_TABLES",
+    "advantage_rows",
+    "cell_rows",
+    "floor_table",
+    "main",
+    "restart_tables",
+]
 
 #: The rows of docs/algorithms.md's floor table: its label and the ``results/floor`` file it is read from.
 FLOOR_TABLE = (
@@ -55,6 +64,31 @@ FLOOR_TABLE = (
     ("C3r, `baseline_bandwidth=0.1, baseline_detrend=True` (C1d)", "c3r-c1d-bandwidth0.1.json"),
 )
 FLOOR_FOLDER = Path(__file__).resolve().parent / "results" / "floor"
+#: The restart tables of docs/algorithms.md (issue 45 item 3, C12 and C13): their functions and rows, read
+#: from ``results/restarts`` (3 runs, then 20 runs per cell).
+RESTART_TABLES = (
+    (
+        ("Ellipsoidal", "Discus", "Ackley"),
+        (
+            ("defaults, `budget=None` (the restarts before C12)", "c3-no-budget.json"),
+            ("defaults (C12: the protocol's budget)", "c3-c12.json"),
+            ("C12, `restart_population_factor=2` (C13)", "c3-c12-ipop2.json"),
+            ('`ridge_centre="old"` (C3r), `budget=None`', "c3r-no-budget.json"),
+            ("C3r, C12", "c3r-c12.json"),
+            ("C3r, C12, C13 (F = 2)", "c3r-c12-ipop2.json"),
+        ),
+    ),
+    (
+        ("Ellipsoidal", "Discus", "DifferentPowers", "Ackley"),
+        (
+            ("defaults, `budget=None`", "c3-no-budget-20runs.json"),
+            ("defaults (C12)", "c3-c12-20runs.json"),
+            ("C12, C13 (F = 2)", "c3-c12-ipop2-20runs.json"),
+            ("C3r, C12", "c3r-c12-20runs.json"),
+        ),
+    ),
+)
+RESTART_FOLDER = FLOOR_FOLDER.parent / "restarts"
 
 
 def cell_rows(functions: Sequence[str], method: str, seeds: int, options: dict[str, Any]) -> list[dict]:
@@ -145,15 +179,26 @@ def _cell(values: list[float]) -> str:
     return f"{np.mean(values):.1e}".replace("-", "−").replace("e−0", "e−").replace("e+0", "e")
 
 
+def _table_rows(rows: Sequence[tuple[str, str]], folder: Path, functions: Sequence[str]) -> str:
+    """One line per (label, file): the mean protocol measure of the file's runs per function."""
+    lines = []
+    for label, name in rows:
+        runs = json.loads((folder / name).read_text(encoding="utf-8"))["rows"]
+        cells = [_cell([r["protocol_last"] for r in runs if r["function"] == f]) for f in functions]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def floor_table(folder: Path = FLOOR_FOLDER) -> str:
     """The body rows of docs/algorithms.md's floor table (mean protocol measure over each file's runs, per
     function in the study's order), rendered from the committed ``results/floor`` files."""
-    lines = []
-    for label, name in FLOOR_TABLE:
-        rows = json.loads((folder / name).read_text(encoding="utf-8"))["rows"]
-        cells = [_cell([r["protocol_last"] for r in rows if r["function"] == f]) for f in PROBLEMS]
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    return _table_rows(FLOOR_TABLE, folder, list(PROBLEMS))
+
+
+def restart_tables(folder: Path = RESTART_FOLDER) -> list[str]:
+    """The body rows of docs/algorithms.md's restart tables (C12, C13), one text per table of
+    :data:`RESTART_TABLES`, rendered from the committed ``results/restarts`` files."""
+    return [_table_rows(rows, folder, functions) for functions, rows in RESTART_TABLES]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

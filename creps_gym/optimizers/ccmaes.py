@@ -104,6 +104,8 @@ class CCMAES(Restarts, PolicyAccess, ContextualOptimizer):
     config_class: ClassVar[type[CCMAESConfig]] = CCMAESConfig
     #: The option a caller (the runner) sets to the run's episode budget unless given (C12).
     budget_option: ClassVar[str | None] = "budget"
+    #: The option that grows the wanted batch after a restart (C13): a fixed-batch caller keeps it at 1.
+    batch_growth_option: ClassVar[str | None] = "restart_population_factor"
 
     def __init__(self, n_params: int, n_context_dims: int, **options: Any) -> None:
         check_option_names(self.config_class, options)

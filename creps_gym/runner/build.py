@@ -118,7 +118,8 @@ def build_optimizer(config: RunConfig, env: gym.Env, n_context_dims: int, seed: 
     The initial distribution is the env-declared one (:func:`creps_gym.envs.base.initial_distribution`)
     unless the config sets ``initial_mean`` (a number, one per parameter, or ``"uniform"``) or
     ``initial_std``. A budget option the optimiser's class names (``budget_option``) is set to the run's
-    episode budget unless given.
+    episode budget unless given; an option that grows the batch after a restart (``batch_growth_option``,
+    C-CMA-ES's C13) must stay 1, since every iteration asks ``samples`` episodes.
     """
     n_params = int(np.prod(env.action_space.shape))
     mean, std = initial_distribution(env)  # the env-declared start (box rule for foreign envs)
@@ -132,9 +133,14 @@ def build_optimizer(config: RunConfig, env: gym.Env, n_context_dims: int, seed: 
     if not (np.isfinite(variances).all() and (variances > 0).all()):  # e.g. an env-declared std of 1e200
         raise ConfigError("initial_std", f"expected standard deviations with finite variances > 0, got {std}")
     options = dict(config.optimizer_options)
-    budget_option = getattr(registered_class(config.optimizer), "budget_option", None)
+    cls = registered_class(config.optimizer)
+    budget_option = getattr(cls, "budget_option", None)
     if budget_option is not None and budget_option not in options:  # e.g. nevergrad's NGOpt needs it
         options[budget_option] = min(config.iterations * config.samples, config.max_episodes or math.inf)
+    growth = getattr(cls, "batch_growth_option", None)  # the runner's batch is fixed: samples
+    if growth is not None and options.get(growth, 1) != 1:
+        reason = f"expected {growth}=1 (the runner's batch stays samples), got {options[growth]!r}"
+        raise ConfigError("optimizer_options", reason)
     with config_field("optimizer_options" if config.optimizer_options else None):  # its error about one
         return make_optimizer(
             config.optimizer,

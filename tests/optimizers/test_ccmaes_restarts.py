@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from creps_gym.errors import ConfigError
 from creps_gym.optimizers import CCMAES
 from creps_gym.runner import run
 
@@ -279,7 +280,7 @@ def test_a_checkpoint_from_before_c12_loads_with_todays_restarts(first_search_ep
         CCMAES.from_state_dict({**optimizer.state_dict(), "search_start": -1})
 
 
-def test_the_runner_gives_c_cma_es_its_budget_unless_given():
+def test_the_runner_gives_c_cma_es_its_budget_unless_given_and_refuses_a_growing_batch():
     from creps_gym.runner.config import RunConfig
     from creps_gym.runner.loop import Runner
 
@@ -288,3 +289,10 @@ def test_the_runner_gives_c_cma_es_its_budget_unless_given():
         assert Runner(config).optimizer.config.budget == expected  # min(iterations × samples, max_episodes)
     given = RunConfig("creps_gym/Sphere-v0", "c-cma-es", 6, 20, 0, optimizer_options={"budget": None})
     assert Runner(given).optimizer.config.budget is None  # the user's setting wins
+    growing = RunConfig(
+        "creps_gym/Sphere-v0", "c-cma-es", 6, 20, 0, optimizer_options={"restart_population_factor": 2.0}
+    )
+    with pytest.raises(
+        ConfigError, match=r"restart_population_factor=1 \(the runner's batch stays samples\)"
+    ):
+        Runner(growing)  # the runner asks a fixed batch: C13 only where the caller grows it (the protocol)

@@ -175,3 +175,13 @@ def test_the_floor_table_of_the_docs_is_rendered_from_the_committed_floor_runs()
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "algorithms.md").read_text(encoding="utf-8")
     assert floor_table() in doc
+
+
+def test_the_restart_tables_of_the_docs_are_rendered_from_the_committed_restart_runs():
+    """docs/algorithms.md's restart tables (issue 45 item 3, C12 and C13): each row is the mean protocol
+    measure of its ``results/restarts`` file, as ``floor_probe.restart_tables`` renders it."""
+    from benchmarks.contextual_bbo.floor_probe import restart_tables
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "algorithms.md").read_text(encoding="utf-8")
+    for table in restart_tables():
+        assert table in doc

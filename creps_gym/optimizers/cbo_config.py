@@ -122,7 +122,7 @@ class CBOConfig:
     initial_samples: int | None = None
     candidates: int = 256
     starts: int = 3
-    trust_share: float | None = 0.5
+    trust_share: float | None = 1.0 / 3.0
     refit_growth: float = 1.2
     hyper_restarts: int = 1
     fit_points: int = 256

@@ -94,6 +94,7 @@ class CBOConfig:
         :mod:`~creps_gym.optimizers.cbo`): the posterior mean is maximised over the box spanned by the θ of
         the best share q of the ``candidates // 4`` episodes with the nearest contexts; None: over the
         whole parameter box (the posterior mean may then extrapolate to a face of it, far from the data).
+        Smaller: closer to the best episodes; larger: reaches optima that move with s past the neighbours.
     refit_growth : float            the hyperparameters are refitted (maximum likelihood, G3) when the data
         have grown by this factor since the last fit (a geometric schedule); in between only the Cholesky
         factor is updated, so asks stay fast.

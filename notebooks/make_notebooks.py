@@ -224,9 +224,12 @@ def execute(notebook: nbformat.NotebookNode, quick: bool = False, timeout: int =
     try:
         with tempfile.TemporaryDirectory() as folder:
             client = nbclient.NotebookClient(
-                notebook, timeout=timeout, kernel_name="python3", record_timing=False,
+                notebook,
+                timeout=timeout,
+                kernel_name="python3",
+                record_timing=False,
                 resources={"metadata": {"path": folder}},
-            )  # fmt: skip
+            )
             client.execute()
     finally:
         if previous is None:

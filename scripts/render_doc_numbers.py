@@ -44,8 +44,15 @@ def main_job() -> tuple[int, int]:
     from creps_gym.runner import run
 
     args = build_parser().parse_args(main_job_argv())
-    history = run(args.optimizer, args.env, args.iterations, args.samples, args.seed,
-                  target_regret=args.target_regret, env_kwargs=dict(args.env_kwarg))  # fmt: skip
+    history = run(
+        args.optimizer,
+        args.env,
+        args.iterations,
+        args.samples,
+        args.seed,
+        target_regret=args.target_regret,
+        env_kwargs=dict(args.env_kwarg),
+    )
     last = history.records[-1]
     return last.iteration, last.episodes
 
@@ -87,10 +94,11 @@ def reacher_table(rows: list[tuple[int, float, float]]) -> str:
 
     return (
         line(["iteration (× 40 episodes)", *(str(i) for i, _, _ in rows)])
-        + "|---" * (len(rows) + 1) + "|\n"
+        + "|---" * (len(rows) + 1)
+        + "|\n"
         + line(["mean return", *(f"{r:.2f}".replace("-", "−") for _, r, _ in rows)])
         + line(["final fingertip–target distance", *(f"{d:.3f}" for _, _, d in rows)])
-    )  # fmt: skip
+    )
 
 
 def committed_reacher_table() -> str:

@@ -319,8 +319,11 @@ def signal_table(cells: Cells, rows: Sequence[tuple[str, int]], budget: int, see
             if None not in medians and not all(math.isinf(m) for m in medians):
                 compared += 1
                 lower += medians[1] < medians[0]
-            missing += [f"{c} at {name}, z = {z}: {len(r)}" for c, r in
-                        zip((default, coefficients), runs, strict=True) if len(r) < seeds]  # fmt: skip
+            missing += [
+                f"{c} at {name}, z = {z}: {len(r)}"
+                for c, r in zip((default, coefficients), runs, strict=True)
+                if len(r) < seeds
+            ]
         lines.append(f"| {name} | {z} | " + " | ".join(texts) + " |")
     lines.append("")
     if compared:
@@ -353,8 +356,11 @@ def bound_table(cells: Cells, budget: int, seeds: int) -> str:
         lines.append(f"| {label} | {shown} | " + " | ".join(texts) + " |")
         met = [t[0] is not None and target_met(r, *t) == "met" for r, t in zip(runs, targets, strict=True)]
         meeting += [label] if all(met) else []
-        missing += [f"{label}, {f} z = {z}: {len(r)}" for (f, z, _), r in zip(BOUND_CELLS, runs, strict=True)
-                    if len(r) < seeds]  # fmt: skip
+        missing += [
+            f"{label}, {f} z = {z}: {len(r)}"
+            for (f, z, _), r in zip(BOUND_CELLS, runs, strict=True)
+            if len(r) < seeds
+        ]
     sphere_target = "–" if bound is None else f"≤ {bound:,.0f} (2 × pycma)"
     lines.append(f"| target | | {sphere_target} | {_target_text(most, fraction, seeds)} |")
     lines += ["", f"Variants that meet both targets: {', '.join(meeting) or 'none'}."]

@@ -46,8 +46,9 @@ def grid(low: np.ndarray, high: np.ndarray, points: int) -> np.ndarray:
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(axes))
 
 
-def cell_losses(contexts: np.ndarray, losses: np.ndarray, low: np.ndarray, high: np.ndarray,
-                cells: int) -> np.ndarray:  # fmt: skip
+def cell_losses(
+    contexts: np.ndarray, losses: np.ndarray, low: np.ndarray, high: np.ndarray, cells: int
+) -> np.ndarray:
     """Mean loss per cell of a ``cells``-per-dimension partition of the box (the bandit's cells, row-major),
     shape (cells ** d,)."""
     flat = cell_index(contexts, low, high, (cells,) * contexts.shape[1])
@@ -86,8 +87,17 @@ def one_probe(task: str, optimizer: str, trial: int) -> dict[str, Any]:
     env, options = make_task(task)
     model = (gym.make(env) if isinstance(env, str) else env).unwrapped
     with tempfile.TemporaryDirectory() as folder:
-        run(optimizer, env, iterations, samples, trial, run_dir=folder, eval_every=every,
-            eval_contexts=EVAL_CONTEXTS, **options)  # fmt: skip
+        run(
+            optimizer,
+            env,
+            iterations,
+            samples,
+            trial,
+            run_dir=folder,
+            eval_every=every,
+            eval_contexts=EVAL_CONTEXTS,
+            **options,
+        )
         policy = load_policy(folder, "final")
     low, high = model.observation_space.low, model.observation_space.high
     contexts = grid(low, high, POINTS)
@@ -127,8 +137,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         document = json.loads(PATH.read_text())
     else:
         trials = list(range(MODES["full"]["trials"]))
-        runs = {f"{task}/{optimizer}/{trial}": one_probe(task, optimizer, trial)
-                for task in TASKS for optimizer in OPTIMIZERS for trial in trials}  # fmt: skip
+        runs = {
+            f"{task}/{optimizer}/{trial}": one_probe(task, optimizer, trial)
+            for task in TASKS
+            for optimizer in OPTIMIZERS
+            for trial in trials
+        }
         document = {"cells": CELLS, "points": POINTS, "trials": trials, "runs": runs, **machine()}
         save(PATH, document)
     text = render(document)

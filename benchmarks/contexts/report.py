@@ -52,15 +52,21 @@ def summary(
         finals = np.array([r["loss"][-1] for r in runs])
         if selector == "uniform":
             own = reached
-        rows.append({
-            "selector": selector, "trials": len(runs), "final_median": float(np.median(finals)),
-            "final_mean": float(finals.mean()),
-            "final_sd": float(finals.std(ddof=1)) if len(runs) > 1 else 0.0,
-            "target": target, "episodes_to_target": reached, "trials_reaching": len(hits),
-            "trial_episodes_mean": float(np.mean(hits)) if hits else None,
-            "trial_episodes_sd": float(np.std(hits, ddof=1)) if len(hits) > 1 else None,
-            "budget": episodes[-1],
-        })  # fmt: skip
+        rows.append(
+            {
+                "selector": selector,
+                "trials": len(runs),
+                "final_median": float(np.median(finals)),
+                "final_mean": float(finals.mean()),
+                "final_sd": float(finals.std(ddof=1)) if len(runs) > 1 else 0.0,
+                "target": target,
+                "episodes_to_target": reached,
+                "trials_reaching": len(hits),
+                "trial_episodes_mean": float(np.mean(hits)) if hits else None,
+                "trial_episodes_sd": float(np.std(hits, ddof=1)) if len(hits) > 1 else None,
+                "budget": episodes[-1],
+            }
+        )
     for row in rows:
         ok = own and row["episodes_to_target"] is not None
         row["ratio"] = row["episodes_to_target"] / own if ok else None
@@ -96,16 +102,23 @@ def render(document: dict[str, Any]) -> str:
             rows = summary(document, task, optimizer, selectors)
             if not rows:
                 continue
-            lines += ["", f"## {task}, {optimizer} (target {_number(rows[0]['target'])}, budget "
-                          f"{rows[0]['budget']} episodes)", ""]  # fmt: skip
+            lines += [
+                "",
+                f"## {task}, {optimizer} (target {_number(rows[0]['target'])}, budget "
+                f"{rows[0]['budget']} episodes)",
+                "",
+            ]
             lines += [
                 "| selector | final loss median | final loss mean ± sd | episodes to target (median curve) "
                 "| ratio to uniform | trials reaching | their episodes mean ± sd |",
                 "|---|---|---|---|---|---|---|",
             ]
             for row in rows:
-                spread = "–" if row["trial_episodes_mean"] is None else (
-                    f"{row['trial_episodes_mean']:.0f} ± {_number(row['trial_episodes_sd'])}")  # fmt: skip
+                spread = (
+                    "–"
+                    if row["trial_episodes_mean"] is None
+                    else (f"{row['trial_episodes_mean']:.0f} ± {_number(row['trial_episodes_sd'])}")
+                )
                 lines.append(
                     f"| {row['selector']} | {_number(row['final_median'])} | {_number(row['final_mean'])} ± "
                     f"{_number(row['final_sd'])} | {row['episodes_to_target'] or '–'} | "

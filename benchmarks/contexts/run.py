@@ -51,11 +51,19 @@ OPTIMIZERS: dict[str, tuple[str, dict[str, Any]]] = {
 #: Per mode: trials, and per task (iterations, samples or None for the optimiser's recommended batch,
 #: evaluate every).
 MODES: dict[str, dict[str, Any]] = {
-    "quick": {"trials": 3, "reacher": (8, 30, 2), "steep-sphere": (20, None, 5),
-              "steep-rosenbrock": (20, None, 5)},
-    "full": {"trials": 5, "reacher": (60, 50, 5), "steep-sphere": (100, None, 5),
-             "steep-rosenbrock": (150, None, 5)},
-}  # fmt: skip
+    "quick": {
+        "trials": 3,
+        "reacher": (8, 30, 2),
+        "steep-sphere": (20, None, 5),
+        "steep-rosenbrock": (20, None, 5),
+    },
+    "full": {
+        "trials": 5,
+        "reacher": (60, 50, 5),
+        "steep-sphere": (100, None, 5),
+        "steep-rosenbrock": (150, None, 5),
+    },
+}
 EVAL_CONTEXTS = 32
 
 
@@ -75,8 +83,18 @@ def one_run(task: str, optimizer: str, selector: str, trial: int, mode: str) -> 
     env, options = make_task(task)
     name, optimizer_options = OPTIMIZERS[optimizer]
     start = time.perf_counter()
-    history = run(name, env, iterations, samples, trial, eval_every=every, eval_contexts=EVAL_CONTEXTS,
-                  context_selector=selector, optimizer_options=optimizer_options, **options)  # fmt: skip
+    history = run(
+        name,
+        env,
+        iterations,
+        samples,
+        trial,
+        eval_every=every,
+        eval_contexts=EVAL_CONTEXTS,
+        context_selector=selector,
+        optimizer_options=optimizer_options,
+        **options,
+    )
     evaluated = [r for r in history.records if r.iteration % every == 0 or r is history.records[-1]]
     regret = history.meta["metric"] == "regret"
     loss = [r.eval_regret if regret else -r.eval_return for r in evaluated]

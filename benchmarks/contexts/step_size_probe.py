@@ -29,14 +29,24 @@ def main() -> int:
     for selector, options in (("uniform", {}), ("bandit", {}), ("beta", {"a": 2.0, "b": 1.0})):
         for seed in range(MODES["full"]["trials"]):
             task = SteepFunction("Rosenbrock")
-            history = run("c-cma-es", task, iterations, samples, seed, eval_every=every,
-                          eval_contexts=EVAL_CONTEXTS, context_selector=selector,
-                          context_selector_options=options)  # fmt: skip
+            history = run(
+                "c-cma-es",
+                task,
+                iterations,
+                samples,
+                seed,
+                eval_every=every,
+                eval_contexts=EVAL_CONTEXTS,
+                context_selector=selector,
+                context_selector_options=options,
+            )
             steps = {r.iteration: r.diagnostics["step_size"] for r in history.records}
             shown = ", ".join(f"{i}: {steps[i]:.3g}" for i in CHECKPOINTS if i in steps)
             final, restarts = history.records[-1].eval_regret, history.records[-1].diagnostics["restarts"]
-            print(f"{selector} {options or ''} seed {seed}: step size {shown}; final regret {final:.3g}; "
-                  f"restarts {restarts:g}")  # fmt: skip
+            print(
+                f"{selector} {options or ''} seed {seed}: step size {shown}; final regret {final:.3g}; "
+                f"restarts {restarts:g}"
+            )
     return 0
 
 

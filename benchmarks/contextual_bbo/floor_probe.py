@@ -13,8 +13,10 @@ baseline V(s) (C1) with the true context effect E[R | s] = E_θ[−f_s(θ)] unde
 distribution (Monte Carlo, ``--draws`` per context): the baseline's error (its rms over the batch, its
 mean removed, since only differences between contexts rank), the spread of the part of R that θ decides
 (R − E[R | s]), the spread of E[R | s] over the batch, and Kendall's τ between the advantages and that θ part
-(1: the advantages rank θ as the returns do at a fixed context). ``--out`` writes the rows with the
-provenance record (``benchmarks/provenance.py``). Nothing here changes the study's cache.
+(1: the advantages rank θ as the returns do at a fixed context), the condition number of C and the rms of
+the mean's error m(s) − θ*(s) over the batch (the mean regression's error across contexts). ``--out``
+writes the rows with the provenance record (``benchmarks/provenance.py``). Nothing here changes the study's
+cache.
 """
 
 from __future__ import annotations
@@ -46,6 +48,11 @@ FLOOR_TABLE = (
     ("`baseline_ridge=1e-16`", "c3-baseline-ridge1e-16.json"),
     ("`ridge=1e-14`", "c3-ridge1e-14.json"),
     ('`ridge_centre="old"` (C3r)', "c3r.json"),
+    ("C3r, `baseline_ridge=0`", "c3r-baseline-ridge0.json"),
+    ('`baseline_ridge_scale="unexplained"` (C1s)', "c1s.json"),
+    ("C3r and C1s", "c3r-c1s.json"),
+    ("C3r, `baseline_bandwidth=0.1` (C1″)", "c3r-bandwidth0.1.json"),
+    ("C3r, `baseline_bandwidth=0.1, baseline_detrend=True` (C1d)", "c3r-c1d-bandwidth0.1.json"),
 )
 FLOOR_FOLDER = Path(__file__).resolve().parent / "results" / "floor"
 
@@ -112,6 +119,8 @@ def _advantage_row(optimizer, draw, contexts, returns, generation, draws, rng) -
         ]
     )
     error = (returns - advantages) - expected  # V(s_k) − E[R | s_k]
+    error_of_mean = mean + contexts @ draw.shift.T - draw.problem.optimum  # m(s_k) − θ*(s_k)
+    eigenvalues = np.linalg.eigvalsh(optimizer.policy.cov)  # C's condition: max_condition stops at 1e14
     theta_part = returns - expected
     regret = draw.regret(draw.test_contexts, optimizer.policy.mean(draw.test_contexts)).mean()
     return {
@@ -124,6 +133,8 @@ def _advantage_row(optimizer, draw, contexts, returns, generation, draws, rng) -
         "context_effect_std": float(np.std(expected)),
         "tau_advantages_theta": float(kendalltau(advantages, theta_part).statistic),
         "baseline_r2": explained,
+        "condition": float(eigenvalues[-1] / eigenvalues[0]),
+        "theta_error_rms": float(np.sqrt(np.mean(np.square(error_of_mean)))),
     }
 
 

@@ -90,8 +90,13 @@ def environment_record() -> dict[str, str]:
     except OSError:
         pass
     versions = {name: metadata.version(name) for name in ("numpy", "scipy", "creps_gym")}
-    return {"python": sys.version.split()[0], **versions, "platform": platform.platform(), "cpu": cpu,
-            "cores": str(os.cpu_count())}  # fmt: skip
+    return {
+        "python": sys.version.split()[0],
+        **versions,
+        "platform": platform.platform(),
+        "cpu": cpu,
+        "cores": str(os.cpu_count()),
+    }
 
 
 def _curve_indices(generations: int) -> list[int]:
@@ -106,9 +111,14 @@ def run_protocol(spec: ProtocolSpec, checkpoint_dir: Path | None = None) -> dict
     draw = draw_run(problem, spec.seed)
     start = time.perf_counter()
     optimizer = make_optimizer(
-        spec.method, N_PARAMS, problem.context_dim, seed=draw.optimizer_seed,
-        initial_mean=draw.initial_mean, initial_cov=problem.sigma0**2, **dict(spec.options),
-    )  # fmt: skip
+        spec.method,
+        N_PARAMS,
+        problem.context_dim,
+        seed=draw.optimizer_seed,
+        initial_mean=draw.initial_mean,
+        initial_cov=problem.sigma0**2,
+        **dict(spec.options),
+    )
     averages, regrets, running, hit, stop_reason = [], [], [], None, "budget"
     for generation in range(problem.generations):
         contexts = draw.contexts(GENERATION)

@@ -79,8 +79,14 @@ def protocol_table(documents: Sequence[dict[str, Any]], published: dict[str, Any
     ours = _columns(documents)
     cells = _by_cell(documents)
     printed = {(v["function"], v["method"]): v["printed"] for v in published["values"]}
-    head = ["function", "n_s", "generations", *published["methods"], "hyperparameter study: best",
-            *(f"{c} (ours)" for c in ours)]  # fmt: skip
+    head = [
+        "function",
+        "n_s",
+        "generations",
+        *published["methods"],
+        "hyperparameter study: best",
+        *(f"{c} (ours)" for c in ours),
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for name, problem in PROBLEMS.items():
         row = [name, str(problem.context_dim), str(problem.generations)]
@@ -133,8 +139,18 @@ def tuned_table(published: dict[str, Any]) -> str:
 def regret_table(documents: Sequence[dict[str, Any]]) -> str:
     """Markdown: per (function, column), the median episodes to a mean test regret ≤ 1e-5 (a run that missed
     counts as infinitely many), the runs that got there, and the final regret's median, mean and worst."""
-    head = ["function", "column", "episodes to 1e-5 (median)", "runs at 1e-5", "final regret: median",
-            "mean", "worst", "runs restarted", "running mean's final regret: median", "worst"]  # fmt: skip
+    head = [
+        "function",
+        "column",
+        "episodes to 1e-5 (median)",
+        "runs at 1e-5",
+        "final regret: median",
+        "mean",
+        "worst",
+        "runs restarted",
+        "running mean's final regret: median",
+        "worst",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     cells = _by_cell(documents)
     for name, problem in PROBLEMS.items():

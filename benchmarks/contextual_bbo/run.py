@@ -104,8 +104,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     start = time.perf_counter()
     cached = sum((args.cache / f"{spec.key}.json").exists() for spec in specs)
     recompute = args.mode == "quick" and not args.render_only
-    documents = run_all(specs, args.cache, workers=args.workers, worker=run_protocol,
-                        compute=not args.render_only, recompute=recompute)  # fmt: skip
+    documents = run_all(
+        specs,
+        args.cache,
+        workers=args.workers,
+        worker=run_protocol,
+        compute=not args.render_only,
+        recompute=recompute,
+    )
     if not documents:
         print(f"no cached runs in {args.cache}: nothing to render")
         return 1

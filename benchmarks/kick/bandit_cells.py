@@ -57,8 +57,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         states = read_json(path)
         last = max(states, key=int)
         shares, rewards = row_shares(states[last])
-        print(f"{name} at iteration {last}: shares {', '.join(f'{s:.2f}' for s in shares)}; "
-              f"mean reward {', '.join(f'{r:.3g}' for r in rewards)}")  # fmt: skip
+        print(
+            f"{name} at iteration {last}: shares {', '.join(f'{s:.2f}' for s in shares)}; "
+            f"mean reward {', '.join(f'{r:.3g}' for r in rewards)}"
+        )
     return 0
 
 

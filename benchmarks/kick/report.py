@@ -89,12 +89,24 @@ def collect(out: Path, mode: str, budgets: dict[str, Any], selectors: bool = Tru
         for run in sorted(
             _runs(out / "runs" / experiment, experiment), key=lambda r: (r["name"], r["trial"])
         ):
-            entry = document[experiment].setdefault(run["name"], {
-                per_trial: [], per_point: [], "trials": [], "iterations": [], "stopped": [], "curves": [],
-                "training_contexts": [], "late_fall_rate": [], "final_spread": [],
-                "features": run["features"], "options": run["options"],
-                "samples": run["samples"], "budget_iterations": run["budget_iterations"],
-            })  # fmt: skip
+            entry = document[experiment].setdefault(
+                run["name"],
+                {
+                    per_trial: [],
+                    per_point: [],
+                    "trials": [],
+                    "iterations": [],
+                    "stopped": [],
+                    "curves": [],
+                    "training_contexts": [],
+                    "late_fall_rate": [],
+                    "final_spread": [],
+                    "features": run["features"],
+                    "options": run["options"],
+                    "samples": run["samples"],
+                    "budget_iterations": run["budget_iterations"],
+                },
+            )
             sources[f"{experiment}/{run['name']}-trial{run['trial']}"] = run.get("provenance")
             entry[per_trial].append(float(np.mean(run["values"])))
             entry[per_point].append(run["values"])
@@ -335,8 +347,9 @@ def plot(document: dict[str, Any], out: Path) -> None:
         if name == "oracle" and len(entry["target_errors"]) != len(TARGETS):
             continue
         errors = np.asarray(entry["target_errors"]).reshape(-1, len(TARGETS))
-        axes[0].errorbar(TARGETS, errors.mean(0), errors.std(0), marker="o", capsize=3, label=name,
-                         color=colours[name])  # fmt: skip
+        axes[0].errorbar(
+            TARGETS, errors.mean(0), errors.std(0), marker="o", capsize=3, label=name, color=colours[name]
+        )
     axes[0].set(xlabel="target distance s [m]", ylabel="distance to target [m]", title="Kick precision")
     twin = axes[1].twinx()
     twin.set_ylabel("flexibility: forward distance [m] (dashed)")
@@ -347,8 +360,14 @@ def plot(document: dict[str, Any], out: Path) -> None:
             for curve in curves:  # each trial thin, the mean over the trials (where all ran) bold
                 ax.plot(*np.asarray(curve).T, ls=style, color=colours[name], alpha=0.25, lw=0.8)
             if mean := _mean_curve(curves):
-                ax.plot(list(mean), list(mean.values()), ls=style, color=colours[name], lw=2,
-                        label=f"{experiment[:4]} {name}")  # fmt: skip
+                ax.plot(
+                    list(mean),
+                    list(mean.values()),
+                    ls=style,
+                    color=colours[name],
+                    lw=2,
+                    label=f"{experiment[:4]} {name}",
+                )
     axes[1].set(
         xlabel="iteration",
         ylabel="precision error [m] (solid)",

@@ -127,22 +127,29 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="override the mode's iterations (a screening budget; rerun without it to resume to the mode's)",
     )
     parser.add_argument(
-        "--trial-indices", type=int, nargs="+", default=None,
+        "--trial-indices",
+        type=int,
+        nargs="+",
+        default=None,
         help="run only these trials (0-based; e.g. one trial per process on another core)",
-    )  # fmt: skip
+    )
     parser.add_argument("--render-only", action="store_true", help="compute nothing; render finished runs")
     parser.add_argument("--out", type=Path, default=None, help="default: benchmarks/kick/results/<mode>")
     parser.add_argument("--threads", type=int, default=0, help="simulation threads (0: all CPUs)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--checkpoint-every", type=int, default=10)
     parser.add_argument(
-        "--contexts", choices=[*TRAINING_CONTEXTS, *SELECTED_CONTEXTS], default=None,
+        "--contexts",
+        choices=[*TRAINING_CONTEXTS, *SELECTED_CONTEXTS],
+        default=None,
         help="training contexts of every experiment (default: TRAINING's); runs go to results/<mode>-<NAME>",
-    )  # fmt: skip
+    )
     parser.add_argument(
-        "--features", choices=FEATURES, default=None,
+        "--features",
+        choices=FEATURES,
+        default=None,
         help="mean features of every method (default: METHODS'); runs go to results/<mode>-features-<NAME>",
-    )  # fmt: skip
+    )
     parser.add_argument(
         "--opt",
         action="append",
@@ -206,8 +213,15 @@ def run_specs(args: argparse.Namespace, options: dict[str, Any] | None = None) -
         for name, features, method_options in methods:
             if args.methods is None or name in args.methods:
                 options = {**method_options, **extra}
-                spec = RunSpec(experiment, name, SAMPLES[experiment], iterations, args.features or features,
-                               options, args.contexts or TRAINING[experiment])  # fmt: skip
+                spec = RunSpec(
+                    experiment,
+                    name,
+                    SAMPLES[experiment],
+                    iterations,
+                    args.features or features,
+                    options,
+                    args.contexts or TRAINING[experiment],
+                )
                 runs.append((spec, args.trials or trials))
     return runs
 
@@ -227,19 +241,36 @@ def compute(args: argparse.Namespace) -> None:
         for experiment in experiments:
             env = envs.setdefault(experiment, make_env(experiment, args.threads))
             for index in range(len(evaluation_contexts(experiment))):
-                result = oracle_point(env, experiment, index, MODES[args.mode]["oracle"], args.seed,
-                                      args.out / "runs" / experiment, fresh=args.mode == "quick")  # fmt: skip
+                result = oracle_point(
+                    env,
+                    experiment,
+                    index,
+                    MODES[args.mode]["oracle"],
+                    args.seed,
+                    args.out / "runs" / experiment,
+                    fresh=args.mode == "quick",
+                )
                 print(f"{experiment} oracle at {result['context']}: {result['value']:.2f} m", flush=True)
     if args.only == "oracle":
         return
     for spec, trials in run_specs(args):
         env = envs.setdefault(spec.experiment, make_env(spec.experiment, args.threads))
         for trial in trial_numbers(args, trials):
-            result = train_run(spec, env, trial, args.seed, args.out / "runs" / spec.experiment,
-                               args.checkpoint_every, fresh=args.mode == "quick")  # fmt: skip
+            result = train_run(
+                spec,
+                env,
+                trial,
+                args.seed,
+                args.out / "runs" / spec.experiment,
+                args.checkpoint_every,
+                fresh=args.mode == "quick",
+            )
             metric = sum(result["values"]) / len(result["values"])
-            print(f"{spec.experiment} {spec.name} trial {trial}: {metric:.2f} m "
-                  f"after {result['iterations']} iterations", flush=True)  # fmt: skip
+            print(
+                f"{spec.experiment} {spec.name} trial {trial}: {metric:.2f} m "
+                f"after {result['iterations']} iterations",
+                flush=True,
+            )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -69,9 +69,12 @@ SECTION = "Training contexts (uniform, arcsine, the learning selectors) and mean
 METRICS = {
     "precision": {"value": "error", "unit": "m", "lower_is_better": True, "contexts": "training targets"},
     "flexibility": {
-        "value": "forward distance", "unit": "m", "lower_is_better": False, "contexts": "training positions",
+        "value": "forward distance",
+        "unit": "m",
+        "lower_is_better": False,
+        "contexts": "training positions",
     },
-}  # fmt: skip
+}
 
 
 def comparison_folders(out: Path) -> list[Path]:
@@ -92,12 +95,23 @@ def _rows(folder: str, entries: dict[str, Any], per_trial: str) -> list[dict[str
         if method == "oracle":
             continue
         for k, law in enumerate(entry["training_contexts"]):
-            row = rows.setdefault((method, law), {
-                "folder": folder, "method": method, "contexts": law, "features": entry["features"],
-                "samples": entry["samples"],
-                "budget_iterations": entry["budget_iterations"], "trials": [], "finals": [],
-                "iterations": [], "curves": [], "late_fall_rate": [], "final_spread": [],
-            })  # fmt: skip
+            row = rows.setdefault(
+                (method, law),
+                {
+                    "folder": folder,
+                    "method": method,
+                    "contexts": law,
+                    "features": entry["features"],
+                    "samples": entry["samples"],
+                    "budget_iterations": entry["budget_iterations"],
+                    "trials": [],
+                    "finals": [],
+                    "iterations": [],
+                    "curves": [],
+                    "late_fall_rate": [],
+                    "final_spread": [],
+                },
+            )
             final, iterations = entry[per_trial][k], entry["iterations"][k]
             curve = [[int(i), float(v)] for i, v in entry["curves"][k] if int(i) < iterations]
             row["trials"].append(entry["trials"][k])
@@ -126,15 +140,22 @@ def comparison(documents: dict[str, dict[str, Any]], metrics: dict[str, tuple[st
     for experiment, (per_trial, _) in metrics.items():
         prefix = f"{experiment}/"
         in_progress = {
-            name: {run.removeprefix(prefix): done for run, done in documents[name]["in_progress"].items()
-                   if run.startswith(prefix)}
+            name: {
+                run.removeprefix(prefix): done
+                for run, done in documents[name]["in_progress"].items()
+                if run.startswith(prefix)
+            }
             for name in names[1:]
-        }  # fmt: skip
+        }
         in_progress = {name: runs for name, runs in in_progress.items() if runs}
         methods = {_method(run) for runs in in_progress.values() for run in runs}
         methods |= {method for name in names[1:] for method in documents[name][experiment]} - {"oracle"}
-        rows = [row for name in names for row in _rows(name, documents[name][experiment], per_trial)
-                if row["method"] in methods]  # fmt: skip
+        rows = [
+            row
+            for name in names
+            for row in _rows(name, documents[name][experiment], per_trial)
+            if row["method"] in methods
+        ]
         rows.sort(key=lambda r: (r["method"], order.get(r["contexts"], len(LAWS)), names.index(r["folder"])))
         data[experiment] = {"reference": TRAINING[experiment], "rows": rows, "in_progress": in_progress}
     data["flexibility"]["oracle_mean"] = oracle_mean(documents[names[0]]["flexibility"].get("oracle"))
@@ -232,8 +253,9 @@ def _experiment_table(experiment: str, data: dict[str, Any], mode: str, study: s
             "",
         ]
     if references:
-        targets = ", ".join(f"{m} {np.mean(r['finals']):.2f} {unit} (`results/{r['folder']}`)"
-                            for m, r in references.items())  # fmt: skip
+        targets = ", ".join(
+            f"{m} {np.mean(r['finals']):.2f} {unit} (`results/{r['folder']}`)" for m, r in references.items()
+        )
         lines += [f"Reference ({reference_law}, the study's training law), final {what}: {targets}.", ""]
     if rows:
         header = (
@@ -298,8 +320,11 @@ def same_features_table(experiment: str, data: dict[str, Any]) -> list[str]:
     for row in data["rows"]:
         if row["contexts"] == "uniform":
             uniform.setdefault((row["method"], row["features"]), row)
-    pairs = [(row, uniform[(row["method"], row["features"])]) for row in data["rows"]
-             if row["contexts"] != "uniform" and (row["method"], row["features"]) in uniform]  # fmt: skip
+    pairs = [
+        (row, uniform[(row["method"], row["features"])])
+        for row in data["rows"]
+        if row["contexts"] != "uniform" and (row["method"], row["features"]) in uniform
+    ]
     if not pairs:
         return []
     lines = [

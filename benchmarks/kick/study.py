@@ -286,8 +286,13 @@ def train_run(
     stem = folder / f"{spec.name}-trial{trial}"
     result_path, ckpt, history_path = (stem.with_suffix(s) for s in (".json", ".npz", ".history.json"))
     selector, selector_path = context_selector(spec, env), stem.with_suffix(".selector.json")
-    setting = {"env": ENV_IDS[spec.experiment], "contexts": spec.contexts, "features": spec.features,
-               "options": spec.options, "samples": spec.samples}  # fmt: skip
+    setting = {
+        "env": ENV_IDS[spec.experiment],
+        "contexts": spec.contexts,
+        "features": spec.features,
+        "options": spec.options,
+        "samples": spec.samples,
+    }
     if result_path.exists() and not fresh:
         done = read_json(result_path)
         if done["budget_iterations"] == spec.iterations and stored_setting(done, spec.experiment) == setting:

@@ -302,8 +302,10 @@ def main(argv: list[str] | None = None) -> None:
     if args.render_only:
         path = HERE / f"results{suffix}.json"
         if not path.exists():  # the full results were computed before results.json existed
-            parser.error(f"--render-only: {path.name} not found; compute it: python benchmarks/reacher/run.py"
-                         + (" --quick" if args.quick else ""))  # fmt: skip
+            parser.error(
+                f"--render-only: {path.name} not found; compute it: python benchmarks/reacher/run.py"
+                + (" --quick" if args.quick else "")
+            )
         print(render(json.loads(path.read_text(encoding="utf-8")), suffix))
         return
     folder = HERE / f"runs{suffix}"

@@ -10,7 +10,10 @@ One iteration, for a batch of N samples (s_k, θ_k, R_k) drawn from π(θ|s) = N
 
 1. Advantages (C1): a_k = R_k − V(s_k), with V a ridge least-squares fit of the returns on a full quadratic in
    s (cross terms included); smaller batches fall back to an affine or a constant baseline. Optionally
-   (C1'') V is a local, kernel-weighted median of the recent returns (``baseline_bandwidth``).
+   (C1'') V is a local, kernel-weighted median of the recent returns (``baseline_bandwidth``), (C1d) that
+   median taken of the residuals of the polynomial fit (``baseline_detrend``), or (C1s) the
+   ridge scales with the fraction of the returns that the context leaves unexplained
+   (``baseline_ridge_scale``).
 2. Weights (C2): CMA-ES rank weights on the advantages, positive for the best ⌊N/2⌋, negative for the rest
    (active CMA, ``active=True``).
 3. Mean (C3): A = weighted least squares of θ on ϕ(s) over the positively weighted samples; optionally
@@ -55,6 +58,7 @@ from creps_gym.optimizers.contextual import (
     coefficient_shift,
     context_advantages,
     contextual_mean,
+    detrended_local_advantages,
     local_advantages,
     recent_samples,
 )
@@ -187,6 +191,16 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
         """a_k = R_k − V(s_k) of a batch and the fraction of its variance V explains (C1), (C1'')."""
         config = self.config
         past = (self.past_contexts, self.past_returns)
+        if config.baseline_bandwidth > 0.0 and config.baseline_detrend:  # Eq. (C1d)
+            return detrended_local_advantages(
+                contexts,
+                returns,
+                config.baseline_bandwidth,
+                config.baseline_degree,
+                config.baseline_ridge,
+                *past,
+                config.baseline_ridge_scale,
+            )
         if config.baseline_bandwidth > 0.0:  # Eq. (C1'')
             return local_advantages(contexts, returns, config.baseline_bandwidth, *past)
         return context_advantages(  # Eq. (C1)
@@ -197,6 +211,7 @@ class CCMAES(PolicyAccess, ContextualOptimizer):
             *past,
             config.standardise_advantages,
             self._baseline_loss(),
+            config.baseline_ridge_scale,  # Eq. (C1s) with "unexplained"
         )
 
     def _step(self, contexts: Array, params: Array, weights: Array, constants: CMAConstants) -> _Step:

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from creps_gym._validation import check_bool, check_positive_int, check_real_in_range, check_seed
 from creps_gym.optimizers.cma_rules import CMAConstants, cma_constants, rank_weights
-from creps_gym.optimizers.contextual import LOSSES, check_local_baseline
+from creps_gym.optimizers.contextual import BASELINE_RIDGE_SCALES, LOSSES, check_local_baseline
 from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import initial_coefficients, initial_covariance, split_step_size
 
@@ -22,6 +22,7 @@ __all__ = [
     "RESTART_LOSSES",
     "RIDGE_CENTRES",
     "SIGNALS",
+    "UNUSED_BY_DETRENDED_BASELINE",
     "UNUSED_BY_LOCAL_BASELINE",
     "CCMAESConfig",
     "options_doc",
@@ -30,7 +31,15 @@ __all__ = [
 
 Array = NDArray[np.float64]
 #: The options of C1's polynomial fit, which the local baseline (C1'') ignores: they must keep their defaults.
-UNUSED_BY_LOCAL_BASELINE = ("standardise_advantages", "baseline_loss", "baseline_degree", "baseline_ridge")
+UNUSED_BY_LOCAL_BASELINE = (
+    "standardise_advantages",
+    "baseline_loss",
+    "baseline_degree",
+    "baseline_ridge",
+    "baseline_ridge_scale",
+)
+#: Those of them that the detrended local baseline (C1d) ignores too (it uses the degree and the ridges).
+UNUSED_BY_DETRENDED_BASELINE = ("standardise_advantages", "baseline_loss")
 SIGNALS = ("coefficients", "mean")
 #: What the mean fit's ridge shrinks towards: 0 (C3, the classic ridge) or the old coefficients (C3r).
 RIDGE_CENTRES = ("zero", "old")
@@ -59,7 +68,13 @@ class CCMAESConfig:
         to a few outlying returns such as falls) for the fit of V (C1).
     baseline_bandwidth : float      0: the polynomial V above; h > 0: a local V, the kernel-weighted median of
         the recent returns with a Gaussian bandwidth of h context standard deviations (C1'').
+    baseline_detrend : bool         with ``baseline_bandwidth`` > 0: V is the polynomial fit of C1
+        (``baseline_degree``, ``baseline_ridge``, ``baseline_ridge_scale``) plus the local median of its
+        residuals (C1d), which has no slope bias at the ends of the context range.
     ridge, baseline_ridge : float   relative ridges of the mean fit (C3) and of the baseline (C1).
+    baseline_ridge_scale : str      ``"fixed"`` (C1) or ``"unexplained"`` (C1s: the baseline's ridge times the
+        fraction of the returns' variance a first fit leaves unexplained, so its bias, ``baseline_ridge``
+        times the context's effect on the returns, shrinks with the part θ decides).
     ridge_centre : str              what the mean fit's ridge shrinks towards: ``"zero"`` (C3: the slopes
         towards 0, a bias of ``ridge`` times the slopes that does not shrink with σ and floors the regret on
         ill-conditioned functions) or ``"old"`` (C3r: the step towards 0, i.e. the slopes towards the old
@@ -96,12 +111,14 @@ class CCMAESConfig:
     standardise_advantages: bool = False
     baseline_loss: str = "squared"
     baseline_bandwidth: float = 0.0
+    baseline_detrend: bool = False
     restarts: int = 3
     keep_best: bool = True
     restart_baseline_loss: str | None = OTHER_LOSS
     step_size_signal: str = "mean"
     ridge: float = 1e-8
     baseline_ridge: float = 1e-10
+    baseline_ridge_scale: str = "fixed"
     ridge_centre: str = "zero"
     c_sigma: float | None = None
     d_sigma: float | None = None
@@ -143,6 +160,7 @@ class CCMAESConfig:
         object.__setattr__(self, "keep_best", check_bool(self.keep_best, "keep_best"))
         standardise = check_bool(self.standardise_advantages, "standardise_advantages")
         object.__setattr__(self, "standardise_advantages", standardise)
+        object.__setattr__(self, "baseline_detrend", check_bool(self.baseline_detrend, "baseline_detrend"))
 
     def _check_choices(self) -> None:
         if self.baseline_loss not in LOSSES:
@@ -152,11 +170,15 @@ class CCMAESConfig:
             raise ValueError(
                 f"restart_baseline_loss: expected one of {RESTART_LOSSES}, got {self.restart_baseline_loss!r}"
             )
-        if not isinstance(self.ridge_centre, str):
-            got = type(self.ridge_centre).__name__
-            raise TypeError(f"ridge_centre: expected one of {RIDGE_CENTRES}, got {got}")
-        if self.ridge_centre not in RIDGE_CENTRES:
-            raise ValueError(f"ridge_centre: expected one of {RIDGE_CENTRES}, got {self.ridge_centre!r}")
+        for name, choices in (
+            ("ridge_centre", RIDGE_CENTRES),
+            ("baseline_ridge_scale", BASELINE_RIDGE_SCALES),
+        ):
+            value = getattr(self, name)
+            if not isinstance(value, str):
+                raise TypeError(f"{name}: expected one of {choices}, got {type(value).__name__}")
+            if value not in choices:
+                raise ValueError(f"{name}: expected one of {choices}, got {value!r}")
         if self.step_size_signal not in SIGNALS:
             raise ValueError(f"step_size_signal: expected one of {SIGNALS}, got {self.step_size_signal!r}")
 
@@ -182,7 +204,10 @@ class CCMAESConfig:
         if self.mean_repulsion > 0.0 and not self.active:  # it repels the negatively weighted samples
             raise ValueError(f"mean_repulsion: expected 0 with active=False, got {self.mean_repulsion}")
         defaults = {option.name: option.default for option in fields(self)}
-        unused = {name: (getattr(self, name), defaults[name]) for name in UNUSED_BY_LOCAL_BASELINE}
+        if self.baseline_detrend and self.baseline_bandwidth == 0.0:  # C1d detrends the local baseline
+            raise ValueError("baseline_detrend: expected False with baseline_bandwidth = 0, got True")
+        names = UNUSED_BY_DETRENDED_BASELINE if self.baseline_detrend else UNUSED_BY_LOCAL_BASELINE
+        unused = {name: (getattr(self, name), defaults[name]) for name in names}
         check_local_baseline(self.baseline_bandwidth, unused)
         if self.baseline_bandwidth > 0.0 and self.restart_baseline_loss in LOSSES:  # C1'' has no loss
             got = self.restart_baseline_loss

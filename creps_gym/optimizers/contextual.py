@@ -19,18 +19,25 @@ from creps_gym.optimizers.features import FeatureMap, PolynomialFeatures
 from creps_gym.optimizers.policies import weighted_ml_fit
 
 __all__ = [
+    "BASELINE_RIDGE_SCALES",
     "MIN_BANDWIDTH",
+    "MIN_UNEXPLAINED",
     "baseline_features",
     "check_local_baseline",
     "coefficient_shift",
     "context_advantages",
     "contextual_mean",
+    "detrended_local_advantages",
     "local_advantages",
     "recent_samples",
     "robust_refit",
+    "scaled_ridge",
 ]
 
 LOSSES = ("squared", "huber")
+#: How the baseline's ridge scales: ``"fixed"`` (C1) or ``"unexplained"`` (C1s, :func:`scaled_ridge`).
+BASELINE_RIDGE_SCALES = ("fixed", "unexplained")
+MIN_UNEXPLAINED = 1e-6  # the smallest factor of C1s: the ridge stays >= 1e-6 of its value (conditioning)
 MIN_BANDWIDTH = 1e-3  # the local baseline's smallest bandwidth: below it the kernel weighs nothing but s_k
 HUBER_K = 1.345  # the Huber threshold in robust standard deviations: 95 % efficiency for Gaussian residuals
 
@@ -75,6 +82,7 @@ def context_advantages(
     past_returns: Array | None = None,
     standardise: bool = False,
     loss: str = "squared",
+    ridge_scale: str = "fixed",
 ) -> tuple[Array, float]:
     """a_k = R_k − V(s_k), Eq. (C1), and the fraction of the batch returns' variance that V explains.
 
@@ -97,9 +105,15 @@ def context_advantages(
         Divide each advantage by a context-dependent scale √v(s), with v a least-squares fit of the squared
         advantages on the same features (floored at 1 % of their mean), so that contexts where the returns
         spread widely do not take all the top and bottom ranks.
+    loss : str
+        ``"squared"`` (least squares) or ``"huber"`` (:func:`robust_refit`).
+    ridge_scale : str
+        ``"fixed"``: the ridge as given. ``"unexplained"``, Eq. (C1s): see :func:`scaled_ridge`.
     """
     if loss not in LOSSES:
         raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
+    if ridge_scale not in BASELINE_RIDGE_SCALES:
+        raise ValueError(f"ridge_scale: expected one of {BASELINE_RIDGE_SCALES}, got {ridge_scale!r}")
     n, z = contexts.shape
     all_contexts, all_returns = _with_past(contexts, returns, past_contexts, past_returns)
     features = baseline_features(all_returns.shape[0], z, degree)
@@ -111,6 +125,9 @@ def context_advantages(
     uniform = np.full(all_returns.shape[0], 1.0 / all_returns.shape[0])
     scale = float(np.abs(all_returns).max()) or 1.0  # the fit is linear in R; scaling keeps it in range
     fit = weighted_ml_fit(phi, all_returns[:, None] / scale, uniform, ridge, features.constant_column)
+    if ridge_scale == "unexplained" and ridge > 0.0:  # Eq. (C1s): the ridge shrinks with the unexplained part
+        ridge = scaled_ridge(ridge, all_returns / scale, (phi @ fit)[:, 0])
+        fit = weighted_ml_fit(phi, all_returns[:, None] / scale, uniform, ridge, features.constant_column)
     if loss == "huber":
         fit = robust_refit(phi, all_returns / scale, fit, ridge, features.constant_column)
     residuals = all_returns / scale - (phi @ fit)[:, 0]
@@ -123,6 +140,26 @@ def context_advantages(
         ]
         advantages = advantages / np.sqrt(np.maximum(variance[-n:], 0.01 * squares.mean()))
     return advantages, explained
+
+
+def scaled_ridge(ridge: float, targets: Array, fitted: Array) -> float:
+    """The baseline's ridge of Eq. (C1s): ``ridge`` times the fraction 1 − R² of the targets' variance that a
+    first fit leaves unexplained, clipped to [:data:`MIN_UNEXPLAINED`, 1].
+
+    A ridge on the standardised features shrinks V's slopes by about ``ridge`` of their size, an error of
+    ``ridge`` times the context's effect on the returns. Where that effect does not vanish at the optimum
+    (a best return that depends on s), a fixed ridge floors the ranking once the part of the returns that θ
+    decides falls below it; scaled by 1 − R², the error is about ``ridge`` times that part squared over the
+    context's effect, so it shrinks with the search. Scaling or shifting the returns does not change it.
+
+    Parameters
+    ----------
+    ridge : float
+    targets, fitted : ndarray, shape (M,)
+        The returns the baseline is fitted on and the first fit's values at them.
+    """
+    unexplained = 1.0 - _explained(targets, targets - fitted)
+    return ridge * min(max(unexplained, MIN_UNEXPLAINED), 1.0)
 
 
 def check_local_baseline(bandwidth: float, polynomial_options: Mapping[str, tuple[Any, Any]]) -> None:
@@ -204,6 +241,44 @@ def local_advantages(
             f" ±{scale:.3g} against a local baseline of the opposite sign); rescale the returns"
         )
     return advantages, explained
+
+
+def detrended_local_advantages(
+    contexts: Array,
+    returns: Array,
+    bandwidth: float,
+    degree: int,
+    ridge: float,
+    past_contexts: Array | None = None,
+    past_returns: Array | None = None,
+    ridge_scale: str = "fixed",
+) -> tuple[Array, float]:
+    """a_k = R_k − V(s_k) with V the polynomial fit of Eq. (C1) plus the local median (C1'') of its residuals,
+    Eq. (C1d), and the fraction of the batch returns' variance V explains.
+
+    The polynomial takes the trend of the returns over the contexts, which a local median follows only to
+    about its slope times the bandwidth (more at the ends of the context range, where the kernel is
+    one-sided); the median of the residuals follows what the polynomial cannot, such as the kink of a
+    cone-shaped optimum's E[R | s] (issue 45: GECCO 2019's Different Powers). Both are fitted on the batch
+    and the reused samples, whose residuals are those of this batch's polynomial.
+
+    Parameters
+    ----------
+    contexts, returns, past_contexts, past_returns
+        As in :func:`context_advantages`.
+    bandwidth : float
+        The local median's h, as in :func:`local_advantages`.
+    degree, ridge, ridge_scale
+        The polynomial fit's, as in :func:`context_advantages`.
+    """
+    all_contexts, all_returns = _with_past(contexts, returns, past_contexts, past_returns)
+    residuals, _ = context_advantages(all_contexts, all_returns, degree, ridge, ridge_scale=ridge_scale)
+    reused = all_returns.shape[0] - returns.shape[0]
+    advantages, _ = local_advantages(
+        contexts, residuals[reused:], bandwidth, all_contexts[:reused], residuals[:reused]
+    )
+    scale = float(np.abs(all_returns).max()) or 1.0
+    return advantages, _explained(returns / scale, advantages / scale)
 
 
 def robust_refit(

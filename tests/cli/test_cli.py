@@ -11,7 +11,7 @@ from dataclasses import fields
 from pathlib import Path
 
 import pytest
-from helpers import EXTRAS, SPHERE, cli_in_process
+from helpers import EXTRAS, SPHERE, cli_in_process, run_argv
 
 import creps_gym
 from creps_gym.cli import main
@@ -22,8 +22,9 @@ cli = cli_in_process  # the commands' behaviour; a process only where the test i
 
 
 def run_args(out, *extra, seed=0):
-    return ["run", "--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 6, "--samples", 10,
-            "--seed", seed, "--out", out, "--env-kwarg", "dim=4", "--eval-every", 2, *extra]  # fmt: skip
+    """A 6-iteration CREPS-CMA run of the 4-D sphere into ``out``, then ``extra``."""
+    short = ("--samples", 10, "--env-kwarg", "dim=4", "--eval-every", 2)
+    return run_argv(out, *short, *extra, optimizer="creps-cma-old", iterations=6, seed=seed)
 
 
 def test_console_script_is_installed():

@@ -4,7 +4,7 @@ directory is written (issue 15, item 11)."""
 from __future__ import annotations
 
 import pytest
-from helpers import SPHERE
+from helpers import SPHERE, run_argv
 
 from creps_gym.cli import EXIT_CODES, main
 from creps_gym.optimizers import CCMAES
@@ -12,19 +12,9 @@ from creps_gym.runner import run
 
 
 def run_args(out, *extra, samples=10):
-    sizes = ["--iterations", "2", "--samples", str(samples), "--seed", "0", "--env-kwarg", "dim=3"]
-    return [
-        "run",
-        "--env",
-        SPHERE,
-        "--optimizer",
-        "creps-cma-old",
-        *sizes,
-        "--out",
-        str(out),
-        "--no-plot",
-        *extra,
-    ]
+    """A 2-iteration CREPS-CMA run of the 3-D sphere into ``out``, then ``extra``."""
+    short = ("--samples", samples, "--env-kwarg", "dim=3", "--no-plot")
+    return run_argv(out, *short, *extra, optimizer="creps-cma-old")
 
 
 def test_an_epsilon_too_large_for_the_batch_is_a_usage_error_and_leaves_nothing_behind(tmp_path, capsys):
@@ -64,8 +54,24 @@ def test_the_python_api_checks_the_batch_before_writing_the_run_directory(tmp_pa
 
 def test_the_small_batch_command_of_issue_31_exits_2_naming_the_minimum(tmp_path, capsys):
     """``--samples 5`` for c-cma-es on a 5-D Sphere diverged (regret 11.5 -> 3.5e9, exit 0); now refused."""
-    args = ["run", "--env", SPHERE, "--env-kwarg", "dim=5", "--optimizer", "c-cma-es", "--samples", "5",
-            "--iterations", "400", "--seed", "0", "--out", str(tmp_path / "s5"), "--no-plot"]  # fmt: skip
+    args = [
+        "run",
+        "--env",
+        SPHERE,
+        "--env-kwarg",
+        "dim=5",
+        "--optimizer",
+        "c-cma-es",
+        "--samples",
+        "5",
+        "--iterations",
+        "400",
+        "--seed",
+        "0",
+        "--out",
+        str(tmp_path / "s5"),
+        "--no-plot",
+    ]
     assert main(args) == EXIT_CODES["usage"]
     error = capsys.readouterr().err
     assert "argument --samples: expected at least 10 episodes per iteration for 'c-cma-es'" in error

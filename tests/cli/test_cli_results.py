@@ -23,8 +23,13 @@ SMALL = {"eval_every": 1, "eval_contexts": 4, "env_kwargs": {"dim": 3}}
 def runs(tmp_path_factory):
     """Sphere p = 3: two seeds at N = 10, two at N = 12, one with epsilon = 0.8; one run on p = 4."""
     root = tmp_path_factory.mktemp("settings")
-    settings = [("n8-0", 0, 10, {}), ("n8-1", 1, 10, {}), ("n12-0", 0, 12, {}), ("n12-1", 1, 12, {}),
-                ("eps-0", 0, 10, {"epsilon": 0.8})]  # fmt: skip
+    settings = [
+        ("n8-0", 0, 10, {}),
+        ("n8-1", 1, 10, {}),
+        ("n12-0", 0, 12, {}),
+        ("n12-1", 1, 12, {}),
+        ("eps-0", 0, 10, {"epsilon": 0.8}),
+    ]
     for name, seed, samples, options in settings:
         run(
             "creps-cma-old", SPHERE, 5, samples, seed, run_dir=root / name, optimizer_options=options, **SMALL

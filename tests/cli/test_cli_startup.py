@@ -43,6 +43,20 @@ def test_help_and_list_import_no_heavy_module(argv):
 
 
 @pytest.mark.slow
+def test_a_run_imports_neither_scipy_stats_nor_scipy_optimize():
+    """Start-up time: ``creps-gym run`` imports the runner and every registered optimiser; scipy.stats
+    (0.5 s) is never needed, scipy.optimize (0.2 s) only once c-bo fits or maximises."""
+    result = _python(
+        """
+        import sys
+        import creps_gym.cli.run, creps_gym.runner, creps_gym.optimizers
+        print([name for name in ("scipy.stats", "scipy.optimize") if name in sys.modules])
+        """
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["[]"]
+
+
 def test_importing_the_package_registers_the_ids_when_gymnasium_is_imported_in_either_order():
     result = _python(
         """

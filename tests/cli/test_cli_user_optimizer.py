@@ -66,6 +66,7 @@ def test_the_guide_module_is_short_and_its_commands_run_resume_plot_and_export(t
 
 @pytest.mark.slow
 def test_without_import_every_command_refuses_the_run_and_names_the_flag(tmp_path):
+    """In processes: a user's optimiser registered by one command must not be known to the next."""
     work = _workspace(tmp_path)
     run = cli(*COMMANDS[0][:-2], "--out", "runs/x", "--iterations", "3", "--no-plot", cwd=work)
     assert run.returncode == 0, run.stderr
@@ -105,12 +106,13 @@ def _default_sigint() -> None:
 @pytest.mark.slow
 def test_ctrl_c_names_the_run_folder_and_resume_with_import_finishes_the_run(tmp_path):
     work = _workspace(tmp_path)
-    args = [*COMMANDS[0][:-2], "--out", "runs/long run", "--iterations", "1000000", "--max-time", "6",
-            "--checkpoint-every", "1", "--no-plot", "--no-progress"]  # fmt: skip
+    args = [*COMMANDS[0][:-2], "--out", "runs/long run", "--iterations", "1000000", "--max-time", "3"]
+    args += ["--checkpoint-every", "1", "--no-plot", "--no-progress"]
     # As a terminal's Ctrl-C finds it: a test run started in the background (`cmd &` in a script) inherits
     # SIGINT ignored, and the command rightly leaves an ignored SIGINT alone.
-    process = subprocess.Popen(cli_command(*args), cwd=work, stderr=subprocess.PIPE, text=True,
-                               preexec_fn=_default_sigint)  # fmt: skip
+    process = subprocess.Popen(
+        cli_command(*args), cwd=work, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint
+    )
     checkpoint = work / "runs" / "long run" / "checkpoint.npz"
     deadline = time.monotonic() + 120
     while not checkpoint.exists() and process.poll() is None and time.monotonic() < deadline:

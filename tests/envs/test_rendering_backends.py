@@ -50,8 +50,9 @@ def test_rendering_twice_headless_never_aborts(env_id: str, backend: str | None)
     second GLFW attempt used to cause."""
     pytest.importorskip("mujoco")
     env = _headless_env(**({"MUJOCO_GL": backend} if backend else {}))
-    out = subprocess.run([sys.executable, "-c", RENDER_TWICE, env_id], capture_output=True, text=True,
-                         env=env, timeout=300)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", RENDER_TWICE, env_id], capture_output=True, text=True, env=env, timeout=300
+    )
     if "No module named" in out.stderr:
         pytest.skip(f"an extra is missing: {out.stderr[-300:]}")
     assert out.returncode == 0, (out.returncode, out.stderr[-2000:])
@@ -132,8 +133,9 @@ POINT_MAZE_FIRST_FRAME = textwrap.dedent(
 @EXTRAS
 @pytest.mark.slow
 def test_point_maze_first_frame_draws_the_goal_marker_at_the_context() -> None:
-    out = subprocess.run([sys.executable, "-c", POINT_MAZE_FIRST_FRAME], capture_output=True, text=True,
-                         timeout=300)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", POINT_MAZE_FIRST_FRAME], capture_output=True, text=True, timeout=300
+    )
     if "No module named" in out.stderr:
         pytest.skip(f"an extra is missing: {out.stderr[-300:]}")
     assert out.returncode == 0, out.stderr[-2000:]

@@ -241,8 +241,16 @@ def test_cma_takes_pycma_options_flat_and_reports_its_own_stop_criteria(nested):
 @pytest.mark.slow
 def test_the_runner_gives_nevergrad_its_budget_and_ngopt_runs_on_this_numpy():
     # NGOpt picks its meta-model here, which calls float() on a one-element array (a TypeError on numpy 2.4)
-    history = run("nevergrad", "creps_gym/Sphere-v0", 6, 10, 0, env_kwargs={"dim": 3},
-                  optimizer_options={"optimizer": "NGOpt"}, run_dir=None)  # fmt: skip
+    history = run(
+        "nevergrad",
+        "creps_gym/Sphere-v0",
+        6,
+        10,
+        0,
+        env_kwargs={"dim": 3},
+        optimizer_options={"optimizer": "NGOpt"},
+        run_dir=None,
+    )
     assert np.isfinite(history.column("eval_regret")).all()
     runner_budgets = {}
     for max_episodes, expected in ((None, 60), (35, 35)):
@@ -262,8 +270,15 @@ def test_nevergrad_threads_are_stopped_by_close_and_by_the_runner():
         _drive(adapter, 3, n=4)
         assert threading.active_count() > baseline
     assert threading.active_count() == baseline
-    history = run("nevergrad", "creps_gym/Sphere-v0", 3, 4, 0, env_kwargs={"dim": 3},
-                  optimizer_options={"optimizer": "Carola3"})  # fmt: skip
+    history = run(
+        "nevergrad",
+        "creps_gym/Sphere-v0",
+        3,
+        4,
+        0,
+        env_kwargs={"dim": 3},
+        optimizer_options={"optimizer": "Carola3"},
+    )
     assert len(history) == 3 and threading.active_count() == baseline
 
 

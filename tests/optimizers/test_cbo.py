@@ -17,7 +17,13 @@ import pytest
 from creps_gym.optimizers import make_optimizer
 from creps_gym.optimizers.acquisitions import gumbel_max_values, mes, ucb
 from creps_gym.optimizers.cbo import ContextualBO
-from creps_gym.optimizers.gp_model import fit_gp, log_marginal_likelihood, matern52, transformed_returns
+from creps_gym.optimizers.gp_model import (
+    fit_gp,
+    log_marginal_likelihood,
+    matern52,
+    mean_ranks,
+    transformed_returns,
+)
 
 H = 1e-6
 
@@ -136,6 +142,18 @@ def test_the_log_transform_keeps_the_order_and_compresses_the_tail():
     assert (np.diff(values) < 0).all()
     assert values[2] - values[3] < 30 * (values[1] - values[2])  # not 9998 times the gap: about 23
     assert transformed_returns(returns, "none", "min").min() == 0.0
+
+
+@pytest.mark.parametrize("distinct", [1, 2, 3, 7, 1000])
+def test_mean_ranks_are_scipys_average_ranks_bit_for_bit(distinct):
+    """The rank transform's ranks (ties share their mean rank) are ``scipy.stats.rankdata``'s."""
+    from scipy.stats import rankdata
+
+    rng = np.random.default_rng(distinct)
+    for n in (1, 2, 9, 500):
+        values = rng.integers(0, distinct, n) * 0.1 if distinct < 1000 else rng.standard_normal(n)
+        assert np.array_equal(mean_ranks(values), rankdata(values))
+    assert mean_ranks(np.array([3.0, -1.0, 3.0, 3.0])).tolist() == [3.0, 1.0, 3.0, 3.0]
 
 
 def _sphere_regret(optimizer, matrix, contexts):

@@ -530,7 +530,7 @@ def test_recommended_batch_size_grows_with_dimension_and_context():
         (
             {"baseline_bandwidth": 0.3, "baseline_loss": "huber"},
             ValueError,
-            r"with baseline_bandwidth > 0, got \(False, 'huber', 2, 1e-10\)",
+            r"with baseline_bandwidth > 0, got \(False, 'huber', 2, 1e-10, 'fixed'\)",
         ),
         ({"baseline_bandwidth": 0.3, "standardise_advantages": True}, ValueError, "standardise_advantages"),
         ({"baseline_bandwidth": 0.3, "baseline_degree": 4}, ValueError, "baseline_degree"),

@@ -59,9 +59,15 @@ def test_the_option_is_validated():
 
 @pytest.mark.parametrize(
     ("baseline_loss", "restart_baseline_loss", "expected"),
-    [("squared", "other", "huber"), ("huber", "other", "squared"), ("huber", None, "huber"),
-     ("squared", None, "squared"), ("huber", "huber", "huber"), ("squared", "huber", "huber")],
-)  # fmt: skip
+    [
+        ("squared", "other", "huber"),
+        ("huber", "other", "squared"),
+        ("huber", None, "huber"),
+        ("squared", None, "squared"),
+        ("huber", "huber", "huber"),
+        ("squared", "huber", "huber"),
+    ],
+)
 def test_the_restart_loss_of_each_setting(baseline_loss, restart_baseline_loss, expected):
     """C11: ``"other"`` (the default) alternates the two losses, None keeps ``baseline_loss``."""
     config = CCMAES(3, 1, baseline_loss=baseline_loss, restart_baseline_loss=restart_baseline_loss).config
@@ -130,11 +136,21 @@ def test_different_powers_at_z3_is_solved_after_a_restart_with_huber():
 
     def regrets(**options):
         history = run(
-            "c-cma-es", "creps_gym/DifferentPowers-v0", iterations=900, samples_per_iteration=50, seed=2,
-            env_kwargs={"dim": 15, "context_dim": 3}, optimizer_options=options, target_regret=1e-5,
-            eval_every=1, eval_contexts=16, backend="vector", vector_mode="native", context_draws="reset",
+            "c-cma-es",
+            "creps_gym/DifferentPowers-v0",
+            iterations=900,
+            samples_per_iteration=50,
+            seed=2,
+            env_kwargs={"dim": 15, "context_dim": 3},
+            optimizer_options=options,
+            target_regret=1e-5,
+            eval_every=1,
+            eval_contexts=16,
+            backend="vector",
+            vector_mode="native",
+            context_draws="reset",
             divergence=None,
-        )  # fmt: skip
+        )
         return history.column("eval_regret"), history.column("diag.restarts")
 
     huber, restarts = regrets()  # the default portfolio

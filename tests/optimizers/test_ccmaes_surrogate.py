@@ -95,8 +95,15 @@ def test_model_kind_grows_with_the_archive():
 
 def test_models_beyond_600_coefficients_are_never_used():
     assert [richest_kind(p, 1) for p in (15, 32, 33, 64, 199, 200, 598, 599)] == [
-        "full", "full", "diagonal", "diagonal", "diagonal", "linear", "linear", "none"
-    ]  # fmt: skip
+        "full",
+        "full",
+        "diagonal",
+        "diagonal",
+        "diagonal",
+        "linear",
+        "linear",
+        "none",
+    ]
     assert choose_kind(10**6, 64, 1, 1.0) == "diagonal"
     config = CCMAESSurrogate(64, 1).config
     assert config.archive_size == 2 * model_coefficients("diagonal", 64, 1)

@@ -273,60 +273,30 @@ def assert_unchanged(before, optimizer):
             assert value == after[key], key
 
 
-@pytest.mark.parametrize(
-    ("contexts", "params", "returns", "error", "match"),
-    [
-        (
-            np.zeros((4, 3)),
-            np.zeros((4, 3)),
-            np.zeros(4),
-            ValueError,
-            r"contexts: expected shape \(n, 2\), got \(4, 3\)",
-        ),
-        (
-            np.zeros((4, 2)),
-            np.zeros((4, 2)),
-            np.zeros(4),
-            ValueError,
-            r"params: expected shape \(4, 3\), got \(4, 2\)",
-        ),
-        (
-            np.zeros((4, 2)),
-            np.zeros((4, 3)),
-            np.zeros(3),
-            ValueError,
-            r"returns: expected shape \(4,\), got \(3,\)",
-        ),
-        (
-            np.zeros((4, 2)),
-            np.zeros((4, 3)),
-            [0, 1, np.nan, 2],
-            ValueError,
-            "returns: expected finite values, got nan",
-        ),
-        (
-            np.zeros((4, 2)),
-            np.full((4, 3), np.inf),
-            np.zeros(4),
-            ValueError,
-            "params: expected finite values",
-        ),
-        (np.zeros((1, 2)), np.zeros((1, 3)), np.zeros(1), ValueError, "at least 2 samples per tell, got 1"),
-        (
-            np.zeros((4, 2)),
-            np.zeros((4, 3)),
-            "bad",
-            TypeError,
-            "returns: expected an array of real numbers, got str",
-        ),
-    ],
-)
-def test_bad_tell_input_raises_and_leaves_the_optimizer_unchanged(contexts, params, returns, error, match):
+#: Bad tells of a batch of 4 to ``fresh()`` (p = 3, z = 2): the entries that differ from a valid tell.
+BAD_TELLS = [
+    ({"contexts": np.zeros((4, 3))}, ValueError, r"contexts: expected shape \(n, 2\), got \(4, 3\)"),
+    ({"params": np.zeros((4, 2))}, ValueError, r"params: expected shape \(4, 3\), got \(4, 2\)"),
+    ({"returns": np.zeros(3)}, ValueError, r"returns: expected shape \(4,\), got \(3,\)"),
+    ({"returns": [0, 1, np.nan, 2]}, ValueError, "returns: expected finite values, got nan"),
+    ({"params": np.full((4, 3), np.inf)}, ValueError, "params: expected finite values"),
+    (
+        {"contexts": np.zeros((1, 2)), "params": np.zeros((1, 3)), "returns": np.zeros(1)},
+        ValueError,
+        "at least 2 samples per tell, got 1",
+    ),
+    ({"returns": "bad"}, TypeError, "returns: expected an array of real numbers, got str"),
+]
+
+
+@pytest.mark.parametrize(("bad", "error", "match"), BAD_TELLS)
+def test_bad_tell_input_raises_and_leaves_the_optimizer_unchanged(bad, error, match):
     optimizer = fresh()
     optimizer.ask(np.zeros((4, 2)))
     before = snapshot(optimizer)
+    tell = {"contexts": np.zeros((4, 2)), "params": np.zeros((4, 3)), "returns": np.zeros(4), **bad}
     with pytest.raises(error, match=match):
-        optimizer.tell(contexts, params, returns)
+        optimizer.tell(**tell)
     assert_unchanged(before, optimizer)
 
 

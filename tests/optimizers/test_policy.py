@@ -76,9 +76,15 @@ def test_rbf_features_boxes_and_source_round_trip(tmp_path):
     features = RBFFeatures.grid([0.0, -1.0], [1.0, 1.0], 3)
     coefficients = np.random.default_rng(0).normal(size=(9, 3))
     box = ([0.0, -1.0], [1.0, 1.0])
-    policy = Policy(features, coefficients, context_box=box, param_box=([-np.inf] * 3, [np.inf] * 3),
-                    env="creps_gym/Sphere-v0", env_kwargs={"dim": 3, "nested": {"a": [1, 2]}},
-                    source={"iteration": 7, "eval_return": -0.5, "which": "best"})  # fmt: skip
+    policy = Policy(
+        features,
+        coefficients,
+        context_box=box,
+        param_box=([-np.inf] * 3, [np.inf] * 3),
+        env="creps_gym/Sphere-v0",
+        env_kwargs={"dim": 3, "nested": {"a": [1, 2]}},
+        source={"iteration": 7, "eval_return": -0.5, "which": "best"},
+    )
     loaded = Policy.load(policy.save(tmp_path / "p.npz"))
     assert loaded.equals(policy) and loaded.env_kwargs == {"dim": 3, "nested": {"a": [1, 2]}}
     assert np.isinf(loaded.param_box[0]).all() and loaded.source["iteration"] == 7

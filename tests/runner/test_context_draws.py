@@ -62,8 +62,18 @@ def test_the_layer_that_chooses_contexts_draws_them():
 def test_both_streams_are_the_same_on_every_backend_and_differ_from_each_other(draws):
     serial = run("creps-cma-old", SPHERE, 3, 10, 2, backend="serial", context_draws=draws, **SMALL)
     native = run("creps-cma-old", SPHERE, 3, 10, 2, context_draws=draws, **SMALL)
-    synced = run("creps-cma-old", SPHERE, 3, 10, 2, backend="vector", vector_mode="sync", context_draws=draws,
-                 workers=3, **SMALL)  # fmt: skip
+    synced = run(
+        "creps-cma-old",
+        SPHERE,
+        3,
+        10,
+        2,
+        backend="vector",
+        vector_mode="sync",
+        context_draws=draws,
+        workers=3,
+        **SMALL,
+    )
     assert native.equals(serial) and synced.equals(serial)
     other = "reset" if draws == "batch" else "batch"
     assert not serial.equals(run("creps-cma-old", SPHERE, 3, 10, 2, context_draws=other, **SMALL))
@@ -98,6 +108,15 @@ def test_a_checkpoint_does_not_grow_with_the_run(tmp_path):
         if record.iteration == 151:  # the checkpoint of iteration 150, beyond the stagnation window (~130)
             sizes.append(path.stat().st_size)
 
-    history = run("creps-cma-old", SPHERE, 300, 10, 0, run_dir=tmp_path / "run", checkpoint_every=150,
-                  callbacks=[measure], **SMALL)  # fmt: skip
+    history = run(
+        "creps-cma-old",
+        SPHERE,
+        300,
+        10,
+        0,
+        run_dir=tmp_path / "run",
+        checkpoint_every=150,
+        callbacks=[measure],
+        **SMALL,
+    )
     assert len(history) == 300 and abs(path.stat().st_size - sizes[0]) < 512  # the history alone: > 50 kB

@@ -33,10 +33,16 @@ OPTIMIZER_RUN = {"iterations": 10, "seed": 5, "checkpoint_every": 3, "eval_conte
 OPTIMIZER_ENV = {"dim": 2, "context_dim": 1}
 OPTIMIZER_SAMPLES = {"c-bo": 4}  # the others: their default sample size
 # every selector: the setting of the former tests/selectors/test_selectors.py case
-SELECTOR_RUN = {"iterations": 10, "samples": 16, "seed": 2, "checkpoint_every": 3, "eval_every": 2}
+SELECTOR_RUN = {
+    "iterations": 10,
+    "samples_per_iteration": 16,
+    "seed": 2,
+    "checkpoint_every": 3,
+    "eval_every": 2,
+}
 SELECTOR_ENV = {"dim": 4, "context_dim": 2}
 SELECTOR_OPTIONS = {"fixed": {"contexts": [[0.5, 1.0], [2.0, 3.0]]}}
-ENV_RUN = {"iterations": 5, "samples": None, "seed": 3, "checkpoint_every": 2}
+ENV_RUN = {"iterations": 5, "samples_per_iteration": None, "seed": 3, "checkpoint_every": 2}
 CRASH = 7  # between the checkpoints of iterations 6 and 9: iteration 7 is done again
 AFTER_CHECKPOINT = 4  # the first iteration after the checkpoint of iteration 3
 UNSHARED = ("elapsed", "log_crc")  # checkpoint entries an interrupted run cannot share
@@ -167,18 +173,13 @@ def test_every_optimiser_resumes_after_a_crash_inside_an_iteration(name, referen
 # -- every context selector --------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", selector_names())
 def test_every_selector_resumes_to_the_uninterrupted_history_and_state(name, reference, tmp_path):
-    s = SELECTOR_RUN
     arguments = {
         "optimizer": "creps-cma-old",
         "env": SPHERE,
-        "iterations": s["iterations"],
-        "samples_per_iteration": s["samples"],
-        "seed": s["seed"],
         "env_kwargs": SELECTOR_ENV,
         "context_selector": name,
         "context_selector_options": SELECTOR_OPTIONS.get(name, {}),
-        "checkpoint_every": s["checkpoint_every"],
-        "eval_every": s["eval_every"],
+        **SELECTOR_RUN,
     }
     expected = reference(f"selector:{name}", **arguments)
 
@@ -190,7 +191,7 @@ def test_every_selector_resumes_to_the_uninterrupted_history_and_state(name, ref
         run(run_dir=tmp_path, callbacks=[interrupt], **arguments)
     state = RunDir.open(tmp_path).load_checkpoint()[0]
     assert state["iteration"] == 6 and "selector" in state and "selector_rng" in state
-    _check_resume(expected, tmp_path, s["iterations"])
+    _check_resume(expected, tmp_path, SELECTOR_RUN["iterations"])
     config = json.loads((tmp_path / RunDir.CONFIG).read_text())["config"]
     assert config["context_selector"] == name
 
@@ -199,17 +200,9 @@ def test_every_selector_resumes_to_the_uninterrupted_history_and_state(name, ref
 @pytest.mark.parametrize("env_id", CHEAP_ENVS)
 @pytest.mark.filterwarnings("ignore:.*is out of date:DeprecationWarning")  # the older versions, as registered
 def test_every_env_resumes_to_the_uninterrupted_history_and_state(env_id, reference, tmp_path):
-    s = ENV_RUN
-    arguments = {
-        "optimizer": "creps-cma-old",
-        "env": env_id,
-        "iterations": s["iterations"],
-        "samples_per_iteration": s["samples"],
-        "seed": s["seed"],
-        "checkpoint_every": s["checkpoint_every"],
-    }
+    arguments = {"optimizer": "creps-cma-old", "env": env_id, **ENV_RUN}
     expected = reference(f"env:{env_id}", **arguments)
     with pytest.raises(RuntimeError, match="crash"):
         run(run_dir=tmp_path / "run", callbacks=[crash_at(3)], **arguments)
     assert RunDir.open(tmp_path / "run").load_checkpoint()[0]["iteration"] == 2
-    _check_resume(expected, tmp_path / "run", s["iterations"])
+    _check_resume(expected, tmp_path / "run", ENV_RUN["iterations"])

@@ -55,14 +55,29 @@ def test_a_diverging_c_cma_es_run_without_restarts_stops_with_the_reason_diverge
     2.2e9 from iteration 25 on; stopped at iteration 34. With ``divergence=None`` it runs on."""
     options = {k: v for k, v in DIVERGING.items() if k not in ("env", "samples", "seed")}
     options["optimizer_options"] = {"restarts": 0}  # no restart left: the rule stops the run
-    history = run("c-cma-es", DIVERGING["env"], 60, DIVERGING["samples"], DIVERGING["seed"],
-                  context_draws="reset", **options)  # fmt: skip
+    history = run(
+        "c-cma-es",
+        DIVERGING["env"],
+        60,
+        DIVERGING["samples"],
+        DIVERGING["seed"],
+        context_draws="reset",
+        **options,
+    )
     regret = history.column("eval_regret")
     assert history.stop_reason == "divergence" and len(history) == 34
     assert (regret[-WINDOW:] - regret[0] > 1000 * regret[0]).all()
     assert not (regret[-WINDOW - 1] - regret[0] > 1000 * regret[0])
-    unchecked = run("c-cma-es", DIVERGING["env"], 40, DIVERGING["samples"], DIVERGING["seed"],
-                    context_draws="reset", divergence=None, **options)  # fmt: skip
+    unchecked = run(
+        "c-cma-es",
+        DIVERGING["env"],
+        40,
+        DIVERGING["samples"],
+        DIVERGING["seed"],
+        context_draws="reset",
+        divergence=None,
+        **options,
+    )
     assert unchecked.stop_reason == "iterations" and len(unchecked) == 40
     np.testing.assert_array_equal(unchecked.column("eval_regret")[:34], regret)  # nothing else changes
 
@@ -78,8 +93,14 @@ def test_with_a_restart_left_the_rule_restarts_the_search_and_the_run_reaches_it
     restarts = history.column("diag.restarts")
     assert restarts[33] == 1.0 and restarts[32] == 0.0  # restarted at iteration 34, where it would stop
     assert history.stop_reason == "target_regret" and history.records[-1].eval_regret <= 1e-5
-    plain = run(*args[:3], DIVERGING["samples"], DIVERGING["seed"], context_draws="reset",
-                optimizer_options={"restarts": 0}, **options)  # fmt: skip
+    plain = run(
+        *args[:3],
+        DIVERGING["samples"],
+        DIVERGING["seed"],
+        context_draws="reset",
+        optimizer_options={"restarts": 0},
+        **options,
+    )
     np.testing.assert_array_equal(history.column("eval_regret")[:34], plain.column("eval_regret"))
 
 
@@ -118,9 +139,27 @@ def test_a_replayed_history_that_went_on_after_the_rule_fired_counts_again():
 
 
 def test_the_command_line_prints_the_stop_and_takes_divergence_none(tmp_path, capsys):
-    args = ["run", "--env", DIVERGING["env"], "--env-kwarg", "dim=15", "--env-kwarg", "context_dim=3",
-            "--optimizer", "c-cma-es", "--samples", "50", "--iterations", "60", "--seed", "4",
-            "--opt", "restarts=0", "--no-plot", "--no-progress"]  # fmt: skip
+    args = [
+        "run",
+        "--env",
+        DIVERGING["env"],
+        "--env-kwarg",
+        "dim=15",
+        "--env-kwarg",
+        "context_dim=3",
+        "--optimizer",
+        "c-cma-es",
+        "--samples",
+        "50",
+        "--iterations",
+        "60",
+        "--seed",
+        "4",
+        "--opt",
+        "restarts=0",
+        "--no-plot",
+        "--no-progress",
+    ]
     assert main([*args, "--out", str(tmp_path / "a")]) == EXIT_CODES["ok"]
     assert "iterations 14, episodes 700, regret " in capsys.readouterr().out  # the batched context stream
     assert json.loads((tmp_path / "a" / "config.json").read_text())["config"]["divergence"] == 1000.0

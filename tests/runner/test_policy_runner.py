@@ -11,7 +11,7 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
-from helpers import EXTRAS, SPHERE, cli_in_process
+from helpers import SPHERE, cli_in_process
 
 import creps_gym
 from creps_gym.optimizers import Policy
@@ -245,21 +245,11 @@ def test_evaluate_video_without_the_extra_exits_4(reacher_run, tmp_path):
         "import sys\nsys.modules['imageio'] = None\nfrom creps_gym.cli import main\n"
         f"sys.exit(main(['evaluate', {str(reacher_run)!r}, '--contexts', '2', '--video', 'v.gif']))"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=180,
-                            cwd=tmp_path)  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=180, cwd=tmp_path
+    )
     assert result.returncode == 4 and "creps-gym[video]" in result.stderr
     assert not (tmp_path / "v.gif").exists()
-
-
-@EXTRAS
-@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
-@pytest.mark.slow
-def test_evaluate_records_a_video(reacher_run, tmp_path, suffix):
-    pytest.importorskip("imageio")
-    video = tmp_path / f"v{suffix}"
-    result = _cli("evaluate", reacher_run, "--contexts", "1", "--video", video)
-    assert result.returncode == 0, result.stderr
-    assert json.loads(result.stdout)["video"] == str(video) and video.stat().st_size > 1000
 
 
 def test_the_policy_files_temporaries_are_the_runs_own():

@@ -246,8 +246,10 @@ def test_bad_runs_with_selectors_are_refused_with_named_errors():
     with pytest.raises(ValueError, match="no selector can choose it"):
         run("creps-cma-old", HideContext(gym.make(SPHERE)), 2, 12, 0, context_selector=UniformSelector())
     with pytest.raises(TypeError, match="not both"):
-        Runner(RunConfig(SPHERE, "creps-cma-old", 3, 12, 0, context_selector="uniform"),
-               context_selector=UniformSelector())  # fmt: skip
+        Runner(
+            RunConfig(SPHERE, "creps-cma-old", 3, 12, 0, context_selector="uniform"),
+            context_selector=UniformSelector(),
+        )
     with pytest.raises(TypeError, match="expected an object with bind, select, tell"):
         run("creps-cma-old", SPHERE, 2, 12, 0, context_selector=object())
 

@@ -485,11 +485,21 @@ def test_ccmaes_surrogate_table_sets_the_surrogate_against_c_cma_es_and_pycma_in
     lines = surrogate_table.surrogate_table(cells, 200_000).splitlines()
     assert len(lines) == 4  # no runs in the other cells: no rows
     assert lines[2].split(" | ")[1:] == [
-        "1", "50", "700 (3/3)", "5,000 (3/3)", "0.14 (≤ 0.7: met)", "1,550 (2/2)", "0.45 (≤ 2: met) |"
-    ]  # fmt: skip
+        "1",
+        "50",
+        "700 (3/3)",
+        "5,000 (3/3)",
+        "0.14 (≤ 0.7: met)",
+        "1,550 (2/2)",
+        "0.45 (≤ 2: met) |",
+    ]
     assert lines[3].split(" | ")[3:] == [
-        ">200,000 (1/3)", "3,950 (2/2)", "∞ (≤ 0.7: not met)", "1,550 (2/2)", "∞ (≤ 2: not met) |"
-    ]  # fmt: skip
+        ">200,000 (1/3)",
+        "3,950 (2/2)",
+        "∞ (≤ 0.7: not met)",
+        "1,550 (2/2)",
+        "∞ (≤ 2: not met) |",
+    ]
     args = run.parse_args(
         ["--full", "--columns", "c-cma-es-surrogate", "--seeds", "1", "--headline-seeds", "2"]
     )

@@ -24,8 +24,14 @@ def test_the_committed_tables_and_doc_are_rendered_from_the_committed_results(mo
     document = json.loads((RESULTS / f"{mode}.json").read_text())
     assert (RESULTS / f"{mode}.md").read_text() == report.render(document)
     assert document["budgets"] == json.loads(json.dumps(run.MODES[mode]))  # the code's budgets
-    keys = {f"{t}/{o}/{s}/{k}" for t in run.MODES[mode] if t != "trials" for o in run.OPTIMIZERS
-            for s in run.SELECTORS for k in range(run.MODES[mode]["trials"])}  # fmt: skip
+    keys = {
+        f"{t}/{o}/{s}/{k}"
+        for t in run.MODES[mode]
+        if t != "trials"
+        for o in run.OPTIMIZERS
+        for s in run.SELECTORS
+        for k in range(run.MODES[mode]["trials"])
+    }
     assert set(document["runs"]) == keys and document["budgets"]["trials"] >= 3
     if mode == "full":
         text = run.DOC.read_text()
@@ -35,8 +41,9 @@ def test_the_committed_tables_and_doc_are_rendered_from_the_committed_results(mo
 def test_the_summary_counts_episodes_to_uniforms_final_loss():
     curve = {"episodes": [10, 20, 30, 40], "budget": [4, 10], "seconds": 0.0}
     document = {"runs": {}}
-    for trial, (u, b) in enumerate([([9, 6, 5, 4], [9, 4, 2, 1]), ([8, 7, 6, 5], [8, 5, 3, 2]),
-                                    ([9, 8, 7, 6], [9, 6, 4, 3])]):  # fmt: skip
+    for trial, (u, b) in enumerate(
+        [([9, 6, 5, 4], [9, 4, 2, 1]), ([8, 7, 6, 5], [8, 5, 3, 2]), ([9, 8, 7, 6], [9, 6, 4, 3])]
+    ):
         document["runs"][f"t/o/uniform/{trial}"] = {**curve, "loss": u}
         document["runs"][f"t/o/bandit/{trial}"] = {**curve, "loss": b}
     rows = {row["selector"]: row for row in report.summary(document, "t", "o", ["uniform", "bandit"])}

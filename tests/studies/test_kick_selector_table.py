@@ -32,13 +32,20 @@ def _write_run(
     samples, points = (20, 10) if experiment == "precision" else (100, 28)
     iterations, final = curve[-1]
     document = {
-        "experiment": experiment, "name": name, "features": features, "options": {}, "trial": trial,
-        "samples": samples, "budget_iterations": iterations, "iterations": iterations,
-        "episodes": iterations * samples, "stopped": [],
+        "experiment": experiment,
+        "name": name,
+        "features": features,
+        "options": {},
+        "trial": trial,
+        "samples": samples,
+        "budget_iterations": iterations,
+        "iterations": iterations,
+        "episodes": iterations * samples,
+        "stopped": [],
         "setting": {"env": study.ENV_IDS[experiment], "contexts": contexts, "features": features},
         "values": [final] * points,
         "history": {"batch": [], "evaluations": [[i, [v] * points] for i, v in curve]},
-    }  # fmt: skip
+    }
     (folder / "runs" / experiment).mkdir(parents=True, exist_ok=True)
     (folder / "runs" / experiment / f"{name}-trial{trial}.json").write_text(json.dumps(document))
 
@@ -156,9 +163,14 @@ def test_the_flexibility_targets_table_gives_each_trials_peak_its_drop_and_the_o
     # uniform's curve 3.0, 5.0 peaks at its end; the bandit's 6.0, 6.5 too: no drop, no fraction.
     assert "| c-cma-es | bandit | affine | 1 | 6.50 ± 0.00 m | 6.50 | 0.00 | 0.00 m | — | — |" in lines
     rows = [
-        {"method": "c-cma-es", "contexts": "bandit", "features": "rbf", "finals": [5.0, 7.0, 6.0],
-         "curves": [[[50, 6.5], [100, 5.0]], [[50, 4.0], [100, 7.0]], [[50, 8.0], [100, 6.0]]]},
-    ]  # fmt: skip
+        {
+            "method": "c-cma-es",
+            "contexts": "bandit",
+            "features": "rbf",
+            "finals": [5.0, 7.0, 6.0],
+            "curves": [[[50, 6.5], [100, 5.0]], [[50, 4.0], [100, 7.0]], [[50, 8.0], [100, 6.0]]],
+        },
+    ]
     table = selector_table.peak_table({"rows": rows, "oracle_mean": 10.0})
     assert "Oracle: 10.00 m averaged over the grid." in table[0]
     # peaks 6.5, 7.0, 8.0; drops 1.5, 0.0, 2.0; final mean 6.0 (0.60 of 10 m), best peak 8.0 (0.80).
@@ -170,18 +182,33 @@ def test_the_flexibility_targets_table_gives_each_trials_peak_its_drop_and_the_o
 
 def test_a_selector_is_measured_against_uniform_draws_with_its_own_mean_features() -> None:
     def row(contexts: str, features: str, folder: str, finals: list[float], curves: list) -> dict:
-        return {"method": "creps-cma-old", "contexts": contexts, "features": features, "folder": folder,
-                "samples": 100, "budget_iterations": 700, "finals": finals, "curves": curves}  # fmt: skip
+        return {
+            "method": "creps-cma-old",
+            "contexts": contexts,
+            "features": features,
+            "folder": folder,
+            "samples": 100,
+            "budget_iterations": 700,
+            "finals": finals,
+            "curves": curves,
+        }
 
     rows = [
         row("uniform", "rbf", "full", [4.0], [[[50, 2.0], [700, 4.0]]]),
         row("uniform", "quadratic", "full-features-quadratic", [7.0, 8.0], [[[700, 7.0]], [[700, 8.0]]]),
         # mean curve 6.0, 7.5, 7.0, 8.0: first reaches 7.5 m at iteration 100, stays from iteration 200 on.
-        row("bandit", "quadratic", "full-bandit-features-quadratic", [8.5, 7.5], [
-            [[50, 6.0], [100, 8.0], [150, 7.0], [200, 8.0]], [[50, 6.0], [100, 7.0], [150, 7.0], [200, 8.0]],
-        ]),
+        row(
+            "bandit",
+            "quadratic",
+            "full-bandit-features-quadratic",
+            [8.5, 7.5],
+            [
+                [[50, 6.0], [100, 8.0], [150, 7.0], [200, 8.0]],
+                [[50, 6.0], [100, 7.0], [150, 7.0], [200, 8.0]],
+            ],
+        ),
         row("bandit", "affine", "full-bandit", [5.0], [[[50, 5.0]]]),  # no uniform affine row: left out
-    ]  # fmt: skip
+    ]
     table = selector_table.same_features_table("flexibility", {"rows": rows})
     body = [line for line in table if line.startswith("| creps-cma-old")]
     assert body == [

@@ -82,11 +82,20 @@ def _run(
     """A finished precision run of 3 iterations whose batches fell at ``falls``, with a final checkpoint
     of ``cov`` (none if None)."""
     document = {
-        "experiment": "precision", "name": name, "features": "affine", "options": {}, "trial": trial,
-        "samples": 20, "budget_iterations": 3, "iterations": 3, "episodes": 60, "stopped": [],
-        "setting": {"env": study.ENV_IDS["precision"], "contexts": contexts}, "values": [1.0] * 10,
+        "experiment": "precision",
+        "name": name,
+        "features": "affine",
+        "options": {},
+        "trial": trial,
+        "samples": 20,
+        "budget_iterations": 3,
+        "iterations": 3,
+        "episodes": 60,
+        "stopped": [],
+        "setting": {"env": study.ENV_IDS["precision"], "contexts": contexts},
+        "values": [1.0] * 10,
         "history": {"batch": [[-1.0, f] for f in falls], "evaluations": [[3, [1.0] * 10]]},
-    }  # fmt: skip
+    }
     (folder / "runs" / "precision").mkdir(parents=True, exist_ok=True)
     (folder / "runs" / "precision" / f"{name}-trial{trial}.json").write_text(json.dumps(document))
     if cov is not None:

@@ -82,13 +82,16 @@ def test_training_contexts_follow_the_spec_and_a_change_of_them_is_computed_agai
 ) -> None:
     uniform = study.RunSpec("precision", "c-cma-es", samples=6, iterations=2, features="affine")
     arcsine = study.RunSpec("precision", "c-cma-es", 6, 2, "affine", contexts="arcsine")
-    draws = {spec.contexts: study.context_sampler(spec, precision_env)(np.random.default_rng(0), 50_000)
-             for spec in (uniform, arcsine)}  # fmt: skip
+    draws = {
+        spec.contexts: study.context_sampler(spec, precision_env)(np.random.default_rng(0), 50_000)
+        for spec in (uniform, arcsine)
+    }
     np.testing.assert_array_equal(
         draws["arcsine"], BetaContexts([3.0], [12.0], 0.5)(np.random.default_rng(0), 50_000)
     )
-    np.testing.assert_array_equal(draws["uniform"], precision_env.unwrapped.sample_contexts(
-        np.random.default_rng(0), 50_000))  # fmt: skip
+    np.testing.assert_array_equal(
+        draws["uniform"], precision_env.unwrapped.sample_contexts(np.random.default_rng(0), 50_000)
+    )
     far = {name: float(np.mean(s[:, 0] > 11.5)) for name, s in draws.items()}
     assert far["uniform"] == pytest.approx(0.5 / 9, abs=0.005)  # 1 in 18 in the last half metre
     assert far["arcsine"] == pytest.approx(2 / np.pi * np.arcsin(np.sqrt(0.5 / 9)), abs=0.005)  # 15 %
@@ -192,17 +195,35 @@ def test_an_old_oracle_record_is_reused_only_if_its_start_ran_its_budget(precisi
     assert recomputed["value"] == fresh["value"] and "starts" in recomputed
 
 
+def _finished_trial(experiment: str, trial: int, setting: dict, **fields) -> dict:
+    """The document of a finished 5-iteration c-cma-es trial (20 samples), with ``fields`` replaced."""
+    document = {
+        "experiment": experiment,
+        "name": "c-cma-es",
+        "features": "affine",
+        "options": {},
+        "trial": trial,
+        "samples": 20,
+        "budget_iterations": 5,
+        "iterations": 5,
+        "episodes": 100,
+        "stopped": [],
+        "setting": setting,
+        "values": [],
+        "history": {"batch": [], "evaluations": []},
+    }
+    return {**document, **fields}
+
+
 def test_results_have_the_issue_shape_and_the_summary_says_what_spreads(tmp_path: Path) -> None:
     runs = tmp_path / "runs"
     for experiment, values in (("precision", [0.5] * 10), ("flexibility", [3.0] * 28)):
         (runs / experiment).mkdir(parents=True)
         for trial, shift in enumerate((0.0, 1.0)):
-            document = {
-                "experiment": experiment, "name": "c-cma-es", "features": "rbf", "options": {},
-                "trial": trial, "samples": 20, "budget_iterations": 5, "iterations": 5, "episodes": 100,
-                "stopped": [], "setting": {"env": study.ENV_IDS[experiment]},
-                "values": [v + shift for v in values], "history": {"batch": [], "evaluations": [[5, values]]},
-            }  # fmt: skip
+            document = _finished_trial(experiment, trial, {"env": study.ENV_IDS[experiment]}, features="rbf")
+            document.update(
+                values=[v + shift for v in values], history={"batch": [], "evaluations": [[5, values]]}
+            )
             (runs / experiment / f"c-cma-es-trial{trial}.json").write_text(json.dumps(document))
         stale = {**document, "trial": 2, "setting": {"env": "creps_gym/KickFlexibility-v1"}}
         (runs / experiment / "c-cma-es-trial2.json").write_text(json.dumps(stale))  # another env: ignored
@@ -251,12 +272,7 @@ def test_a_finished_run_being_recomputed_under_another_setting_is_in_progress_no
     folder.mkdir(parents=True)
     old = {"env": study.ENV_IDS["precision"], "features": "affine", "options": {}, "samples": 20}
     for trial in (0, 1):
-        document = {
-            "experiment": "precision", "name": "c-cma-es", "features": "affine", "options": {},
-            "trial": trial, "samples": 20, "budget_iterations": 5, "iterations": 5, "episodes": 100,
-            "stopped": [], "setting": old, "values": [float(trial)] * 10,
-            "history": {"batch": [], "evaluations": []},
-        }  # fmt: skip
+        document = _finished_trial("precision", trial, old, values=[float(trial)] * 10)
         (folder / f"c-cma-es-trial{trial}.json").write_text(json.dumps(document))
         (folder / f"c-cma-es-trial{trial}.history.json").write_text(json.dumps({"setting": old, "batch": []}))
     new = {**old, "options": {"baseline_loss": "huber"}}  # trial 1 restarted under new options

@@ -19,8 +19,15 @@ from creps_gym.wrappers.examples import ReacherTargetEnv
 
 pytestmark = EXTRAS
 IDS = ["creps_gym/PointMazeGoal-v0", "creps_gym/ReacherTarget-v0"]
-SECTIONS = ["Description", "Context Space", "Parameter Space", "Return", "Episode End", "Arguments",
-            "Version History"]  # fmt: skip
+SECTIONS = [
+    "Description",
+    "Context Space",
+    "Parameter Space",
+    "Return",
+    "Episode End",
+    "Arguments",
+    "Version History",
+]
 
 
 @pytest.mark.parametrize("env_id", IDS)
@@ -99,8 +106,9 @@ _RENDER_SCRIPT = textwrap.dedent(
 @pytest.mark.slow
 def test_rgb_array_frames_show_the_start_and_the_end_of_the_episode(env_id):
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    out = subprocess.run([sys.executable, "-c", _RENDER_SCRIPT, env_id], capture_output=True, text=True,
-                         env=env, timeout=300)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", _RENDER_SCRIPT, env_id], capture_output=True, text=True, env=env, timeout=300
+    )
     if out.stdout.startswith("NOGL"):
         pytest.skip(f"no working OpenGL backend: {out.stdout[-300:]}")
     assert out.returncode == 0, out.stderr[-2000:]

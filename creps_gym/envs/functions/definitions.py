@@ -270,10 +270,8 @@ def sharp_ridge(x: Array) -> Array:
 
 
 def parabolic_ridge(x: Array) -> Array:
-    """Parabolic ridge: ``f(x) = x_1 + 100 sum_{i=2}^{p} x_i^2``.
-
-    Reference: Hansen's ``fparabR`` (with ``-x_1``: the mirror image). Unbounded below along ``-x_1``; stop
-    target ``f <= -1e4``.
+    """Parabolic ridge: ``f(x) = x_1 + 100 sum_{i=2}^{p} x_i^2``, Hansen's ``fparabR``: the sharp ridge
+    (:func:`sharp_ridge`, mirrored and unbounded below in the same way) with the squared norm.
 
     Parameters
     ----------

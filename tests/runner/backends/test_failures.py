@@ -47,9 +47,11 @@ def test_flaky_steps_and_resets_are_retried_alike_on_every_backend_and_lose_no_s
 
 @pytest.mark.parametrize(
     ("draws", "where"),
-    [("reset", r"\(reset seed \d+\): reset"),  # the context is read from the reset
-     ("batch", r"\(reset seed \d+, context \[[-0-9.e, ]+\]\)")],  # drawn first: the episode's reset fails
-)  # fmt: skip
+    [
+        ("reset", r"\(reset seed \d+\): reset"),  # the context is read from the reset
+        ("batch", r"\(reset seed \d+, context \[[-0-9.e, ]+\]\)"),
+    ],  # drawn first: the episode's reset fails
+)
 def test_a_reset_that_keeps_failing_stops_the_run_with_an_episode_error(draws, where):
     pattern = rf"iteration 1, episode 0 {where} failed 2 time\(s\); last error: RuntimeError: simulated reset"
     with pytest.raises(EpisodeError, match=pattern):
@@ -70,9 +72,7 @@ def test_an_episode_that_keeps_failing_gives_the_same_error_on_every_backend(bac
     assert message(**backend) == serial
 
 
-@pytest.mark.parametrize(
-    "reward", ["1.5", True, np.bool_(False), None, 1 + 0j, [1.0, 2.0]], ids=repr
-)  # fmt: skip
+@pytest.mark.parametrize("reward", ["1.5", True, np.bool_(False), None, 1 + 0j, [1.0, 2.0]], ids=repr)
 @pytest.mark.parametrize("backend", ["serial", "sync"])
 def test_a_reward_that_is_not_a_real_number_is_refused_not_converted(reward, backend):
     register()

@@ -32,6 +32,12 @@ def _driver(tmp_path: Path, body: str) -> subprocess.Popen:
     )
 
 
+def _ray_driver(tmp_path: Path, body: str) -> subprocess.Popen:
+    """:func:`_driver` for a body that uses Ray (the test is skipped without it)."""
+    pytest.importorskip("ray")
+    return _driver(tmp_path, body)
+
+
 def _alive(tracked: dict[int, int]) -> list[int]:
     stats = {pid: process_stat(pid) for pid in tracked}
     return [pid for pid, start in tracked.items() if stats[pid] is not None and stats[pid][1] == start]
@@ -85,8 +91,7 @@ def test_the_watchdog_stops_the_watched_tree_when_the_driver_is_killed(tmp_path)
 
 @pytest.mark.slow
 def test_a_killed_driver_leaves_no_ray_process_behind(tmp_path):
-    pytest.importorskip("ray")
-    driver = _driver(
+    driver = _ray_driver(
         tmp_path,
         """
         import time
@@ -120,8 +125,7 @@ def test_a_killed_driver_leaves_no_ray_process_behind(tmp_path):
 @pytest.mark.slow
 def test_a_local_ray_is_started_once_per_process_and_stopped_at_its_exit(tmp_path):
     """Issue 31: the second run of a process reuses the local Ray the first started; exit stops it."""
-    pytest.importorskip("ray")
-    driver = _driver(
+    driver = _ray_driver(
         tmp_path,
         f"""
         import json, os

@@ -47,8 +47,11 @@ from creps_gym.runner.rundir.checkpoint import config_fingerprint
 ROOT = Path(__file__).resolve().parents[3]
 # A killed node is declared dead after 3 refused health checks 1 s apart (Ray's default: 5 checks 3 s apart);
 # a live but slow node still gets 5 s per check, so a loaded machine does not lose one.
-FAST_NODE_DEATH = {"RAY_health_check_period_ms": "1000", "RAY_health_check_timeout_ms": "5000",
-                   "RAY_health_check_failure_threshold": "3"}  # fmt: skip
+FAST_NODE_DEATH = {
+    "RAY_health_check_period_ms": "1000",
+    "RAY_health_check_timeout_ms": "5000",
+    "RAY_health_check_failure_threshold": "3",
+}
 NODE = "CREPS_GYM_TEST_NODE"  # which node a Ray worker process belongs to (inherited from `ray start`)
 
 
@@ -84,8 +87,22 @@ def test_the_address_comes_from_the_argument_then_ray_address():
         resolve_address(None, {"RAY_ADDRESS": "ray://head:10001"})
 
 
-@pytest.mark.parametrize("address", ["head", "head:", ":6379", "head:0", "head:65536", "head:6379x", "a b:1",
-                                     "ray://head:10001", "head:６３７９", "", "local"])  # fmt: skip
+@pytest.mark.parametrize(
+    "address",
+    [
+        "head",
+        "head:",
+        ":6379",
+        "head:0",
+        "head:65536",
+        "head:6379x",
+        "a b:1",
+        "ray://head:10001",
+        "head:６３７９",
+        "",
+        "local",
+    ],
+)
 def test_bad_addresses_are_refused_with_their_name(address):
     with pytest.raises(ValueError, match=rf"^ray_address: expected 'HOST:PORT' .*, got {address!r}$"):
         check_ray_address(address)
@@ -175,8 +192,14 @@ def _free_port() -> int:
 
 def _ray_start(directory: Path, role: str, *args: str) -> subprocess.Popen:
     """``ray start --block`` of one node, in a session of its own, every port free; output in a file."""
-    ports = ["--dashboard-agent-listen-port", "--dashboard-agent-grpc-port", "--metrics-export-port",
-             "--runtime-env-agent-port", "--node-manager-port", "--object-manager-port"]  # fmt: skip
+    ports = [
+        "--dashboard-agent-listen-port",
+        "--dashboard-agent-grpc-port",
+        "--metrics-export-port",
+        "--runtime-env-agent-port",
+        "--node-manager-port",
+        "--object-manager-port",
+    ]
     command = [sys.executable, "-m", "ray.scripts.scripts", "start", "--block", "--num-cpus=1", *args]
     command += ["--disable-usage-stats", *(f"{flag}={_free_port()}" for flag in ports)]
     path = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))  # this checkout's code
@@ -301,8 +324,18 @@ def test_a_2_node_cluster_gives_the_serial_history_and_is_left_running(cluster, 
     out = tmp_path / "run"
     with pytest.raises(RuntimeError, match="simulated crash"):
         env = Probe(str(log), meet=str(tmp_path / "meet"))
-        run(CREPSCMA(2, 1, seed=0), env, 5, 10, 0, backend="ray", ray_address=cluster["address"],
-            run_dir=out, checkpoint_every=2, callbacks=[_crash_at(3)])  # fmt: skip
+        run(
+            CREPSCMA(2, 1, seed=0),
+            env,
+            5,
+            10,
+            0,
+            backend="ray",
+            ray_address=cluster["address"],
+            run_dir=out,
+            checkpoint_every=2,
+            callbacks=[_crash_at(3)],
+        )
     assert not ray.is_initialized()  # the driver disconnected ...
     assert all(node.poll() is None for node in (cluster["head"], cluster["worker"]))  # ... the cluster runs
     document = json.loads((out / RunDir.CONFIG).read_text())
@@ -342,8 +375,16 @@ def test_killing_the_worker_node_mid_run_loses_no_sample(cluster, tmp_path):
 
     killer = threading.Thread(target=kill_the_worker_node, daemon=True)
     killer.start()
-    history = run(CREPSCMA(2, 1, seed=1), Probe(hang=hang), 4, 10, 1, backend="ray",
-                  ray_address=cluster["address"], callbacks=[arm])  # fmt: skip
+    history = run(
+        CREPSCMA(2, 1, seed=1),
+        Probe(hang=hang),
+        4,
+        10,
+        1,
+        backend="ray",
+        ray_address=cluster["address"],
+        callbacks=[arm],
+    )
     killer.join(timeout=10)
     assert killed == [True] and cluster["worker"].wait(timeout=30) is not None
     assert history.equals(serial) and len(history) == 4 and history.records[-1].episodes == 40

@@ -25,8 +25,17 @@ def runs(tmp_path_factory):
     root = tmp_path_factory.mktemp("runs")
     small = {"eval_every": 1, "eval_contexts": 4}
     for name, seed, dim in (("a", 0, 3), ("b", 1, 3), ("c", 0, 4)):
-        run("creps-cma-old", SPHERE, 8, 10, seed, env_kwargs={"dim": dim}, run_dir=root / name,
-            target_regret=2.0, **small)  # fmt: skip
+        run(
+            "creps-cma-old",
+            SPHERE,
+            8,
+            10,
+            seed,
+            env_kwargs={"dim": dim},
+            run_dir=root / name,
+            target_regret=2.0,
+            **small,
+        )
     return root
 
 

@@ -69,8 +69,11 @@ def test_resume_never_imports_a_module_named_by_config_json(place, tmp_path, mod
     else:  # `python -m` puts the current directory first on sys.path too
         result = subprocess.run(
             [sys.executable, "-m", "creps_gym.cli", "resume", ".", "--no-plot"],
-            capture_output=True, text=True, cwd=out, timeout=120,
-        )  # fmt: skip
+            capture_output=True,
+            text=True,
+            cwd=out,
+            timeout=120,
+        )
         expected_code, stream = 3, result.stderr
         assert "Traceback" not in stream
     assert not (out / "PAYLOAD_RAN").exists()

@@ -33,8 +33,16 @@ from creps_gym.runner.results.export import write_iohanalyzer
 from creps_gym.runner.rundir.references import escape_text
 
 # -- item 2: nothing is written (or read) through a link planted in a run directory --------------------------
-LINKED = [RunDir.LOCK, RunDir.LOG, RunDir.PLOT, RunDir.CHECKPOINT, RunDir.CONFIG, RunDir.HISTORY_JSON,
-          RunDir.HISTORY_CSV, RunDir.IOH]  # fmt: skip
+LINKED = [
+    RunDir.LOCK,
+    RunDir.LOG,
+    RunDir.PLOT,
+    RunDir.CHECKPOINT,
+    RunDir.CONFIG,
+    RunDir.HISTORY_JSON,
+    RunDir.HISTORY_CSV,
+    RunDir.IOH,
+]
 
 
 @POSIX
@@ -94,8 +102,13 @@ def test_a_log_linked_to_dev_zero_is_not_read_until_memory_runs_out(place, tmp_p
         resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
 
     start = time.monotonic()
-    done = subprocess.run(cli_command("export", out, "-o", tmp_path / "e.csv"), capture_output=True,
-                          text=True, timeout=120, preexec_fn=limit_memory)  # fmt: skip
+    done = subprocess.run(
+        cli_command("export", out, "-o", tmp_path / "e.csv"),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=limit_memory,
+    )
     assert time.monotonic() - start < 120
     assert done.returncode == 3, done.stderr
     one_error_naming(done.stderr, out / RunDir.LOG)
@@ -149,8 +162,12 @@ def test_output_not_a_regular_file_or_a_run_file_is_refused(place, tmp_path, cap
     if command == "plot":
         pytest.importorskip("matplotlib")
     out = place("finished")
-    target = {"fifo": tmp_path / "fifo", "directory": tmp_path / "folder", "own-log": out / RunDir.LOG,
-              "own-history-through-a-link": tmp_path / "link"}[kind]  # fmt: skip
+    target = {
+        "fifo": tmp_path / "fifo",
+        "directory": tmp_path / "folder",
+        "own-log": out / RunDir.LOG,
+        "own-history-through-a-link": tmp_path / "link",
+    }[kind]
     if kind == "fifo":
         os.mkfifo(target)
     elif kind == "directory":

@@ -185,6 +185,13 @@ def iteration_lines(path: Path) -> list[bytes]:
     return [line for line in path.read_bytes().splitlines(True) if line.startswith(b'{"iteration"')]
 
 
+def _check_iteration_3_is_refused(out) -> None:
+    """The history read from ``out`` warns that its iteration 3 is not the run's and stops before it."""
+    with pytest.warns(RunDirWarning, match="iteration 3 is not this run's"):
+        history = load_history(out)
+    assert len(history) == 2
+
+
 @POSIX
 def test_log_lines_copied_from_another_run_are_not_exported(place, templates, tmp_path):
     out = place("crashed")  # checkpoint at 2, iteration 3 logged after it
@@ -192,9 +199,7 @@ def test_log_lines_copied_from_another_run_are_not_exported(place, templates, tm
     own = iteration_lines(out / RunDir.LOG)[2]
     foreign = iteration_lines(templates["other"] / RunDir.LOG)[2:4]  # seed 1's iterations 3 and 4
     (out / RunDir.LOG).write_bytes(b"".join(line for line in lines if line != own) + b"".join(foreign))
-    with pytest.warns(RunDirWarning, match="iteration 3 is not this run's"):
-        history = load_history(out)
-    assert len(history) == 2
+    _check_iteration_3_is_refused(out)
 
 
 @POSIX
@@ -205,9 +210,7 @@ def test_a_hand_written_log_line_without_its_checksums_is_not_exported(place, tm
     entry["mean_return"] = 0.0
     with open(out / RunDir.LOG, "a") as stream:
         stream.write(json.dumps(entry) + "\n")
-    with pytest.warns(RunDirWarning, match="iteration 3 is not this run's"):
-        history = load_history(out)
-    assert len(history) == 2
+    _check_iteration_3_is_refused(out)
 
 
 @POSIX

@@ -42,8 +42,18 @@ def policy_bytes(document: dict, arrays: dict) -> bytes:
 def _unfinished(path: Path, optimizer: str = "c-cma-es", **options) -> Path:
     """A run of 6 iterations whose last checkpoint is iteration 4 (evaluated at every iteration)."""
     with pytest.raises(RuntimeError, match="crash"):
-        run(optimizer, SPHERE, 6, None, 0, env_kwargs={"dim": 2}, run_dir=path, checkpoint_every=1,
-            callbacks=[crash_at(5)], **options)  # fmt: skip
+        run(
+            optimizer,
+            SPHERE,
+            6,
+            None,
+            0,
+            env_kwargs={"dim": 2},
+            run_dir=path,
+            checkpoint_every=1,
+            callbacks=[crash_at(5)],
+            **options,
+        )
     return path
 
 
@@ -282,8 +292,17 @@ def test_an_npy_header_with_a_bool_in_its_shape_is_a_damaged_file(tmp_path, caps
 
 
 def test_a_bandit_with_a_uniform_share_of_one_runs(tmp_path):
-    history = run("c-cma-es", SPHERE, 2, None, 0, env_kwargs={"dim": 2}, run_dir=tmp_path / "run",
-                  context_selector="bandit", context_selector_options={"uniform_share": 1})  # fmt: skip
+    history = run(
+        "c-cma-es",
+        SPHERE,
+        2,
+        None,
+        0,
+        env_kwargs={"dim": 2},
+        run_dir=tmp_path / "run",
+        context_selector="bandit",
+        context_selector_options={"uniform_share": 1},
+    )
     assert len(history) == 2 and (tmp_path / "run" / RunDir.POLICY).exists()
 
 

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import SPHERE, cli_command, cli_in_process
+from helpers import SPHERE, cli_command, cli_in_process, run_argv
 from rundir_setup import (
     POSIX,
     checked_cli,
@@ -27,6 +27,12 @@ from rundir_setup import (
 from creps_gym.cli import main
 from creps_gym.errors import RunDirWarning
 from creps_gym.runner import History, RunDir, resume, run
+
+
+def six_iterations(out) -> list:
+    """``creps-gym run`` of 6 CREPS-CMA iterations on the 2-D sphere into ``out``, checkpointing every 2."""
+    short = ("--env-kwarg", "dim=2", "--samples", 10, "--eval-every", 2, "--checkpoint-every", 2)
+    return run_argv(out, *short, "--no-progress", "--no-plot", optimizer="creps-cma-old", iterations=6)
 
 
 # -- item 10: operating-system errors are named, and lose nothing --------------------------------------------
@@ -62,9 +68,7 @@ def test_a_write_that_fails_stops_the_run_with_exit_3_and_resume_is_bit_identica
             return real_save(flat, path)
 
         monkeypatch.setattr(rundir, "save_state", save)
-    flags = ["--env", SPHERE, "--env-kwarg", "dim=2", "--optimizer", "creps-cma-old", "--iterations", "6",
-             "--samples", "10", "--eval-every", "2", "--checkpoint-every", "2", "--seed", "0"]  # fmt: skip
-    exit_code, error = checked_cli(capsys, "run", *flags, "--out", out, "--no-progress", "--no-plot")
+    exit_code, error = checked_cli(capsys, *six_iterations(out))
     assert exit_code == 3
     name = RunDir.LOG if failing == "log" else RunDir.CHECKPOINT
     assert f"({os.strerror(code)}, {errno.errorcode[code]})" in one_error_naming(error, out / name)
@@ -81,9 +85,7 @@ def test_a_file_size_limit_gives_exit_3_not_a_signal_and_resume_is_bit_identical
     def limit_file_size():
         resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))  # `ulimit -f 2`: log.jsonl outgrows it
 
-    flags = ["--env", SPHERE, "--env-kwarg", "dim=2", "--optimizer", "creps-cma-old", "--iterations", "6",
-             "--samples", "10", "--eval-every", "2", "--checkpoint-every", "2", "--seed", "0"]  # fmt: skip
-    command = cli_command("run", *flags, "--out", out, "--no-progress", "--no-plot")
+    command = cli_command(*six_iterations(out))
     done = subprocess.run(command, capture_output=True, text=True, timeout=120, preexec_fn=limit_file_size)
     assert done.returncode == 3, (done.returncode, done.stderr)  # not -SIGXFSZ
     assert "File too large, EFBIG" in one_error_naming(done.stderr, out)
@@ -91,6 +93,12 @@ def test_a_file_size_limit_gives_exit_3_not_a_signal_and_resume_is_bit_identical
 
 
 NO_STAGNATION = 10**9  # iterations: the optimiser's stagnation stop never fires
+
+
+def endless_run(out, iterations: int, *extra, seed: int = 0) -> list:
+    """``creps-gym run`` of CREPS-CMA on the sphere into ``out``, no stagnation stop, then ``extra``."""
+    never = ("--opt", f"tolstagnation={NO_STAGNATION}")
+    return run_argv(out, *never, *extra, optimizer="creps-cma-old", iterations=iterations, seed=seed)
 
 
 cli = cli_in_process  # the commands' behaviour; processes below only where a test needs one
@@ -117,10 +125,9 @@ def iterations_logged(path: Path) -> int:
 def test_a_second_writer_is_refused_while_the_first_lives(tmp_path):
     out = tmp_path / "run"
     # no stagnation stop: with it the run may end within seconds, while the live run must outlast the test
-    args = ["--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 100000, "--samples", 12,
-            "--seed", 0, "--opt", f"tolstagnation={NO_STAGNATION}"]  # fmt: skip
+    args = endless_run(out, 100000, "--samples", 12)
     live = subprocess.Popen(
-        cli_command("run", *args, "--out", out, "--checkpoint-every", 1, "--no-plot"),
+        cli_command(*args, "--checkpoint-every", 1, "--no-plot"),
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
@@ -131,7 +138,7 @@ def test_a_second_writer_is_refused_while_the_first_lives(tmp_path):
         assert second.returncode == 3, second.stderr
         assert f"process {live.pid} on " in second.stderr
         assert f"writes this run directory (lock file {out / RunDir.LOCK})" in second.stderr
-        overwrite = cli("run", *args, "--out", out, "--overwrite", "--no-plot", timeout=60)
+        overwrite = cli(*args, "--overwrite", "--no-plot", timeout=60)
         assert overwrite.returncode == 3 and "writes this run directory" in overwrite.stderr
         assert live.poll() is None  # the live run was not disturbed
     finally:
@@ -157,8 +164,28 @@ def test_only_the_runs_own_temporary_files_are_removed(place, tmp_path):
     assert sorted(p.name for p in out.iterdir() if p.name.endswith(".tmp")) == sorted(mine)
     for name in theirs:
         (out / name).write_text("x")
-    assert main(["run", "--env", SPHERE, "--optimizer", "creps", "--iterations", "2", "--samples", "12",
-                 "--seed", "0", "--out", str(out), "--overwrite", "--no-plot"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "--env",
+                SPHERE,
+                "--optimizer",
+                "creps",
+                "--iterations",
+                "2",
+                "--samples",
+                "12",
+                "--seed",
+                "0",
+                "--out",
+                str(out),
+                "--overwrite",
+                "--no-plot",
+            ]
+        )
+        == 0
+    )
     assert sorted(p.name for p in out.iterdir() if p.name.endswith(".tmp")) == sorted(mine)
 
 
@@ -166,14 +193,13 @@ def test_only_the_runs_own_temporary_files_are_removed(place, tmp_path):
 @pytest.mark.skipif(sys.platform == "win32", reason="needs SIGINT to a subprocess")
 @pytest.mark.slow
 def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
-    out = tmp_path / "run"
-    # Long enough that the run is still going when the signal comes (an iteration takes about 2 ms): the
-    # stagnation stop is off, since with it the run would end on its own after 186 iterations.
-    args = ["--env", SPHERE, "--optimizer", "creps-cma-old", "--iterations", 3000, "--samples", 10,
-            "--seed", 3, "--env-kwarg", "dim=3", "--checkpoint-every", 100000, "--eval-every", 2,
-            "--opt", f"tolstagnation={NO_STAGNATION}"]  # fmt: skip
+    out, iterations = tmp_path / "run", 1000
+    # Long enough that the run is still going when the signal comes (an iteration takes about 2 ms, so 1,000
+    # take 2 s after the 5th): the stagnation stop is off, since with it the run would end after 186.
+    args = endless_run(out, iterations, "--samples", 10, "--env-kwarg", "dim=3", "--eval-every", 2, seed=3)
+    args += ["--checkpoint-every", 100000]
     process = subprocess.Popen(
-        cli_command("run", *args, "--out", out, "--no-plot"),
+        cli_command(*args, "--no-plot"),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         # A shell without job control starts background jobs with SIGINT ignored, and the child would inherit
@@ -187,12 +213,18 @@ def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
     assert b"interrupted" in stderr and b"Traceback" not in stderr
     records, _ = RunDir.open(out).read_log()
     state = RunDir.open(out).load_checkpoint()[0]
-    assert 5 <= state["iteration"] == records[-1].iteration < 3000  # nothing done after the checkpoint
+    assert 5 <= state["iteration"] == records[-1].iteration < iterations  # nothing done after the checkpoint
     assert main(["resume", str(out), "--no-plot"]) == 0
     expected = run(
-        "creps-cma-old", SPHERE, 3000, 10, 3, env_kwargs={"dim": 3}, eval_every=2,
+        "creps-cma-old",
+        SPHERE,
+        iterations,
+        10,
+        3,
+        env_kwargs={"dim": 3},
+        eval_every=2,
         optimizer_options={"tolstagnation": NO_STAGNATION},
-    )  # fmt: skip
+    )
     assert History.from_json(out / RunDir.HISTORY_JSON).equals(expected)
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import EXTRAS, SPHERE, cli_command, cli_in_process, needs_extra
+from helpers import SPHERE, cli_command, cli_in_process
 
 from creps_gym.runner import History, RunDir, resume, run
 
@@ -42,27 +42,38 @@ def _kill_when(process: subprocess.Popen, ready, what: str, timeout: float = 90.
     assert process.returncode == -signal.SIGKILL
 
 
-@pytest.mark.parametrize(
-    ("optimizer", "selector"),
-    [
-        ("creps-cma-old", None),
-        pytest.param("cma", None, marks=[EXTRAS] if needs_extra("cma") else []),
-        ("creps-cma-old", "bandit"),
-    ],
-)
 @pytest.mark.slow
-def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(
-    tmp_path, optimizer, selector
-):
+def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(tmp_path):
+    """The process boundary, once: a learning selector's state is checkpointed beside the optimiser's. Every
+    optimiser and selector resumes after a crash at any moment in tests/runner/test_contract_resume.py."""
+    optimizer, selector = "creps-cma-old", "bandit"
     out = tmp_path / "run"
     log = out / RunDir.LOG
     s = SETTINGS
     chosen = ["--context-selector", selector, "--selector-opt", "cells=5"] if selector else []
     start = cli_command(
-        "run", "--env", SPHERE, "--optimizer", optimizer, "--iterations", s["iterations"],
-        "--samples", s["samples"], "--seed", s["seed"], "--out", out, "--env-kwarg", "dim=6",
-        "--checkpoint-every", s["checkpoint_every"], "--eval-every", s["eval_every"], "--no-plot", *chosen,
-    )  # fmt: skip
+        "run",
+        "--env",
+        SPHERE,
+        "--optimizer",
+        optimizer,
+        "--iterations",
+        s["iterations"],
+        "--samples",
+        s["samples"],
+        "--seed",
+        s["seed"],
+        "--out",
+        out,
+        "--env-kwarg",
+        "dim=6",
+        "--checkpoint-every",
+        s["checkpoint_every"],
+        "--eval-every",
+        s["eval_every"],
+        "--no-plot",
+        *chosen,
+    )
     resume = cli_command("resume", out, "--no-plot")
     popen = {"stdout": subprocess.DEVNULL, "stderr": subprocess.PIPE, "text": True}
     # 1) killed as soon as the run directory exists (most likely before the first checkpoint);
@@ -85,9 +96,18 @@ def test_sigkill_at_several_moments_then_resume_gives_the_uninterrupted_history(
 
     whole = tmp_path / "whole"
     options = {"context_selector": selector, "context_selector_options": {"cells": 5}} if selector else {}
-    expected = run(optimizer, SPHERE, s["iterations"], s["samples"], s["seed"], env_kwargs={"dim": 6},
-                   checkpoint_every=s["checkpoint_every"], eval_every=s["eval_every"],
-                   run_dir=whole, **options)  # fmt: skip
+    expected = run(
+        optimizer,
+        SPHERE,
+        s["iterations"],
+        s["samples"],
+        s["seed"],
+        env_kwargs={"dim": 6},
+        checkpoint_every=s["checkpoint_every"],
+        eval_every=s["eval_every"],
+        run_dir=whole,
+        **options,
+    )
     for name in (RunDir.BEST_POLICY, RunDir.POLICY):  # the policies too, bit for bit
         assert (out / name).read_bytes() == (whole / name).read_bytes()
     resumed = History.from_json(out / RunDir.HISTORY_JSON)

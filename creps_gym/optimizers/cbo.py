@@ -18,9 +18,21 @@ acquisitions of :mod:`creps_gym.optimizers.acquisitions`):
 
 ``tell`` appends the episodes to the data; the hyperparameters (G3) are refitted by maximum likelihood when
 the data have grown by ``refit_growth`` since the last fit, and otherwise kept, so an ask costs one Cholesky
-factor and the acquisition's optimisation. ``recommend(contexts)`` is the posterior mean's maximiser at each
-s; :meth:`ContextualBO.mean_policy` distils it into a :class:`~creps_gym.optimizers.policy_file.Policy`
-(least squares of the maximisers on a context grid) and reports the distillation error in ``diagnostics``.
+factor and the acquisition's optimisation.
+
+``recommend(contexts)`` is the posterior mean's maximiser at each s within a trust region of the data. With
+N(s) the k = max(1, ``candidates`` // 4) episodes whose scaled contexts are nearest to s (the first on ties)
+and G(s) the best ⌈q k⌉ of them by return (q = ``trust_share``),
+
+    θ̂(s) = argmax_{θ ∈ B(s)} μ(s, θ),   B(s) = [min_{i ∈ G(s)} θ_i, max_{i ∈ G(s)} θ_i]               (R1)
+
+(componentwise, on the observed θ clipped to the box; ``trust_share=None``: the whole box). Over the whole
+box the mean extrapolates: after a refit with a long lengthscale and an interpolating fit it keeps rising
+past the good episodes, above every told return and with a small σ (so μ − κσ does not help), and its
+maximiser runs to a face of the box far from the data (issue 44's study: regrets of 10⁴–10⁷ after 500
+episodes where 300 gave 10⁻³). :meth:`ContextualBO.mean_policy` distils the recommendation into a
+:class:`~creps_gym.optimizers.policy_file.Policy` (least squares of the maximisers on a context grid) and
+reports the distillation error in ``diagnostics``.
 
 Checkpoints store the data, the hyperparameters, the context scaling and the Generator; the GP is refitted
 from them on restore (never pickled), giving the same bits.
@@ -230,20 +242,20 @@ class ContextualBO(ContextualOptimizer):
                 model = model.condition(x, float(model.predict(x[None, :])[0][0]))
         return rows
 
-    def _observed_units(self, context: Array) -> Array:
+    def _observed_units(self, context: Array) -> tuple[Array, Array]:
         """The observed θ (scaled, clipped to the box) of the ``candidates // 4`` episodes whose scaled
-        contexts are nearest to ``context`` (the first on ties): candidates that know where returns were
-        good."""
+        contexts are nearest to ``context`` (the first on ties), candidates that know where returns were
+        good, and those episodes' indices."""
         units = np.clip(self._scaled_params(self.params), 0.0, 1.0)
-        keep = max(1, self.config.candidates // 4)
-        if units.shape[0] <= keep:
-            return units
-        distance = ((self._scaled_contexts(self.contexts) - context) ** 2).sum(axis=1)
-        return units[np.argsort(distance, kind="stable")[:keep]]
+        nearest = np.arange(units.shape[0])
+        if units.shape[0] > max(1, self.config.candidates // 4):
+            distance = ((self._scaled_contexts(self.contexts) - context) ** 2).sum(axis=1)
+            nearest = np.argsort(distance, kind="stable")[: max(1, self.config.candidates // 4)]
+        return units[nearest], nearest
 
     def _propose(self, model: GPModel, context: Array) -> Array:
         random = self.rng.uniform(size=(self.config.candidates, self.n_params))
-        candidates = np.vstack([random, self._observed_units(context)])
+        candidates = np.vstack([random, self._observed_units(context)[0]])
         mean, variance = model.predict(self._maximiser.inputs(context, candidates))
         if self.config.acquisition == "ucb":
             beta = self.config.beta
@@ -256,7 +268,8 @@ class ContextualBO(ContextualOptimizer):
 
     # -- recommend and the policy --------------------------------------------------------------------------
     def recommend(self, contexts: Any) -> Array:
-        """The posterior mean's maximiser over the parameter box at each context: shape (n, p).
+        """The posterior mean's maximiser at each context within the trust region of the data, Eq. (R1):
+        shape (n, p).
 
         Before the GP exists (fewer than two episodes told) it is the initial mean. Deterministic: the
         candidates come from a fixed seed, so a context gives the same θ alone or in any batch.
@@ -270,12 +283,22 @@ class ContextualBO(ContextualOptimizer):
             )
             self._recommend_candidates = fixed
         fixed, model = self._recommend_candidates, self.model
-        scaled = self._scaled_contexts(contexts)
-        units = [
-            self._maximiser.maximise(model, row, np.vstack([fixed, self._observed_units(row)]), None)[0]
-            for row in scaled
-        ]
+        units = []
+        for row in self._scaled_contexts(contexts):
+            observed, (low, high) = self.trust_region(row)
+            candidates = np.vstack([low + fixed * (high - low), observed])
+            units.append(self._maximiser.maximise(model, row, candidates, None, (low, high))[0])
         return self._unscaled_params(np.array(units))
+
+    def trust_region(self, context: Array) -> tuple[Array, tuple[Array, Array]]:
+        """G(s) and B(s) of Eq. (R1) at a scaled context (z,): the good episodes' θ (g, p) and the box's
+        (low (p,), high (p,)), in the unit box of θ; the whole unit box for ``trust_share=None``."""
+        units, nearest = self._observed_units(context)
+        if self.config.trust_share is None:
+            return units, (np.zeros(self.n_params), np.ones(self.n_params))
+        count = max(1, math.ceil(self.config.trust_share * nearest.shape[0]))
+        good = units[np.argsort(-self.returns[nearest], kind="stable")[:count]]
+        return good, (good.min(axis=0), good.max(axis=0))
 
     def context_utility(self, candidates: Any, targets: Any, pending: Any = None) -> Array:
         """What one more episode at each candidate context (m, z) would teach the GP about the optimal θ

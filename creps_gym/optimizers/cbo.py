@@ -47,10 +47,11 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_fits_in_memory, check_positive_int
+from creps_gym._validation import check_positive_int
 from creps_gym.optimizers.acquisitions import Acquisition, AcquisitionMaximiser, gumbel_max_values, mes, ucb
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.cbo_config import MAX_COUNTS, CBOConfig
+from creps_gym.optimizers.cbo_state import GPData, check_kernel_memory, read_gp_data
 from creps_gym.optimizers.ccmaes_config import options_doc, options_signature
 from creps_gym.optimizers.context_value import context_information, utility_thetas
 from creps_gym.optimizers.gp_model import (
@@ -58,7 +59,6 @@ from creps_gym.optimizers.gp_model import (
     default_start,
     fit_gp,
     fit_hyperparameters,
-    hyper_bounds,
     transformed_returns,
 )
 from creps_gym.optimizers.policies import check_option_names
@@ -162,12 +162,7 @@ class ContextualBO(ContextualOptimizer):
         all_contexts = np.vstack([self.contexts, contexts])
         all_params, all_returns = np.vstack([self.params, params]), np.concatenate([self.returns, returns])
         n = all_returns.shape[0]
-        check_fits_in_memory(
-            8.0 * n * n * (self.n_params + self.n_context_dims + 6),
-            "returns",
-            n,
-            "the GP's kernel matrices (n x n x (p + z + 6) floats)",
-        )
+        check_kernel_memory(n, self.n_params, self.n_context_dims, "returns")
         log_hyper, scale, fitted_at = self.log_hyper, self.context_scale, self.fitted_at
         refit = fitted_at == 0 or n >= fitted_at * self.config.refit_growth
         rng_state = self.rng.bit_generator.state
@@ -351,16 +346,10 @@ class ContextualBO(ContextualOptimizer):
     # -- checkpoints ---------------------------------------------------------------------------------------
     def _state(self) -> dict[str, Any]:
         state: dict[str, Any] = {"config": self.config.to_json(), **self.config.arrays()}
-        state.update(
-            rng=self.rng.bit_generator.state,
-            data_contexts=self.contexts.copy(),
-            data_params=self.params.copy(),
-            data_returns=self.returns.copy(),
-            log_hyper=self.log_hyper.copy(),
-            scale_low=self.context_scale[0].copy(),
-            scale_high=self.context_scale[1].copy(),
-            fitted_at=self.fitted_at,
+        data = GPData(
+            self.contexts, self.params, self.returns, self.log_hyper, self.context_scale, self.fitted_at
         )
+        state.update(rng=self.rng.bit_generator.state, **data.arrays())
         return state
 
     @classmethod
@@ -378,36 +367,12 @@ class ContextualBO(ContextualOptimizer):
         return optimizer
 
     def _restore_data(self, state: Mapping[str, Any]) -> None:
-        p, z = self.n_params, self.n_context_dims
-        contexts = as_float_array(state["data_contexts"], "state['data_contexts']", (None, z)).copy()
-        n = contexts.shape[0]
-        params = as_float_array(state["data_params"], "state['data_params']", (n, p)).copy()
-        returns = as_float_array(state["data_returns"], "state['data_returns']", (n,)).copy()
-        log_hyper = as_float_array(state["log_hyper"], "state['log_hyper']", (p + z + 2,)).copy()
-        low, high = np.array(hyper_bounds(p + z)).T
-        if ((log_hyper < low) | (log_hyper > high)).any():
-            raise ValueError(
-                f"state['log_hyper']: expected values within {low.tolist()} and {high.tolist()}, "
-                f"got {log_hyper.tolist()}"
-            )
-        scale = tuple(
-            as_float_array(state[k], f"state['{k}']", (z,)).copy() for k in ("scale_low", "scale_high")
-        )
-        if not (scale[0] < scale[1]).all():
-            raise ValueError(f"state['scale_low'], state['scale_high']: expected low < high, got {scale}")
-        fitted_at = check_positive_int(state["fitted_at"], "state['fitted_at']", minimum=0)
-        if fitted_at > n:
-            raise ValueError(f"state['fitted_at']: expected at most the {n} stored episodes, got {fitted_at}")
-        check_fits_in_memory(
-            8.0 * n * n * (p + z + 6),
-            "state['data_returns']",
-            n,
-            "the GP's kernel matrices (n x n x (p + z + 6) floats)",
-        )
-        self.contexts, self.params, self.returns = contexts, params, returns
-        self.log_hyper, self.context_scale, self.fitted_at = log_hyper, (scale[0], scale[1]), fitted_at
-        if n >= 1 and fitted_at > 0:
-            self.model = fit_gp(self._inputs(contexts, params), self._targets(returns), log_hyper)
+        data = read_gp_data(state, self.n_params, self.n_context_dims)
+        self.contexts, self.params, self.returns = data.contexts, data.params, data.returns
+        self.log_hyper, self.context_scale, self.fitted_at = data.log_hyper, data.scale, data.fitted_at
+        if self.returns.shape[0] >= 1 and self.fitted_at > 0:
+            inputs = self._inputs(self.contexts, self.params)
+            self.model = fit_gp(inputs, self._targets(self.returns), self.log_hyper)
 
 
 ContextualBO.__signature__ = options_signature(CBOConfig)  # type: ignore[attr-defined]

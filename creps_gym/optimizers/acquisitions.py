@@ -11,8 +11,9 @@ With μ and σ the GP's posterior mean and standard deviation (:mod:`creps_gym.o
   with K samples y*_k of the maximum drawn from a Gumbel distribution fitted to
   P(y* < y) ≈ Π_i Φ((y − μ_i)/σ_i) over a candidate set at s (Wang & Jegelka's Gumbel sampling).   (A3)
 
-Each is maximised over θ in the parameter box with s fixed: the acquisition is evaluated on many candidates
-(random draws and the observed θ) and L-BFGS-B, with the analytic gradient, starts from the best few.
+Each is maximised over θ in the parameter box (or a sub-box of it, e.g. the trust region of ``recommend``)
+with s fixed: the acquisition is evaluated on many candidates (random draws and the observed θ) and
+L-BFGS-B, with the analytic gradient, starts from the best few.
 Everything is deterministic given the candidates and the Generator.
 """
 
@@ -108,15 +109,22 @@ class AcquisitionMaximiser:
         self.max_iter = max_iter
 
     def maximise(
-        self, model: GPModel, context: Array, candidates: Array, acquisition: Acquisition | None
+        self,
+        model: GPModel,
+        context: Array,
+        candidates: Array,
+        acquisition: Acquisition | None,
+        bounds: tuple[Array, Array] | None = None,
     ) -> tuple[Array, float]:
-        """The best θ (q,) in [0, 1]^q found at the scaled context (c,) and its value.
+        """The best θ (q,) in [0, 1]^q (or in ``bounds``, (low (q,), high (q,)) inside it) found at the
+        scaled context (c,) and its value.
 
-        ``acquisition`` None maximises the posterior mean. ``candidates`` (m, q) are scored first; the best
-        ``n_starts`` start L-BFGS-B; the result is the best of the runs and the candidates.
+        ``acquisition`` None maximises the posterior mean. ``candidates`` (m, q), which must lie within the
+        bounds, are scored first; the best ``n_starts`` start L-BFGS-B; the result is the best of the runs
+        and the candidates.
         """
         mean, variance = model.predict(self.inputs(context, candidates))
-        return self.maximise_scored(model, context, candidates, mean, variance, acquisition)
+        return self.maximise_scored(model, context, candidates, mean, variance, acquisition, bounds)
 
     def maximise_scored(
         self,
@@ -126,6 +134,7 @@ class AcquisitionMaximiser:
         mean: Array,
         variance: Array,
         acquisition: Acquisition | None,
+        bounds: tuple[Array, Array] | None = None,
     ) -> tuple[Array, float]:
         """:meth:`maximise` with the posterior (``mean``, ``variance``, (m,)) at the candidates given."""
         values = mean if acquisition is None else acquisition(mean, variance)[0]
@@ -140,7 +149,7 @@ class AcquisitionMaximiser:
             if len(starts) == self.n_starts:
                 break
         for start in starts:
-            theta, value = self._local(model, context, start, acquisition)
+            theta, value = self._local(model, context, start, acquisition, bounds)
             if value > best_value:
                 best, best_value = theta, value
         return best, best_value
@@ -150,7 +159,12 @@ class AcquisitionMaximiser:
         return np.hstack([np.broadcast_to(context, (thetas.shape[0], context.shape[0])), thetas])
 
     def _local(
-        self, model: GPModel, context: Array, start: Array, acquisition: Acquisition | None
+        self,
+        model: GPModel,
+        context: Array,
+        start: Array,
+        acquisition: Acquisition | None,
+        bounds: tuple[Array, Array] | None,
     ) -> tuple[Array, float]:
         width = context.shape[0]
 
@@ -165,11 +179,16 @@ class AcquisitionMaximiser:
 
         from scipy import optimize  # here: c-bo alone needs it, and it adds 0.2 s to every start-up
 
-        bounds = [(0.0, 1.0)] * start.shape[0]
+        low, high = (np.zeros(start.shape[0]), np.ones(start.shape[0])) if bounds is None else bounds
         options = {"maxiter": self.max_iter}
         result = optimize.minimize(
-            negative, start, jac=True, method="L-BFGS-B", bounds=bounds, options=options
+            negative,
+            start,
+            jac=True,
+            method="L-BFGS-B",
+            bounds=list(zip(low, high, strict=True)),
+            options=options,
         )
-        theta = np.clip(np.asarray(result.x, dtype=np.float64), 0.0, 1.0)
+        theta = np.clip(np.asarray(result.x, dtype=np.float64), low, high)
         value = -negative(theta)[0]
         return theta, value if math.isfinite(value) else -math.inf

@@ -18,9 +18,21 @@ acquisitions of :mod:`creps_gym.optimizers.acquisitions`):
 
 ``tell`` appends the episodes to the data; the hyperparameters (G3) are refitted by maximum likelihood when
 the data have grown by ``refit_growth`` since the last fit, and otherwise kept, so an ask costs one Cholesky
-factor and the acquisition's optimisation. ``recommend(contexts)`` is the posterior mean's maximiser at each
-s; :meth:`ContextualBO.mean_policy` distils it into a :class:`~creps_gym.optimizers.policy_file.Policy`
-(least squares of the maximisers on a context grid) and reports the distillation error in ``diagnostics``.
+factor and the acquisition's optimisation.
+
+``recommend(contexts)`` is the posterior mean's maximiser at each s within a trust region of the data. With
+N(s) the k = max(1, ``candidates`` // 4) episodes whose scaled contexts are nearest to s (the first on ties)
+and G(s) the best ⌈q k⌉ of them by return (q = ``trust_share``),
+
+    θ̂(s) = argmax_{θ ∈ B(s)} μ(s, θ),   B(s) = [min_{i ∈ G(s)} θ_i, max_{i ∈ G(s)} θ_i]               (R1)
+
+(componentwise, on the observed θ clipped to the box; ``trust_share=None``: the whole box). Over the whole
+box the mean extrapolates: after a refit with a long lengthscale and an interpolating fit it keeps rising
+past the good episodes, above every told return and with a small σ (so μ − κσ does not help), and its
+maximiser runs to a face of the box far from the data (issue 44's study: regrets of 10⁴–10⁷ after 500
+episodes where 300 gave 10⁻³). :meth:`ContextualBO.mean_policy` distils the recommendation into a
+:class:`~creps_gym.optimizers.policy_file.Policy` (least squares of the maximisers on a context grid) and
+reports the distillation error in ``diagnostics``.
 
 Checkpoints store the data, the hyperparameters, the context scaling and the Generator; the GP is refitted
 from them on restore (never pickled), giving the same bits.
@@ -35,10 +47,11 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym._validation import as_float_array, check_fits_in_memory, check_positive_int
+from creps_gym._validation import check_positive_int
 from creps_gym.optimizers.acquisitions import Acquisition, AcquisitionMaximiser, gumbel_max_values, mes, ucb
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.cbo_config import MAX_COUNTS, CBOConfig
+from creps_gym.optimizers.cbo_state import GPData, check_kernel_memory, read_gp_data
 from creps_gym.optimizers.ccmaes_config import options_doc, options_signature
 from creps_gym.optimizers.context_value import context_information, utility_thetas
 from creps_gym.optimizers.gp_model import (
@@ -46,7 +59,6 @@ from creps_gym.optimizers.gp_model import (
     default_start,
     fit_gp,
     fit_hyperparameters,
-    hyper_bounds,
     transformed_returns,
 )
 from creps_gym.optimizers.policies import check_option_names
@@ -150,12 +162,7 @@ class ContextualBO(ContextualOptimizer):
         all_contexts = np.vstack([self.contexts, contexts])
         all_params, all_returns = np.vstack([self.params, params]), np.concatenate([self.returns, returns])
         n = all_returns.shape[0]
-        check_fits_in_memory(
-            8.0 * n * n * (self.n_params + self.n_context_dims + 6),
-            "returns",
-            n,
-            "the GP's kernel matrices (n x n x (p + z + 6) floats)",
-        )
+        check_kernel_memory(n, self.n_params, self.n_context_dims, "returns")
         log_hyper, scale, fitted_at = self.log_hyper, self.context_scale, self.fitted_at
         refit = fitted_at == 0 or n >= fitted_at * self.config.refit_growth
         rng_state = self.rng.bit_generator.state
@@ -230,20 +237,20 @@ class ContextualBO(ContextualOptimizer):
                 model = model.condition(x, float(model.predict(x[None, :])[0][0]))
         return rows
 
-    def _observed_units(self, context: Array) -> Array:
+    def _observed_units(self, context: Array) -> tuple[Array, Array]:
         """The observed θ (scaled, clipped to the box) of the ``candidates // 4`` episodes whose scaled
-        contexts are nearest to ``context`` (the first on ties): candidates that know where returns were
-        good."""
+        contexts are nearest to ``context`` (the first on ties), candidates that know where returns were
+        good, and those episodes' indices."""
         units = np.clip(self._scaled_params(self.params), 0.0, 1.0)
-        keep = max(1, self.config.candidates // 4)
-        if units.shape[0] <= keep:
-            return units
-        distance = ((self._scaled_contexts(self.contexts) - context) ** 2).sum(axis=1)
-        return units[np.argsort(distance, kind="stable")[:keep]]
+        nearest = np.arange(units.shape[0])
+        if units.shape[0] > max(1, self.config.candidates // 4):
+            distance = ((self._scaled_contexts(self.contexts) - context) ** 2).sum(axis=1)
+            nearest = np.argsort(distance, kind="stable")[: max(1, self.config.candidates // 4)]
+        return units[nearest], nearest
 
     def _propose(self, model: GPModel, context: Array) -> Array:
         random = self.rng.uniform(size=(self.config.candidates, self.n_params))
-        candidates = np.vstack([random, self._observed_units(context)])
+        candidates = np.vstack([random, self._observed_units(context)[0]])
         mean, variance = model.predict(self._maximiser.inputs(context, candidates))
         if self.config.acquisition == "ucb":
             beta = self.config.beta
@@ -256,7 +263,8 @@ class ContextualBO(ContextualOptimizer):
 
     # -- recommend and the policy --------------------------------------------------------------------------
     def recommend(self, contexts: Any) -> Array:
-        """The posterior mean's maximiser over the parameter box at each context: shape (n, p).
+        """The posterior mean's maximiser at each context within the trust region of the data, Eq. (R1):
+        shape (n, p).
 
         Before the GP exists (fewer than two episodes told) it is the initial mean. Deterministic: the
         candidates come from a fixed seed, so a context gives the same θ alone or in any batch.
@@ -270,12 +278,22 @@ class ContextualBO(ContextualOptimizer):
             )
             self._recommend_candidates = fixed
         fixed, model = self._recommend_candidates, self.model
-        scaled = self._scaled_contexts(contexts)
-        units = [
-            self._maximiser.maximise(model, row, np.vstack([fixed, self._observed_units(row)]), None)[0]
-            for row in scaled
-        ]
+        units = []
+        for row in self._scaled_contexts(contexts):
+            observed, (low, high) = self.trust_region(row)
+            candidates = np.vstack([low + fixed * (high - low), observed])
+            units.append(self._maximiser.maximise(model, row, candidates, None, (low, high))[0])
         return self._unscaled_params(np.array(units))
+
+    def trust_region(self, context: Array) -> tuple[Array, tuple[Array, Array]]:
+        """G(s) and B(s) of Eq. (R1) at a scaled context (z,): the good episodes' θ (g, p) and the box's
+        (low (p,), high (p,)), in the unit box of θ; the whole unit box for ``trust_share=None``."""
+        units, nearest = self._observed_units(context)
+        if self.config.trust_share is None:
+            return units, (np.zeros(self.n_params), np.ones(self.n_params))
+        count = max(1, math.ceil(self.config.trust_share * nearest.shape[0]))
+        good = units[np.argsort(-self.returns[nearest], kind="stable")[:count]]
+        return good, (good.min(axis=0), good.max(axis=0))
 
     def context_utility(self, candidates: Any, targets: Any, pending: Any = None) -> Array:
         """What one more episode at each candidate context (m, z) would teach the GP about the optimal θ
@@ -328,16 +346,10 @@ class ContextualBO(ContextualOptimizer):
     # -- checkpoints ---------------------------------------------------------------------------------------
     def _state(self) -> dict[str, Any]:
         state: dict[str, Any] = {"config": self.config.to_json(), **self.config.arrays()}
-        state.update(
-            rng=self.rng.bit_generator.state,
-            data_contexts=self.contexts.copy(),
-            data_params=self.params.copy(),
-            data_returns=self.returns.copy(),
-            log_hyper=self.log_hyper.copy(),
-            scale_low=self.context_scale[0].copy(),
-            scale_high=self.context_scale[1].copy(),
-            fitted_at=self.fitted_at,
+        data = GPData(
+            self.contexts, self.params, self.returns, self.log_hyper, self.context_scale, self.fitted_at
         )
+        state.update(rng=self.rng.bit_generator.state, **data.arrays())
         return state
 
     @classmethod
@@ -355,36 +367,12 @@ class ContextualBO(ContextualOptimizer):
         return optimizer
 
     def _restore_data(self, state: Mapping[str, Any]) -> None:
-        p, z = self.n_params, self.n_context_dims
-        contexts = as_float_array(state["data_contexts"], "state['data_contexts']", (None, z)).copy()
-        n = contexts.shape[0]
-        params = as_float_array(state["data_params"], "state['data_params']", (n, p)).copy()
-        returns = as_float_array(state["data_returns"], "state['data_returns']", (n,)).copy()
-        log_hyper = as_float_array(state["log_hyper"], "state['log_hyper']", (p + z + 2,)).copy()
-        low, high = np.array(hyper_bounds(p + z)).T
-        if ((log_hyper < low) | (log_hyper > high)).any():
-            raise ValueError(
-                f"state['log_hyper']: expected values within {low.tolist()} and {high.tolist()}, "
-                f"got {log_hyper.tolist()}"
-            )
-        scale = tuple(
-            as_float_array(state[k], f"state['{k}']", (z,)).copy() for k in ("scale_low", "scale_high")
-        )
-        if not (scale[0] < scale[1]).all():
-            raise ValueError(f"state['scale_low'], state['scale_high']: expected low < high, got {scale}")
-        fitted_at = check_positive_int(state["fitted_at"], "state['fitted_at']", minimum=0)
-        if fitted_at > n:
-            raise ValueError(f"state['fitted_at']: expected at most the {n} stored episodes, got {fitted_at}")
-        check_fits_in_memory(
-            8.0 * n * n * (p + z + 6),
-            "state['data_returns']",
-            n,
-            "the GP's kernel matrices (n x n x (p + z + 6) floats)",
-        )
-        self.contexts, self.params, self.returns = contexts, params, returns
-        self.log_hyper, self.context_scale, self.fitted_at = log_hyper, (scale[0], scale[1]), fitted_at
-        if n >= 1 and fitted_at > 0:
-            self.model = fit_gp(self._inputs(contexts, params), self._targets(returns), log_hyper)
+        data = read_gp_data(state, self.n_params, self.n_context_dims)
+        self.contexts, self.params, self.returns = data.contexts, data.params, data.returns
+        self.log_hyper, self.context_scale, self.fitted_at = data.log_hyper, data.scale, data.fitted_at
+        if self.returns.shape[0] >= 1 and self.fitted_at > 0:
+            inputs = self._inputs(self.contexts, self.params)
+            self.model = fit_gp(inputs, self._targets(self.returns), self.log_hyper)
 
 
 ContextualBO.__signature__ = options_signature(CBOConfig)  # type: ignore[attr-defined]

@@ -90,6 +90,11 @@ class CBOConfig:
         None: max(4, 2(p + z)).
     candidates : int                random θ scored at each asked context (the observed θ are scored too).
     starts : int                    L-BFGS-B runs from the best candidates.
+    trust_share : float or None     q of ``recommend``'s trust region (Eq. R1 of
+        :mod:`~creps_gym.optimizers.cbo`): the posterior mean is maximised over the box spanned by the θ of
+        the best share q of the ``candidates // 4`` episodes with the nearest contexts; None: over the
+        whole parameter box (the posterior mean may then extrapolate to a face of it, far from the data).
+        Smaller: closer to the best episodes; larger: reaches optima that move with s past the neighbours.
     refit_growth : float            the hyperparameters are refitted (maximum likelihood, G3) when the data
         have grown by this factor since the last fit (a geometric schedule); in between only the Cholesky
         factor is updated, so asks stay fast.
@@ -118,6 +123,7 @@ class CBOConfig:
     initial_samples: int | None = None
     candidates: int = 256
     starts: int = 3
+    trust_share: float | None = 1.0 / 3.0
     refit_growth: float = 1.2
     hyper_restarts: int = 1
     fit_points: int = 256
@@ -159,6 +165,8 @@ class CBOConfig:
             raise ValueError(f"prior_mean: expected one of {PRIOR_MEANS}, got {self.prior_mean!r}")
         set_(self, "beta", check_real_in_range(self.beta, "beta", 0.0, 1e6))
         set_(self, "refit_growth", check_real_in_range(self.refit_growth, "refit_growth", 1.0, 1e6))
+        if self.trust_share is not None:
+            set_(self, "trust_share", check_real_in_range(self.trust_share, "trust_share", 0.0, 1.0))
         set_(self, "seed", check_seed(self.seed))
         mean = as_float_array(self.initial_mean, "initial_mean")
         if mean.ndim == 0:

@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from creps_gym._validation import as_float_array, check_count, check_positive_int, check_real_in_range
 from creps_gym.optimizers.ccmaes import CCMAES
 from creps_gym.optimizers.ccmaes_config import CCMAESConfig, options_doc, options_signature
-from creps_gym.optimizers.cma_rules import inverse_sqrt
+from creps_gym.optimizers.cma_rules import inverse_sqrt, median
 from creps_gym.optimizers.policies import LinearGaussianPolicy
 from creps_gym.optimizers.surrogate_model import (
     KINDS,
@@ -109,15 +109,6 @@ def next_model_generations(tau: float | None, previous: int, most: int, min_tau:
     return int(min(target, 2 * previous + 1))  # Eq. (S5)
 
 
-def _median(values: Array) -> float:
-    """The median of ``values`` (n,), as ``np.median`` gives it, without overflowing near the float limit: the
-    two middle values are halved before they are added (halving is exact, so this is ``np.median``'s
-    (a + b)/2 bit for bit wherever that does not overflow or underflow)."""
-    n = values.size
-    middle = np.partition(values, [(n - 1) // 2, n // 2])
-    return float(middle[(n - 1) // 2] / 2 + middle[n // 2] / 2)
-
-
 @dataclass(frozen=True)
 class _Rollback:
     """The distribution and paths where model generations started, and the true batch before them: its
@@ -133,7 +124,7 @@ class _Rollback:
     def of(cls, optimizer: CCMAES, returns: Array) -> _Rollback:
         """The optimiser's distribution and paths now, and the smallest and median of ``returns``."""
         paths = (optimizer.path_sigma.copy(), optimizer.path_cov.copy())
-        return cls(optimizer.policy.copy(), *paths, float(returns.min()), _median(returns))
+        return cls(optimizer.policy.copy(), *paths, float(returns.min()), median(returns))
 
 
 class CCMAESSurrogate(CCMAES):
@@ -171,7 +162,7 @@ class CCMAESSurrogate(CCMAES):
         if self._model_made_worse(returns):  # Eq. (S7): undo the model generations, keep the batch's data
             self._reject_model_generations(contexts, params, returns)
             return
-        if self.rollback is not None and _median(returns) >= self.rollback.median:  # Eq. (S7)
+        if self.rollback is not None and median(returns) >= self.rollback.median:  # Eq. (S7)
             self.model_cap = min(self.config.max_model_generations, 2 * self.model_cap + 1)  # they helped
         tau = self._fresh_tau(contexts, params, returns)  # before the update: its V is the one C1 fits
         super()._update(contexts, params, returns)  # the true generation; raises with the state unchanged
@@ -212,7 +203,7 @@ class CCMAESSurrogate(CCMAES):
     def _model_made_worse(self, returns: Array) -> bool:
         """Eq. (S7): model generations ran before this true batch, and its median return is below the
         smallest return of the true batch before them."""
-        return self.rollback is not None and _median(returns) < self.rollback.floor
+        return self.rollback is not None and median(returns) < self.rollback.floor
 
     def _reject_model_generations(self, contexts: Array, params: Array, returns: Array) -> None:
         """Eq. (S7): the distribution and paths of before the model generations, the batch in the archive and

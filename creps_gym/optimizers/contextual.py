@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym.optimizers.cma_rules import inverse_sqrt
+from creps_gym.optimizers.cma_rules import inverse_sqrt, median
 from creps_gym.optimizers.features import FeatureMap, PolynomialFeatures
 from creps_gym.optimizers.policies import weighted_ml_fit
 
@@ -307,8 +307,8 @@ def robust_refit(
     """
     for _ in range(iterations):
         residuals = targets - (phi @ fit)[:, 0]
-        deviation = np.abs(residuals - np.median(residuals))
-        sigma = 1.4826 * float(np.median(deviation))
+        deviation = np.abs(residuals - median(residuals))
+        sigma = 1.4826 * median(deviation)
         if sigma <= 1e-12 * float(np.abs(targets).max(initial=0.0)):  # half the fit is exact: keep it
             return fit
         weights = np.minimum(1.0, HUBER_K * sigma / np.maximum(np.abs(residuals), 1e-300))

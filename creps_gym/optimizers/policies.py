@@ -72,7 +72,7 @@ def weighted_ml_fit(
         gram = weighted @ mean_features
         gram.flat[:: gram.shape[0] + 1] += ridge * max(gram.trace() / gram.shape[0], 1e-300)
         return linalg.solve(gram, weighted @ params, assume_a="pos", check_finite=False)
-    others = np.delete(np.arange(mean_features.shape[1]), constant_column)
+    others = [i for i in range(mean_features.shape[1]) if i != constant_column]
     columns = mean_features[:, others]
     centre = weights @ columns
     centred = columns - centre

@@ -202,6 +202,63 @@ def test_recommend_is_deterministic_stays_in_the_box_and_ignores_the_batch():
     assert (batch >= low).all() and (batch <= high).all() and optimizer.state_dict()["rng"] == before
 
 
+def _climbed_halfway(**options) -> ContextualBO:
+    """Nine episodes that climbed R = −|θ − 0.5| from θ = 0.1 to its peak 0.5 and never went past it."""
+    optimizer = make_optimizer(
+        "c-bo",
+        1,
+        1,
+        0,
+        param_low=0.0,
+        param_high=1.0,
+        context_low=0.0,
+        context_high=1.0,
+        **options,
+    )
+    theta = np.linspace(0.1, 0.5, 9)[:, None]
+    contexts = np.random.default_rng(0).uniform(size=(9, 1))
+    optimizer.tell(contexts, theta, -np.abs(theta[:, 0] - 0.5), allow_external=True)
+    return optimizer
+
+
+def test_recommend_stays_where_the_good_episodes_are_instead_of_extrapolating_to_a_face():
+    """Issue 44's late blow-ups: the posterior mean fitted to a climb keeps rising past the data (here to
+    μ(1) far above μ(0.5), the best told θ), so its maximiser over the whole box is the face θ = 1, 0.5 from
+    every episode, with the true return −0.5; within the trust region of Eq. (R1) (by default the best third
+    of the episodes, ⌈9/3⌉ = 3: θ = 0.4, 0.45, 0.5) it is the peak."""
+    contexts = np.array([[0.2], [0.5], [0.8]])
+    old = _climbed_halfway(trust_share=None)
+    mean = old.model.predict(np.array([[0.5, 0.5], [0.5, 1.0]]))[0]
+    assert mean[1] > mean[0] + 1.0  # the extrapolation
+    np.testing.assert_array_equal(old.recommend(contexts), 1.0)
+    new = _climbed_halfway()
+    good, (low, high) = new.trust_region(np.array([0.5]))
+    np.testing.assert_allclose(np.sort(good[:, 0]), [0.4, 0.45, 0.5])
+    np.testing.assert_allclose([low, high], [[0.4], [0.5]])
+    np.testing.assert_allclose(new.recommend(contexts), 0.5, atol=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("share", "count"), [(1.0 / 3.0, 7), (0.5, 10)])
+def test_recommend_lies_in_the_box_of_the_best_episodes_near_each_context(share, count):
+    """Eq. (R1): θ̂(s) within the box of G(s), the best ⌈qk⌉ of the k = 64 episodes with the nearest
+    contexts (all 20 here: the best 7 at q = 1/3, 10 at q = 1/2), and no worse by the posterior mean than
+    every θ of G(s) at s."""
+    optimizer = _trained(trust_share=share)
+    contexts = np.linspace(0, 1, 5)[:, None]
+    units = optimizer._scaled_params(optimizer.recommend(contexts))
+    order = np.argsort(-optimizer.returns, kind="stable")[:count]
+    best = np.clip(optimizer._scaled_params(optimizer.params[order]), 0.0, 1.0)
+    for context, unit in zip(optimizer._scaled_contexts(contexts), units, strict=True):
+        good, (low, high) = optimizer.trust_region(context)
+        np.testing.assert_array_equal(good, best)
+        np.testing.assert_array_equal([low, high], [best.min(axis=0), best.max(axis=0)])
+        assert (unit >= low).all() and (unit <= high).all()
+        inputs = np.hstack([np.tile(context, (count + 1, 1)), np.vstack([unit, good])])
+        mean = optimizer.model.predict(inputs)[0]
+        assert mean[0] >= mean[1:].max()
+
+
 @pytest.mark.slow
 def test_a_batch_at_one_context_holds_distinct_rows_through_the_kriging_believer():
     optimizer = _trained()
@@ -245,6 +302,8 @@ def test_the_first_asks_draw_the_initial_design_inside_the_box():
         ({"kappa": 1.0}, TypeError, "options: expected names in .* got unknown \\['kappa'\\]"),
         ({"candidates": 10**9}, ValueError, "candidates: expected an integer of at most 100000"),
         ({"distillation_points": 20_000}, ValueError, "distillation_points: expected an integer of at most"),
+        ({"trust_share": 0.0}, ValueError, r"trust_share: expected a finite value in \(0.0, 1.0\], got 0.0"),
+        ({"trust_share": "all"}, TypeError, "trust_share: expected a real number"),
     ],
 )
 def test_bad_options_are_refused_naming_them(options, error, match):

@@ -21,10 +21,11 @@ from creps_gym.runner.seeds import split_seed
 
 # c-cma-es restarts at iteration 24 with these options (its stagnation criterion after 5 iterations), and
 # its evaluations get worse after that (``keep_best=False``: its recommendation restarts with the search): the
-# best policy is iteration 22's, the final one much worse.
+# best policy is iteration 22's, the final one much worse. ``budget=None``: the restart is made although the
+# 6 iterations left could not carry a search as far as the first one went (Eq. C12's rule would decline it).
 RESTARTING = {
     "env_kwargs": {"dim": 3},
-    "optimizer_options": {"tolstagnation": 5, "restarts": 3, "keep_best": False},
+    "optimizer_options": {"tolstagnation": 5, "restarts": 3, "keep_best": False, "budget": None},
 }
 
 
@@ -57,7 +58,8 @@ def test_the_final_policy_is_the_recommendation_after_a_restart_that_kept_the_be
     """Issue 42, item 1: with ``keep_best`` (the default) a restarted c-cma-es recommends the best search's
     policy, and the run's evaluation measures that; ``policy.npz`` held the restarted search's mean instead
     (evaluated −0.58 where the run recorded −2e−6 on these options)."""
-    options = {"env_kwargs": {"dim": 2}, "optimizer_options": {"tolx": 1e-3}, "eval_every": 5}
+    restart = {"tolx": 1e-3, "budget": None}  # restart even where the budget left could not repay it (C12)
+    options = {"env_kwargs": {"dim": 2}, "optimizer_options": restart, "eval_every": 5}
     history = run("c-cma-es", SPHERE, 85, None, 0, run_dir=tmp_path / "run", **options)
     assert history.column("diag.restarts")[-1] >= 1  # the search restarted; the kept best is in force
     last = history.records[-1]

@@ -58,3 +58,21 @@ def test_the_budget_table_quotes_the_target_study():
     documented, study = doc_cells(), study_cells()
     assert set(documented) == set(study) and len(study) == 4
     assert documented == study
+
+
+LOW_BUDGET = ROOT / "docs" / "results" / "low_budget" / "full" / "results.md"
+
+
+def test_the_low_budget_table_quotes_the_low_budget_study_row_for_row():
+    """docs/optimizers.md's 50–500-episode rows are rows of the low-budget study's rendered tables at 200
+    and 300 episodes, cell for cell."""
+    text = DOC.read_text(encoding="utf-8")
+    block = text[text.index("<!-- low-budget-table:start -->") : text.index("<!-- low-budget-table:end -->")]
+    study = LOW_BUDGET.read_text(encoding="utf-8")
+    for episodes in (200, 300):
+        heading = f"c-bo against the best other method at {episodes} episodes"
+        rendered = {row["task"]: row for row in _table_after(study, "## " + heading)}
+        documented = _table_after(block, heading)
+        assert len(documented) >= 5
+        for row in documented:
+            assert row == rendered[row["task"]]

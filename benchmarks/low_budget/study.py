@@ -301,13 +301,25 @@ def _record(curve: dict[str, list[Any]], state: dict[str, Any], value: float | N
         curve[name].append(value if name == "values" else state[name])
 
 
+def _select(selector: Any, optimizer: Any, rng: np.random.Generator, spec: LowBudgetSpec) -> Array:
+    """The selector's contexts for the next batch; a selector that declares ``uses_context_utility`` gets the
+    optimiser's ``context_utility`` (as the runner's :class:`~creps_gym.runner.selection.Selection` gives it),
+    without which the active selector draws uniformly."""
+    if not getattr(selector, "uses_context_utility", False):
+        return selector.select(rng, spec.samples)
+    utility = getattr(optimizer, "context_utility", None)
+    return selector.select(rng, spec.samples, context_utility=utility if callable(utility) else None)
+
+
 def _batch(
     spec: LowBudgetSpec, model: Any, optimizer: Any, selector: Any, rng: np.random.Generator, state: dict
 ) -> None:
     """Ask, evaluate and tell one batch; ``state`` gains its episodes and the optimiser's seconds (wall:
     ``spent``, ``last``; this process's CPU: ``spent_cpu``, ``last_cpu``; ``last*`` per episode)."""
     contexts = (
-        model.sample_contexts(rng, spec.samples) if selector is None else selector.select(rng, spec.samples)
+        model.sample_contexts(rng, spec.samples)
+        if selector is None
+        else _select(selector, optimizer, rng, spec)
     )
     clock, cpu = time.perf_counter(), time.process_time()
     params = optimizer.ask(contexts)

@@ -144,3 +144,16 @@ def test_the_report_says_which_tasks_are_complete_partial_or_not_started() -> No
         "Complete tasks: Sphere-p2-z1. Partial: Sphere-p4-z1 (1 of 2 runs). "
         "Not started: 1 task(s) (Sphere-p8-z1).\n"
     )
+
+
+def test_an_active_column_chooses_its_contexts_with_the_optimisers_model():
+    """The active selector gets c-bo's ``context_utility`` in the study's loop (without it every context is a
+    uniform draw and the column is c-bo's bit for bit, as the first active runs were): every committed run
+    of an active column differs from the run of its optimiser alone."""
+    runs = sorted(
+        (Path(__file__).resolve().parents[2] / "benchmarks/low_budget/runs").rglob("*+active-s*.json")
+    )
+    assert runs
+    for path in runs:
+        alone = path.with_name(path.name.replace("+active", ""))
+        assert json.loads(path.read_text())["values"] != json.loads(alone.read_text())["values"], path.name

@@ -27,6 +27,7 @@ import creps_gym  # noqa: F401  (registers the ids)
 from creps_gym.envs.evaluation import contextual_model, test_contexts
 from creps_gym.optimizers import make_optimizer, recommended_samples
 from creps_gym.selectors import make_selector
+from creps_gym.selectors.base import select_for
 
 __all__ = [
     "BUDGETS",
@@ -301,16 +302,6 @@ def _record(curve: dict[str, list[Any]], state: dict[str, Any], value: float | N
         curve[name].append(value if name == "values" else state[name])
 
 
-def _select(selector: Any, optimizer: Any, rng: np.random.Generator, spec: LowBudgetSpec) -> Array:
-    """The selector's contexts for the next batch; a selector that declares ``uses_context_utility`` gets the
-    optimiser's ``context_utility`` (as the runner's :class:`~creps_gym.runner.selection.Selection` gives it),
-    without which the active selector draws uniformly."""
-    if not getattr(selector, "uses_context_utility", False):
-        return selector.select(rng, spec.samples)
-    utility = getattr(optimizer, "context_utility", None)
-    return selector.select(rng, spec.samples, context_utility=utility if callable(utility) else None)
-
-
 def _batch(
     spec: LowBudgetSpec, model: Any, optimizer: Any, selector: Any, rng: np.random.Generator, state: dict
 ) -> None:
@@ -319,7 +310,7 @@ def _batch(
     contexts = (
         model.sample_contexts(rng, spec.samples)
         if selector is None
-        else _select(selector, optimizer, rng, spec)
+        else select_for(selector, rng, spec.samples, optimizer)
     )
     clock, cpu = time.perf_counter(), time.process_time()
     params = optimizer.ask(contexts)

@@ -18,7 +18,7 @@ import numpy as np
 from creps_gym._validation import check_generator_state
 from creps_gym.runner.config import RunConfig
 from creps_gym.runner.seeds import SeedPlan, seed_child
-from creps_gym.selectors.base import ContextSelector
+from creps_gym.selectors.base import ContextSelector, select_for
 from creps_gym.selectors.registry import make_selector
 
 __all__ = ["STATE_KEYS", "Selection", "selector_stream"]
@@ -66,10 +66,7 @@ class Selection:
     def select(self, n: int, optimizer: Any = None) -> Any:
         """The selector's ``n`` contexts from its stream; a selector that declares
         ``uses_context_utility`` also gets the optimiser's ``context_utility`` (None if it has none)."""
-        if not getattr(self.selector, "uses_context_utility", False):
-            return self.selector.select(self.rng, n)
-        utility = getattr(optimizer, "context_utility", None)
-        return self.selector.select(self.rng, n, context_utility=utility if callable(utility) else None)
+        return select_for(self.selector, self.rng, n, optimizer)
 
     def tell(self, contexts: np.ndarray, returns: np.ndarray, optimizer: Any) -> None:
         """Tell the selector the iteration's outcome and the optimiser's diagnostics (no-op without one)."""

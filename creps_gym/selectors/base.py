@@ -53,6 +53,7 @@ __all__ = [
     "UniformSelector",
     "check_state_keys",
     "finite_box",
+    "select_for",
 ]
 
 Array = NDArray[np.float64]
@@ -76,6 +77,15 @@ class ContextSelector(Protocol):
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore :meth:`state_dict`'s output (validated: it comes from an untrusted checkpoint)."""
+
+
+def select_for(selector: Any, rng: np.random.Generator, n: int, optimizer: Any = None) -> Array:
+    """``selector``'s ``n`` contexts (n, z) from ``rng`` for ``optimizer``'s next batch: a selector that
+    declares ``uses_context_utility`` also gets the optimiser's ``context_utility`` (None if it has none)."""
+    if not getattr(selector, "uses_context_utility", False):
+        return selector.select(rng, n)
+    utility = getattr(optimizer, "context_utility", None)
+    return selector.select(rng, n, context_utility=utility if callable(utility) else None)
 
 
 def finite_box(low: Any, high: Any, user: str) -> tuple[Array, Array]:

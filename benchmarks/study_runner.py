@@ -93,9 +93,10 @@ def run_all(
     specs = list(specs)
     results: dict[str, dict[str, Any]] = {}
     todo = []
+    names = os.listdir(cache)
     for spec in specs:
         fresh = recompute and (compute is True or (callable(compute) and compute(spec)))
-        cached = None if fresh else cached_result(cache, spec)
+        cached = None if fresh else cached_result(cache, spec, names)
         if cached is not None:
             results[spec.key] = cached
         elif spec.key not in {s.key for s in todo}:
@@ -316,9 +317,11 @@ def run_study(
     )
     recompute = args.mode == "quick"  # a quick study is a reproduction: it computes every run again
 
+    names = os.listdir(args.cache) if args.cache.is_dir() else []
+
     def read_back(spec: RunSpec) -> bool:  # a cached run this invocation reads rather than computes
         fresh = recompute and bool(compute) and (compute is True or compute(spec))
-        return not fresh and cached_result(args.cache, spec) is not None
+        return not fresh and cached_result(args.cache, spec, names) is not None
 
     cached_before = sum(map(read_back, specs))
     documents = run_all(

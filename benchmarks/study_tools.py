@@ -14,10 +14,11 @@ f <= -1e4. Curves are stored at up to :data:`CURVE_POINTS` log-spaced iterations
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import math
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -348,18 +349,21 @@ def execute(
     )
 
 
-def cached_result(cache: Path, spec: RunSpec) -> dict[str, Any] | None:
+def cached_result(cache: Path, spec: RunSpec, names: Collection[str] | None = None) -> dict[str, Any] | None:
     """The cached document of ``spec``, or of the same run with a smaller budget that did not use it up.
 
     A run is deterministic and its budget only sets where it is cut off, so a run that ended before its
     budget ran out (it met the target, or the optimiser stopped) is the same run under any larger budget.
-    Raising the budget of a study therefore recomputes only its censored runs.
+    Raising the budget of a study therefore recomputes only its censored runs. ``names`` is the folder's
+    listing (``os.listdir(cache)``) from a caller that looks up many specs, so the folder of thousands of
+    runs is not listed again for each.
     """
     exact = load_document(cache / f"{spec.key}.json")
     if exact is not None:
         return exact
-    for path in sorted(cache.glob(f"{spec.prefix}-b*-n{spec.samples}.json")):
-        document = load_document(path)
+    pattern = f"{spec.prefix}-b*-n{spec.samples}.json"
+    for name in sorted(fnmatch.filter(os.listdir(cache) if names is None else names, pattern)):
+        document = load_document(cache / name)
         if document is not None and document["spec"]["budget"] <= spec.budget and ended_early(document):
             return document
     return None

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from creps_gym.optimizers.cma_rules import inverse_sqrt, median
 from creps_gym.optimizers.features import FeatureMap, PolynomialFeatures
-from creps_gym.optimizers.policies import weighted_ml_fit
+from creps_gym.optimizers.mean_fit import weighted_ml_fit
 
 __all__ = [
     "BASELINE_RIDGE_SCALES",
@@ -298,7 +298,7 @@ def robust_refit(
     targets : ndarray, shape (n,)
     fit : ndarray, shape (k, 1)      the starting fit (least squares)
     ridge : float
-    constant_column : int or None    as in :func:`~creps_gym.optimizers.policies.weighted_ml_fit`
+    constant_column : int or None    as in :func:`~creps_gym.optimizers.mean_fit.weighted_ml_fit`
     iterations : int                 at most this many passes (it stops once the fit no longer moves)
 
     Returns

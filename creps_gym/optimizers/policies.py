@@ -4,11 +4,11 @@
 :mod:`creps_gym.optimizers.features`), a covariance matrix C with its lower Cholesky factor, and a global step
 size σ. CREPS and CREPS-CMA keep σ = 1, so C is their Σ; contextual CMA-ES adapts σ and C separately.
 
-The module holds the pure maths the update rules share: the weighted ridge fit of the mean coefficients
-(Eq. 7 of the CREPS paper; see ``docs/algorithms.md``), the SPD repair of a covariance
-(:func:`spd_factor`) and the validation of an initial or restored distribution. :class:`LinearGaussianPolicy`
-is the thin state holder: sampling, the mean, and a state dict that is checked on restore like a
-constructor argument.
+The module holds the pure maths the update rules share about the distribution: the SPD repair of a
+covariance (:func:`spd_factor`) and the validation of an initial or restored distribution; the weighted
+ridge fit of the mean coefficients lives in :mod:`creps_gym.optimizers.mean_fit` (re-exported here).
+:class:`LinearGaussianPolicy` is the thin state holder: sampling, the mean, and a state dict that is checked
+on restore like a constructor argument.
 """
 
 from __future__ import annotations
@@ -20,12 +20,12 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg
 
 from creps_gym._validation import as_float_array, check_positive_int, check_real
 from creps_gym.optimizers.base import overflowing_contexts
 from creps_gym.optimizers.cma_rules import record_mean_return, stagnated, stagnation_window
 from creps_gym.optimizers.features import FeatureMap
+from creps_gym.optimizers.mean_fit import weighted_ml_fit
 from creps_gym.optimizers.policy_file import Policy
 
 __all__ = [
@@ -41,54 +41,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-
-
-def weighted_ml_fit(
-    mean_features: Array, params: Array, weights: Array, ridge: float, constant_column: int | None = None
-) -> Array:
-    """Weighted ridge maximum-likelihood fit of the mean coefficients, Eq. (7).
-
-    Parameters
-    ----------
-    mean_features : ndarray, shape (N, m)   ϕ(s_k)
-    params : ndarray, shape (N, p)          θ_k
-    weights : ndarray, shape (N,)           d_k ≥ 0, summing to one
-    ridge : float
-        Ridge of the regularised normal equations (ΦᵀDΦ + ridge·I)A = ΦᵀDU, relative to the features' scale.
-    constant_column : int, optional
-        Index of a constant feature (the 1 of ϕ(s) = [1, s]). The ridge then acts on the other columns after
-        weighted centring and standardising, and the intercept is not shrunk, so the fit does not depend on
-        where the context box lies (contexts in [1000, 1003] fit like contexts in [0, 3]), and the weighted
-        residuals sum to zero: Σ_k d_k (θ_k − Aᵀϕ(s_k)) = 0. Without it, the ridge is relative to the mean
-        diagonal of ΦᵀDΦ.
-
-    Returns
-    -------
-    ndarray, shape (m, p)
-        The coefficients A; Aᵀϕ(s) is the new mean.
-    """
-    if constant_column is None:
-        weighted = mean_features.T * weights
-        gram = weighted @ mean_features
-        gram.flat[:: gram.shape[0] + 1] += ridge * max(gram.trace() / gram.shape[0], 1e-300)
-        return linalg.solve(gram, weighted @ params, assume_a="pos", check_finite=False)
-    others = [i for i in range(mean_features.shape[1]) if i != constant_column]
-    columns = mean_features[:, others]
-    centre = weights @ columns
-    centred = columns - centre
-    spread = np.sqrt(weights @ centred**2)
-    informative = spread > 1e-12 * (np.abs(centre) + spread)  # constant context dimensions carry nothing
-    standardised = np.where(informative, centred / np.where(informative, spread, 1.0), 0.0)
-    mean_params = weights @ params
-    weighted = standardised.T * weights
-    gram = weighted @ standardised
-    gram.flat[:: gram.shape[0] + 1] += ridge + (~informative)
-    slopes = linalg.solve(gram, weighted @ (params - mean_params), assume_a="pos", check_finite=False)
-    slopes /= np.where(informative, spread, 1.0)[:, None]
-    coefficients = np.empty((mean_features.shape[1], params.shape[1]))
-    coefficients[others] = slopes
-    coefficients[constant_column] = mean_params - centre @ slopes
-    return coefficients
 
 
 def check_option_names(config_class: type, options: Mapping[str, Any]) -> None:

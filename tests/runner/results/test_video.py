@@ -57,6 +57,31 @@ def test_the_reacher_draws_its_motion_as_it_runs():
     assert len(listed) == 51 and np.array_equal(listed[50], last)
 
 
+@EXTRAS
+def test_the_reachers_frames_are_the_whole_figure_drawn_again_in_any_order():
+    """Twin check of the blitted frames (the moving parts drawn over a copy of the rest): each is, pixel for
+    pixel, the figure drawn whole with the same arm, path and title, whichever frame was read before."""
+    pytest.importorskip("matplotlib")
+    from creps_gym.envs.reacher import rendering
+    from creps_gym.envs.reacher.planar import DT, GOAL, VIA_STEP
+
+    env = gym.make(REACHER, render_mode="rgb_array_list")
+    env.reset(seed=0, options={"context": [1.0, 1.5]})
+    env.step(np.linspace(-1, 1, 25))
+    postures = env.unwrapped._postures()
+    frames = env.unwrapped.episode_frames()
+    canvas, ax = rendering._axes(postures)
+    (path,) = ax.plot([], [], "-", color="tab:green", lw=1.0, label="hand path")
+    (arm,) = ax.plot([], [], "-o", color="black", lw=2.0, ms=3.5, label="arm")
+    rendering._markers(ax, env.unwrapped._context, GOAL)
+    for index, k in [(50, 100), (0, 0), (25, VIA_STEP), (24, 48)]:  # read out of order
+        arm.set_data(postures[k, :, 0], postures[k, :, 1])
+        path.set_data(postures[: k + 1, -1, 0], postures[: k + 1, -1, 1])
+        note = " (via-point time)" if k == VIA_STEP else ""
+        ax.set_title(f"t = {k * DT:.2f} s, step {k} of 100{note}", fontsize=10)
+        assert np.array_equal(frames[index], rendering._image(canvas)), index
+
+
 def _reacher_run(tmp_path):
     run_dir = tmp_path / "reacher"
     run("creps-cma-old", REACHER, 2, 20, 0, eval_every=1, eval_contexts=4, run_dir=run_dir)
@@ -169,7 +194,7 @@ def test_the_reacher_drawings_have_a_legend(mode, monkeypatch):
 
     figures = []
 
-    def image(canvas):
+    def image(canvas, redraw=True):
         figures.append(canvas.figure)
         return np.zeros((1, 1, 3), dtype=np.uint8)
 

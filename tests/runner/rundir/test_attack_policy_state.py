@@ -23,6 +23,7 @@ import creps_gym
 from creps_gym.cli import main
 from creps_gym.errors import RunDirError
 from creps_gym.optimizers import Policy, load_state, restore_optimizer, save_state
+from creps_gym.optimizers.features import make_features
 from creps_gym.runner import RunDir, resume, run
 from creps_gym.selectors.progress import KernelProgressSelector
 
@@ -85,8 +86,9 @@ def _cli(*args: object) -> subprocess.CompletedProcess:
 
 # -- item 16: sizes that a file or a flag sets are checked against memory first -----------------------------
 def _rbf_policy(k: int, p: int = 1) -> Policy:
-    spec = {"name": "rbf", "context_dim": 1, "centres": [[0.0]] * k, "bandwidth": 1.0}
-    return Policy(spec, np.zeros((k, p)), context_dim=1, env=SPHERE, env_kwargs={"dim": p})
+    # The map from an array of centres: a spec of k nested lists would be walked item by item.
+    features = make_features({"name": "rbf", "centres": np.zeros((k, 1)), "bandwidth": 1.0}, context_dim=1)
+    return Policy(features, np.zeros((k, p)), env=SPHERE, env_kwargs={"dim": p})
 
 
 @pytest.mark.slow

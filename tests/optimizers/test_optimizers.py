@@ -175,10 +175,14 @@ def test_weighted_ml_fit_recovers_a_linear_mean_and_covariance_helper_is_unbiase
 @pytest.mark.parametrize("constant_column", [None, 0])
 def test_weighted_ml_fit_is_scipys_positive_definite_solve_bit_for_bit(constant_column):
     """The fit calls LAPACK ``posv`` directly; twin: the same normal equations through ``scipy.linalg.solve``,
-    over shapes the optimisers use, and a singular Gram matrix still raises ``LinAlgError``."""
+    over shapes the optimisers use (a 1 × 1 system is a division, as in the scipy the committed studies ran
+    on, 1.17; older ones factorise it), and a singular Gram matrix still raises ``LinAlgError``."""
     from scipy import linalg
 
     from creps_gym.optimizers import mean_fit
+
+    def twin(gram, rhs):
+        return rhs / gram if gram.size == 1 else linalg.solve(gram, rhs, assume_a="pos", check_finite=False)
 
     rng = np.random.default_rng(3)
     systems = []
@@ -189,13 +193,11 @@ def test_weighted_ml_fit_is_scipys_positive_definite_solve_bit_for_bit(constant_
             params, weights = rng.standard_normal((n, p)), rng.uniform(0, 1, n)
             mean_fit.weighted_ml_fit(phi, params, weights / weights.sum(), 1e-8, constant_column)
     assert len(systems) == 5
-    for gram, rhs in systems:
-        direct = mean_fit._solve_pos(gram, rhs)
-        assert np.array_equal(direct, linalg.solve(gram, rhs, assume_a="pos", check_finite=False))
-        assert direct.strides == (8 * direct.shape[1], 8)  # later products' bits depend on the strides
     grams, rights = rng.uniform(0.1, 10, (200, 1, 1)), rng.standard_normal((200, 1, 3))
-    for gram, rhs in zip(grams, rights, strict=True):  # 1 × 1: a division in both
-        assert np.array_equal(mean_fit._solve_pos(gram, rhs), linalg.solve(gram, rhs, assume_a="pos"))
+    for gram, rhs in [*systems, *zip(grams, rights, strict=True)]:
+        direct = mean_fit._solve_pos(gram, rhs)
+        assert np.array_equal(direct, twin(gram, rhs))
+        assert direct.strides == (8 * direct.shape[1], 8)  # later products' bits depend on the strides
     assert mean_fit._solve_pos(np.eye(2), np.ones((2, 0))).shape == (2, 0)
     assert mean_fit._solve_pos(np.zeros((0, 0)), np.ones((0, 3))).shape == (0, 3)
     with pytest.raises(np.linalg.LinAlgError, match="gram: expected a positive definite matrix"):

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, special
+from scipy.linalg.lapack import dtrtrs
 
 __all__ = [
     "LOG_BOUNDS",
@@ -134,7 +135,7 @@ class GPModel:
     def predict(self, x: Array) -> tuple[Array, Array]:
         """Posterior mean and latent variance at x (m, d), Eq. (G2): two arrays of shape (m,)."""
         cross = matern52(x, self.inputs, self.lengthscales, self.signal)
-        v = linalg.solve_triangular(self.chol, cross.T, lower=True, check_finite=False)
+        v = _solve_lower(self.chol, cross.T)
         variance = np.maximum(self.signal - np.einsum("nm,nm->m", v, v), 1e-300)
         return cross @ self.alpha, variance
 
@@ -142,8 +143,8 @@ class GPModel:
         """Mean (m,), variance (m,) and their gradients with respect to x, each of shape (m, d)."""
         cross, slope, scaled = _kernel_and_slope(x, self.inputs, self.lengthscales, self.signal)
         dcross = -(slope[:, :, None] * scaled) / self.lengthscales  # ∂k(x, X_i)/∂x, (m, n, d)
-        v = linalg.solve_triangular(self.chol, cross.T, lower=True, check_finite=False)
-        weights = linalg.solve_triangular(self.chol, v, lower=True, trans="T", check_finite=False)  # K⁻¹k
+        v = _solve_lower(self.chol, cross.T)
+        weights = _solve_lower(self.chol, v, transposed=True)  # K⁻¹k
         variance = np.maximum(self.signal - np.einsum("nm,nm->m", v, v), 1e-300)
         mean_gradient = np.einsum("mnd,n->md", dcross, self.alpha)
         variance_gradient = -2.0 * np.einsum("mnd,nm->md", dcross, weights)
@@ -163,6 +164,19 @@ class GPModel:
         targets = np.append(self.targets, y)
         alpha = linalg.cho_solve((chol, True), targets, check_finite=False)
         return GPModel(inputs, targets, self.log_hyper, chol, alpha)
+
+
+def _solve_lower(chol: Array, rhs: Array, transposed: bool = False) -> Array:
+    """L⁻¹ B (or L⁻ᵀ B) for the lower Cholesky factor ``chol`` (n, n) and ``rhs`` (n, m): the LAPACK
+    ``trtrs`` call ``scipy.linalg.solve_triangular`` makes, bit for bit (a C-ordered L is passed as the
+    Fortran-ordered Lᵀ), without its checks and batching, which cost more than the solve at these sizes."""
+    if chol.flags.f_contiguous:
+        solution, info = dtrtrs(chol, rhs, lower=1, trans=int(transposed))
+    else:
+        solution, info = dtrtrs(chol.T, rhs, lower=0, trans=int(not transposed))
+    if info != 0:
+        raise np.linalg.LinAlgError(f"chol: expected a nonsingular triangular factor, got a zero at {info}")
+    return solution
 
 
 def _factor(inputs: Array, log_hyper: Array) -> tuple[Array, Array]:

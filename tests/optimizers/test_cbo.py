@@ -98,6 +98,30 @@ def test_the_posterior_gradients_match_finite_differences_and_condition_equals_a
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
 
 
+def test_the_triangular_solves_are_scipys_bit_for_bit():
+    """The posterior's L⁻¹K(X, x) and L⁻ᵀ(...) call LAPACK ``trtrs`` directly; twin: ``solve_triangular``,
+    for C- and Fortran-ordered factors, transposed right-hand sides (as the predictions pass them) and the
+    strides of the result; a zero on L's diagonal raises ``LinAlgError``."""
+    from scipy import linalg
+
+    from creps_gym.optimizers import gp_model
+
+    rng = np.random.default_rng(5)
+    for n, m in [(1, 1), (2, 7), (30, 1), (45, 64)]:
+        a = rng.standard_normal((n, n))
+        chol = np.linalg.cholesky(a @ a.T + n * np.eye(n))
+        rhs = rng.standard_normal((m, n)).T
+        for factor in (chol, np.asfortranarray(chol)):
+            for transposed in (False, True):
+                direct = gp_model._solve_lower(factor, rhs, transposed)
+                twin = linalg.solve_triangular(
+                    factor, rhs, lower=True, trans="T" if transposed else "N", check_finite=False
+                )
+                assert np.array_equal(direct, twin) and direct.strides == twin.strides
+    with pytest.raises(np.linalg.LinAlgError, match="chol: expected a nonsingular triangular factor"):
+        gp_model._solve_lower(np.zeros((2, 2)), np.ones((2, 1)))
+
+
 def test_the_posterior_interpolates_noise_free_data_and_reverts_to_the_prior_far_away():
     inputs, targets = _problem(n=10)
     model = fit_gp(inputs, targets, np.log([0.3, 0.3, 0.3, 1.0, 1e-6]))

@@ -9,6 +9,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+from helpers import EXTRAS
 
 pytest.importorskip("matplotlib")
 
@@ -50,6 +51,18 @@ def test_a_run_is_deterministic_and_its_budgets_come_from_one_run() -> None:
     shorter = study.one_run(dataclasses.replace(spec, budget=50))
     assert shorter["values"] == first["values"][:1]  # the curve's first point is the 50-episode run's end
     assert spec.key == "Rosenbrock-p2-z1-creps-s3-b100-n12"
+
+
+@EXTRAS  # bit for bit only on the stack that computed it (the full environment), not the lowest versions
+@pytest.mark.slow
+def test_a_committed_c_bo_run_is_what_the_code_computes() -> None:
+    """The c-bo columns are the code's: a committed quick run (the reacher's, 100 episodes) computed again
+    gives its curve and test contexts bit for bit (the GP's solves call LAPACK directly: the same bits)."""
+    path = Path(study_run.__file__).parent / "runs" / "quick" / "PlanarReacherLowDim-c-bo-s0-b100-n4.json"
+    committed = json.loads(path.read_text(encoding="utf-8"))
+    computed = study.one_run(study.LowBudgetSpec("PlanarReacherLowDim", "c-bo", 0, 100))
+    for field in ("values", "episodes", "test_contexts", "final", "stop_reason"):
+        assert computed[field] == committed[field], field
 
 
 def test_every_method_starts_from_the_same_distribution(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -185,3 +185,20 @@ def needs_extra(env_or_optimizer: str) -> bool:
 def marked(names: Any) -> list[Any]:
     """Parameters for ``pytest.mark.parametrize``, the ones that need an optional extra marked ``extras``."""
     return [pytest.param(name, marks=EXTRAS) if needs_extra(name) else name for name in names]
+
+
+# -- a GP's posterior gradients against central differences (c-bo's model, with or without a trend)
+def check_posterior_gradients(model: Any, x: Any, step: float = 1e-6, variance_atol: float = 1e-7) -> None:
+    """``model.predict_with_gradient(x)``'s mean and variance gradients (m, d) are the central differences
+    of ``model.predict`` with ``step`` in each input dimension."""
+    import numpy as np
+
+    _, _, dmean, dvariance = model.predict_with_gradient(x)
+    for j in range(x.shape[1]):
+        shift = np.zeros(x.shape[1])
+        shift[j] = step
+        up, down = model.predict(x + shift), model.predict(x - shift)
+        np.testing.assert_allclose(dmean[:, j], (up[0] - down[0]) / (2 * step), rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(
+            dvariance[:, j], (up[1] - down[1]) / (2 * step), rtol=1e-5, atol=variance_atol
+        )

@@ -88,6 +88,12 @@ METHODS = (
         selector="active",
         note="GP-UCB, active contexts",
     ),
+    Method(
+        "c-bo+quadratic",
+        "c-bo",
+        (("trend", "quadratic"), ("transform", "none")),
+        note="a quadratic prior mean (Eq. G4) on the untransformed returns",
+    ),
     Method("creps", "creps", (("epsilon", 1.0),), note="ε = 1, as Fabisch (GECCO 2019)"),
     Method("creps-cma-old", "creps-cma-old", note="the paper's CREPS-CMA"),
     Method("c-cma-es", "c-cma-es"),

@@ -61,6 +61,7 @@ from creps_gym.optimizers.gp_model import (
     fit_hyperparameters,
     transformed_returns,
 )
+from creps_gym.optimizers.gp_trend import detrend, trend_p_value, with_trend_maximiser
 from creps_gym.optimizers.policies import check_option_names
 from creps_gym.optimizers.policy_file import Policy
 
@@ -72,6 +73,8 @@ RECOMMEND_SEED = 20_150_901
 #: ``stop()`` looks at the model only from this many told episodes on, and reports ``no_signal`` when the
 #: fitted noise holds at least this share of the model's variance.
 STOP_EPISODES, NOISE_SHARE = 50, 0.95
+#: A quadratic trend (Eq. G4) counts as signal for the stop when noise would explain as much less often.
+TREND_P = 0.01
 
 
 class ContextualBO(ContextualOptimizer):
@@ -122,6 +125,7 @@ class ContextualBO(ContextualOptimizer):
         self.context_scale = (np.zeros(z), np.ones(z)) if box is None else (box[0].copy(), box[1].copy())
         self.fitted_at = 0
         self.model: GPModel | None = None
+        self._trend = config.trend == "quadratic"
         self._maximiser = AcquisitionMaximiser(config.starts)
         self._recommend_candidates: Array | None = None
         self._chol_initial = np.linalg.cholesky(config.initial_cov)
@@ -172,12 +176,16 @@ class ContextualBO(ContextualOptimizer):
                 recent = slice(max(0, n - self.config.fit_points), n)
                 inputs = self._inputs(all_contexts[recent], all_params[recent], scale)
                 restarts = self.config.hyper_restarts
-                log_hyper = fit_hyperparameters(
-                    inputs, self._targets(all_returns, "mean")[recent], log_hyper, self.rng, restarts
-                )
+                targets = self._targets(all_returns, "mean")[recent]
+                if self._trend:  # the hyperparameters of the residuals' GP, Eq. (G4)
+                    targets = detrend(inputs, targets)[0]
+                log_hyper = fit_hyperparameters(inputs, targets, log_hyper, self.rng, restarts)
                 fitted_at = n
             model = fit_gp(
-                self._inputs(all_contexts, all_params, scale), self._targets(all_returns), log_hyper
+                self._inputs(all_contexts, all_params, scale),
+                self._targets(all_returns),
+                log_hyper,
+                self._trend,
             )
         except BaseException:
             self.rng.bit_generator.state = rng_state  # a failed tell changes nothing
@@ -200,8 +208,10 @@ class ContextualBO(ContextualOptimizer):
 
     def stop(self) -> dict[str, Any]:
         """Met once at least :data:`STOP_EPISODES` episodes are told: ``no_signal`` (the fitted noise is at
-        least :data:`NOISE_SHARE` of the model's variance, σ_n²/(σ_f² + σ_n²): the returns look like noise
-        in θ and s) or ``tolflatfitness`` (every told return is equal)."""
+        least :data:`NOISE_SHARE` of the model's variance, σ_n²/(σ_f² + σ_n²), and with a quadratic trend
+        that pure noise fits as well less often than :data:`TREND_P` (an F-test), that share times the
+        share of the transformed returns' variance the trend leaves: the returns look like noise in θ and
+        s) or ``tolflatfitness`` (every told return is equal)."""
         n = self.returns.shape[0]
         if n < STOP_EPISODES:
             return {}
@@ -209,6 +219,11 @@ class ContextualBO(ContextualOptimizer):
             return {"tolflatfitness": n}
         noise, signal = math.exp(self.log_hyper[-1]), math.exp(self.log_hyper[-2])
         share = noise / (noise + signal)
+        model = self.model
+        if model is not None and model.beta is not None:  # the residuals' share, if the trend is signal
+            unexplained = model.scale**2 / max(float(np.var(self._targets(self.returns))), 1e-300)
+            if trend_p_value(model.targets.shape[0], model.beta.shape[0], 1.0 - unexplained) < TREND_P:
+                share *= unexplained
         return {"no_signal": share} if share >= NOISE_SHARE else {}
 
     # -- ask -----------------------------------------------------------------------------------------------
@@ -251,6 +266,7 @@ class ContextualBO(ContextualOptimizer):
     def _propose(self, model: GPModel, context: Array) -> Array:
         random = self.rng.uniform(size=(self.config.candidates, self.n_params))
         candidates = np.vstack([random, self._observed_units(context)[0]])
+        candidates = with_trend_maximiser(candidates, model.beta, context, (0.0, 1.0))
         mean, variance = model.predict(self._maximiser.inputs(context, candidates))
         if self.config.acquisition == "ucb":
             beta = self.config.beta
@@ -282,6 +298,7 @@ class ContextualBO(ContextualOptimizer):
         for row in self._scaled_contexts(contexts):
             observed, (low, high) = self.trust_region(row)
             candidates = np.vstack([low + fixed * (high - low), observed])
+            candidates = with_trend_maximiser(candidates, model.beta, row, (low, high))
             units.append(self._maximiser.maximise(model, row, candidates, None, (low, high))[0])
         return self._unscaled_params(np.array(units))
 
@@ -372,7 +389,7 @@ class ContextualBO(ContextualOptimizer):
         self.log_hyper, self.context_scale, self.fitted_at = data.log_hyper, data.scale, data.fitted_at
         if self.returns.shape[0] >= 1 and self.fitted_at > 0:
             inputs = self._inputs(self.contexts, self.params)
-            self.model = fit_gp(inputs, self._targets(self.returns), self.log_hyper)
+            self.model = fit_gp(inputs, self._targets(self.returns), self.log_hyper, self._trend)
 
 
 ContextualBO.__signature__ = options_signature(CBOConfig)  # type: ignore[attr-defined]

@@ -34,6 +34,7 @@ MAX_COUNTS = {
 }
 TRANSFORMS = ("none", "log", "rank")
 PRIOR_MEANS = ("min", "mean")
+TRENDS = ("constant", "quadratic")
 _BOX_ARRAYS = ("param_low", "param_high", "context_low", "context_high")
 
 
@@ -85,6 +86,10 @@ class CBOConfig:
         :func:`~creps_gym.optimizers.cbo.transformed_returns`.
     prior_mean : str                the GP's constant prior mean: the smallest transformed return seen
         (``"min"``, pessimistic: unexplored θ are not recommended for their prior) or their mean (``"mean"``).
+    trend : str                     ``"constant"`` (that prior mean alone) or ``"quadratic"``: a quadratic in
+        (s, θ) fitted by least squares is the prior mean and the GP models its residuals, Eq. (G4) of
+        :mod:`~creps_gym.optimizers.gp_trend` (from 2q episodes on, q its coefficients; ``prior_mean`` then
+        only matters before).
     mes_samples : int               K, the sampled maximum values of MES (A3).
     initial_samples : int or None   episodes drawn from the initial distribution before the GP is used;
         None: max(4, 2(p + z)).
@@ -119,6 +124,7 @@ class CBOConfig:
     beta: float = 4.0
     transform: str = "log"
     prior_mean: str = "min"
+    trend: str = "constant"
     mes_samples: int = 10
     initial_samples: int | None = None
     candidates: int = 256
@@ -163,6 +169,8 @@ class CBOConfig:
             raise ValueError(f"transform: expected one of {TRANSFORMS}, got {self.transform!r}")
         if not isinstance(self.prior_mean, str) or self.prior_mean not in PRIOR_MEANS:
             raise ValueError(f"prior_mean: expected one of {PRIOR_MEANS}, got {self.prior_mean!r}")
+        if not isinstance(self.trend, str) or self.trend not in TRENDS:
+            raise ValueError(f"trend: expected one of {TRENDS}, got {self.trend!r}")
         set_(self, "beta", check_real_in_range(self.beta, "beta", 0.0, 1e6))
         set_(self, "refit_growth", check_real_in_range(self.refit_growth, "refit_growth", 1.0, 1e6))
         if self.trust_share is not None:

@@ -104,7 +104,7 @@ def posterior_covariance(model: GPModel, a: Array, b: Array) -> Array:
 def _gains(model: GPModel, queries: Array, representers: Array) -> Array:
     """(C1) before the maximum: the share of prior variance each query (m, d) removes, shape (m,)."""
     covariance = posterior_covariance(model, queries, representers)
-    variance = model.predict(queries)[1]
+    variance = model.latent_variance(queries)  # the units of the covariance (a trend's scale cancels)
     removed = np.einsum("mr,mr->m", covariance, covariance) / (variance + model.noise)
     return removed / (model.signal * representers.shape[0])
 

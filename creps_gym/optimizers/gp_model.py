@@ -18,7 +18,8 @@ not depend on the task. With K = k(X, X) + σ_n² I = LLᵀ and α = K⁻¹y:
 A model is a pure function of (X, y, h): :func:`fit_gp` computes the same bits from the same arrays, so an
 optimiser that stores its data and hyperparameters restores its model exactly, without pickle.
 :meth:`GPModel.condition` appends one (fantasised) observation by a rank-one extension of L (the kriging
-believer of batch acquisition), in O(n²).
+believer of batch acquisition), in O(n²). An optional quadratic prior mean, Eq. (G4), is in
+:mod:`creps_gym.optimizers.gp_trend`.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, special
 from scipy.linalg.lapack import dtrtrs
+
+from creps_gym.optimizers.gp_trend import detrend, trend_and_gradient
 
 __all__ = [
     "LOG_BOUNDS",
@@ -105,10 +108,15 @@ class GPModel:
     Attributes
     ----------
     inputs : ndarray, shape (n, d)      X, scaled to the unit box.
-    targets : ndarray, shape (n,)       standardised returns y.
+    targets : ndarray, shape (n,)       standardised returns y (with a trend: the residuals / σ_r).
     log_hyper : ndarray, shape (d + 2,) h.
     chol : ndarray, shape (n, n)        L, lower.
     alpha : ndarray, shape (n,)         K⁻¹y.
+    beta : ndarray, shape (q,) or None  the quadratic prior mean's coefficients, Eq. (G4); None: none.
+    scale : float                       σ_r of Eq. (G4) (1 without a trend).
+
+    With a trend, :meth:`predict` and :meth:`predict_with_gradient` give h(x)ᵀβ + σ_r μ(x) and σ_r² σ²(x);
+    ``signal``, ``noise`` and :meth:`latent_variance` stay those of the GP of the standardised residuals.
     """
 
     inputs: Array
@@ -116,6 +124,8 @@ class GPModel:
     log_hyper: Array
     chol: Array
     alpha: Array
+    beta: Array | None = None
+    scale: float = 1.0
 
     @property
     def lengthscales(self) -> Array:
@@ -133,11 +143,20 @@ class GPModel:
         return float(np.exp(self.log_hyper[-1]))
 
     def predict(self, x: Array) -> tuple[Array, Array]:
-        """Posterior mean and latent variance at x (m, d), Eq. (G2): two arrays of shape (m,)."""
+        """Posterior mean and latent variance at x (m, d), Eq. (G2) (and G4): two arrays of shape (m,)."""
         cross = matern52(x, self.inputs, self.lengthscales, self.signal)
         v = _solve_lower(self.chol, cross.T)
         variance = np.maximum(self.signal - np.einsum("nm,nm->m", v, v), 1e-300)
-        return cross @ self.alpha, variance
+        if self.beta is None:
+            return cross @ self.alpha, variance
+        trend = trend_and_gradient(x, self.beta)[0]
+        return trend + self.scale * (cross @ self.alpha), np.maximum(self.scale**2 * variance, 1e-300)
+
+    def latent_variance(self, x: Array) -> Array:
+        """σ²(x) of the GP of Eq. (G2) itself, in the units of ``signal`` and ``noise``: shape (m,)."""
+        cross = matern52(x, self.inputs, self.lengthscales, self.signal)
+        v = _solve_lower(self.chol, cross.T)
+        return np.maximum(self.signal - np.einsum("nm,nm->m", v, v), 1e-300)
 
     def predict_with_gradient(self, x: Array) -> tuple[Array, Array, Array, Array]:
         """Mean (m,), variance (m,) and their gradients with respect to x, each of shape (m, d)."""
@@ -148,12 +167,20 @@ class GPModel:
         variance = np.maximum(self.signal - np.einsum("nm,nm->m", v, v), 1e-300)
         mean_gradient = np.einsum("mnd,n->md", dcross, self.alpha)
         variance_gradient = -2.0 * np.einsum("mnd,nm->md", dcross, weights)
-        return cross @ self.alpha, variance, mean_gradient, variance_gradient
+        if self.beta is None:
+            return cross @ self.alpha, variance, mean_gradient, variance_gradient
+        trend, trend_gradient = trend_and_gradient(x, self.beta)
+        squared = self.scale**2
+        mean = trend + self.scale * (cross @ self.alpha)
+        mean_gradient = trend_gradient + self.scale * mean_gradient
+        return mean, np.maximum(squared * variance, 1e-300), mean_gradient, squared * variance_gradient
 
     def condition(self, x: Array, y: float) -> GPModel:
         """The model with one more observation (x (d,), y) and the same hyperparameters: L grows by one row
         (l = L⁻¹k(X, x), L_nn = √(k(x, x) + σ_n² − ‖l‖²)), in O(n²)."""
         row = x[None, :]
+        if self.beta is not None:  # the GP holds the standardised residual
+            y = (y - float(trend_and_gradient(row, self.beta)[0][0])) / self.scale
         cross = matern52(row, self.inputs, self.lengthscales, self.signal)[0]
         low = linalg.solve_triangular(self.chol, cross, lower=True, check_finite=False)
         corner = math.sqrt(max(self.signal + self.noise + _JITTER - float(low @ low), 1e-12))
@@ -163,7 +190,7 @@ class GPModel:
         inputs = np.vstack([self.inputs, row])
         targets = np.append(self.targets, y)
         alpha = linalg.cho_solve((chol, True), targets, check_finite=False)
-        return GPModel(inputs, targets, self.log_hyper, chol, alpha)
+        return GPModel(inputs, targets, self.log_hyper, chol, alpha, self.beta, self.scale)
 
 
 def _solve_lower(chol: Array, rhs: Array, transposed: bool = False) -> Array:
@@ -187,14 +214,20 @@ def _factor(inputs: Array, log_hyper: Array) -> tuple[Array, Array]:
     return gram, linalg.cholesky(gram, lower=True, check_finite=False)
 
 
-def fit_gp(inputs: Array, targets: Array, log_hyper: Array) -> GPModel:
-    """The GP of Eq. (G2) on inputs (n, d) and standardised targets (n,) with hyperparameters h (d + 2,).
+def fit_gp(inputs: Array, targets: Array, log_hyper: Array, trend: bool = False) -> GPModel:
+    """The GP of Eq. (G2) on inputs (n, d) and standardised targets (n,) with hyperparameters h (d + 2,);
+    with ``trend``, on the standardised residuals of the quadratic prior mean of Eq. (G4)
+    (:func:`~creps_gym.optimizers.gp_trend.detrend`).
 
     A pure function: the same arrays give the same bits.
     """
+    beta, scale = None, 1.0
+    if trend:
+        targets, beta, scale = detrend(inputs, targets)
     _, chol = _factor(inputs, log_hyper)
     alpha = linalg.cho_solve((chol, True), targets, check_finite=False)
-    return GPModel(inputs.copy(), targets.copy(), np.array(log_hyper, dtype=np.float64), chol, alpha)
+    hyper = np.array(log_hyper, dtype=np.float64)
+    return GPModel(inputs.copy(), targets.copy(), hyper, chol, alpha, beta, scale)
 
 
 def log_marginal_likelihood(inputs: Array, targets: Array, log_hyper: Array) -> tuple[float, Array]:

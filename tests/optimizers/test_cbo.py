@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pytest
+from helpers import check_posterior_gradients
 
 from creps_gym.optimizers import make_optimizer
 from creps_gym.optimizers.acquisitions import gumbel_max_values, mes, ucb
@@ -85,13 +86,7 @@ def test_the_posterior_gradients_match_finite_differences_and_condition_equals_a
     log_hyper = np.log([0.5, 0.3, 0.8, 1.2, 1e-3])
     model = fit_gp(inputs, targets, log_hyper)
     x = np.random.default_rng(1).uniform(size=(4, 3))
-    _, _, dmean, dvariance = model.predict_with_gradient(x)
-    for j in range(3):
-        step = np.zeros(3)
-        step[j] = H
-        up, down = model.predict(x + step), model.predict(x - step)
-        np.testing.assert_allclose(dmean[:, j], (up[0] - down[0]) / (2 * H), rtol=1e-5, atol=1e-7)
-        np.testing.assert_allclose(dvariance[:, j], (up[1] - down[1]) / (2 * H), rtol=1e-5, atol=1e-7)
+    check_posterior_gradients(model, x, H)
     grown = model.condition(x[0], 0.25)
     refit = fit_gp(np.vstack([inputs, x[:1]]), np.append(targets, 0.25), log_hyper)
     for a, b in zip(grown.predict(x), refit.predict(x), strict=True):

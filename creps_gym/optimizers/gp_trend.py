@@ -1,0 +1,114 @@
+"""A quadratic prior mean for c-bo's Gaussian process: the GP models what a quadratic leaves unexplained.
+
+With h(x) = [1, x_1 … x_d, x_i x_j (i ≤ j)], q = 1 + d + d(d + 1)/2 basis functions of the scaled inputs
+x = (s, θ) ∈ [0, 1]^d, the return model is
+
+    f(x) = h(x)ᵀβ + σ_r g(x),   g ~ GP(0, k),                                                      (G4)
+
+with β the least-squares fit of the targets y on H = h(X) (a plug-in estimate, as in universal kriging with
+the trend fitted first; Rasmussen & Williams 2006, Sec. 2.7) and σ_r the root mean square of the residuals
+y − Hβ, which the GP of Eq. (G2) then fits at unit scale (its hyperparameter bounds stay those of
+standardised targets). Where the returns are quadratic in (s, θ), as on a contextual sphere with an affine
+optimum, the trend is exact and the posterior mean's maximiser is the optimum whatever the GP's lengthscales;
+elsewhere the GP carries what the quadratic misses. The trend is used from 2q episodes on (fewer would let
+it interpolate noise); before, the GP has its constant prior mean alone.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import special
+
+__all__ = [
+    "TREND_RATIO",
+    "detrend",
+    "quadratic_basis",
+    "trend_and_gradient",
+    "trend_maximiser",
+    "trend_p_value",
+    "with_trend_maximiser",
+]
+
+Array = NDArray[np.float64]
+#: The trend is fitted once there are at least this many episodes per basis function.
+TREND_RATIO = 2
+
+
+def quadratic_basis(x: Array) -> Array:
+    """h(x) of Eq. (G4) at inputs x (m, d): shape (m, q), q = 1 + d + d(d + 1)/2."""
+    i, j = np.triu_indices(x.shape[1])
+    return np.hstack([np.ones((x.shape[0], 1)), x, x[:, i] * x[:, j]])
+
+
+def trend_and_gradient(x: Array, beta: Array) -> tuple[Array, Array]:
+    """h(x)ᵀβ (m,) and its gradient with respect to x (m, d): β_lin + (U + Uᵀ)x, U the upper triangle of
+    the quadratic coefficients."""
+    d = x.shape[1]
+    i, j = np.triu_indices(d)
+    upper = np.zeros((d, d))
+    upper[i, j] = beta[d + 1 :]
+    return quadratic_basis(x) @ beta, beta[1 : d + 1] + x @ (upper + upper.T)
+
+
+def detrend(inputs: Array, targets: Array) -> tuple[Array, Array | None, float]:
+    """(residuals / σ_r, β, σ_r) of Eq. (G4) on inputs (n, d) and targets (n,); the targets, None and 1.0
+    while n < :data:`TREND_RATIO` · q. σ_r is floored at 1e-12 times the targets' root mean square, so
+    residuals that vanish (an exact quadratic) stay finite."""
+    basis = quadratic_basis(inputs)
+    if basis.shape[0] < TREND_RATIO * basis.shape[1]:
+        return targets, None, 1.0
+    beta = np.linalg.lstsq(basis, targets, rcond=None)[0]
+    residuals = targets - basis @ beta
+    size = float(np.sqrt(np.mean(targets**2)))
+    scale = max(float(np.sqrt(np.mean(residuals**2))), 1e-12 * size, 1e-300)
+    return residuals / scale, beta, scale
+
+
+def trend_p_value(n: int, q: int, explained: float) -> float:
+    """The F-test's p-value of a least-squares fit with q coefficients (an intercept among them) that
+    explains the share ``explained`` (R²) of n targets' variance: how likely pure noise explains as much.
+
+    F = (R²/(q − 1)) / ((1 − R²)/(n − q)), p = P(F_{q−1, n−q} ≥ F); 1.0 when n ≤ q or q < 2."""
+    if n <= q or q < 2:
+        return 1.0
+    if explained >= 1.0:
+        return 0.0
+    statistic = (max(explained, 0.0) / (q - 1)) / ((1.0 - explained) / (n - q))
+    return float(special.fdtrc(q - 1, n - q, statistic))
+
+
+def trend_maximiser(beta: Array, context: Array, low: Array, high: Array) -> Array | None:
+    """The maximiser over θ of the trend h(s, θ)ᵀβ at a fixed scaled context s (c,), clipped to the box
+    [low, high] (q,), or None where the trend is not strictly concave in θ.
+
+    Setting the θ-gradient to zero: Q_θθ θ = −(b_θ + Q_θs s), with b the linear and Q = U + Uᵀ the quadratic
+    coefficients. A candidate for the acquisition's and the posterior mean's maximisation: on an
+    ill-conditioned quadratic, L-BFGS-B stops once the value no longer changes in its ninth digit, far from
+    the maximiser along the flat directions."""
+    c, d = context.shape[0], context.shape[0] + low.shape[0]
+    i, j = np.triu_indices(d)
+    upper = np.zeros((d, d))
+    upper[i, j] = beta[d + 1 :]
+    hessian = upper + upper.T
+    block = hessian[c:, c:]
+    try:
+        np.linalg.cholesky(-block)
+    except np.linalg.LinAlgError:
+        return None
+    theta = np.linalg.solve(block, -(beta[1 + c : 1 + d] + hessian[c:, :c] @ context))
+    return np.clip(theta, low, high)
+
+
+def with_trend_maximiser(
+    candidates: Array, beta: Array | None, context: Array, bounds: tuple[Any, Any]
+) -> Array:
+    """The candidate θ (m, q) and, with a trend ``beta``, its :func:`trend_maximiser` at ``context`` in
+    ``bounds`` (low, high: scalars or (q,)) as one more row."""
+    if beta is None:
+        return candidates
+    q = candidates.shape[1]
+    best = trend_maximiser(beta, context, *(np.broadcast_to(b, (q,)) for b in bounds))
+    return candidates if best is None else np.vstack([candidates, best[None, :]])

@@ -91,8 +91,8 @@ METHODS = (
     Method(
         "c-bo+quadratic",
         "c-bo",
-        (("trend", "quadratic"), ("transform", "none")),
-        note="a quadratic prior mean (Eq. G4) on the untransformed returns",
+        (("trend", "quadratic"), ("transform", "auto")),
+        note="a quadratic prior mean (Eq. G4), the returns' transform chosen by Eq. (G5)",
     ),
     Method("creps", "creps", (("epsilon", 1.0),), note="ε = 1, as Fabisch (GECCO 2019)"),
     Method("creps-cma-old", "creps-cma-old", note="the paper's CREPS-CMA"),

@@ -61,7 +61,7 @@ from creps_gym.optimizers.gp_model import (
     fit_hyperparameters,
     transformed_returns,
 )
-from creps_gym.optimizers.gp_trend import detrend, trend_p_value, with_trend_maximiser
+from creps_gym.optimizers.gp_trend import chosen_transform, detrend, residual_share, with_trend_maximiser
 from creps_gym.optimizers.policies import check_option_names
 from creps_gym.optimizers.policy_file import Policy
 
@@ -73,8 +73,6 @@ RECOMMEND_SEED = 20_150_901
 #: ``stop()`` looks at the model only from this many told episodes on, and reports ``no_signal`` when the
 #: fitted noise holds at least this share of the model's variance.
 STOP_EPISODES, NOISE_SHARE = 50, 0.95
-#: A quadratic trend (Eq. G4) counts as signal for the stop when noise would explain as much less often.
-TREND_P = 0.01
 
 
 class ContextualBO(ContextualOptimizer):
@@ -126,6 +124,7 @@ class ContextualBO(ContextualOptimizer):
         self.fitted_at = 0
         self.model: GPModel | None = None
         self._trend = config.trend == "quadratic"
+        self._transform = "log" if config.transform == "auto" else config.transform  # chosen at each tell
         self._maximiser = AcquisitionMaximiser(config.starts)
         self._recommend_candidates: Array | None = None
         self._chol_initial = np.linalg.cholesky(config.initial_cov)
@@ -152,11 +151,17 @@ class ContextualBO(ContextualOptimizer):
         flat = high - low <= 1e-12 * np.maximum(np.abs(low), 1.0)
         return np.where(flat, low - 0.5, low), np.where(flat, low + 0.5, high)
 
-    def _targets(self, returns: Array, prior_mean: str | None = None) -> Array:
+    def _targets(self, returns: Array, prior_mean: str | None = None, transform: str | None = None) -> Array:
         """The GP's targets; ``prior_mean`` None: the configured one (the posterior's), "mean" for the
-        likelihood of a refit (a constant-mean GP: the pessimistic shift is no signal to explain)."""
+        likelihood of a refit (a constant-mean GP: the pessimistic shift is no signal to explain);
+        ``transform`` None: the one in use (``"auto"``'s choice at the last tell)."""
         centre = self.config.prior_mean if prior_mean is None else prior_mean
-        return transformed_returns(returns, self.config.transform, centre)
+        return transformed_returns(returns, self._transform if transform is None else transform, centre)
+
+    def _chosen_transform(self, inputs: Array, returns: Array) -> str:
+        """The configured transform, or ``"auto"``'s choice on these scaled inputs and returns, Eq. (G5)."""
+        auto = self.config.transform == "auto"
+        return chosen_transform(inputs, returns, self._trend) if auto else self.config.transform
 
     def _inputs(self, contexts: Array, params: Array, scale: tuple[Array, Array] | None = None) -> Array:
         return np.hstack([self._scaled_contexts(contexts, scale), self._scaled_params(params)])
@@ -173,25 +178,24 @@ class ContextualBO(ContextualOptimizer):
         try:
             if refit:
                 scale = self._fit_scale(all_contexts)
+            all_inputs = self._inputs(all_contexts, all_params, scale)
+            transform = self._chosen_transform(all_inputs, all_returns)
+            if refit:
                 recent = slice(max(0, n - self.config.fit_points), n)
                 inputs = self._inputs(all_contexts[recent], all_params[recent], scale)
                 restarts = self.config.hyper_restarts
-                targets = self._targets(all_returns, "mean")[recent]
+                targets = self._targets(all_returns, "mean", transform)[recent]
                 if self._trend:  # the hyperparameters of the residuals' GP, Eq. (G4)
                     targets = detrend(inputs, targets)[0]
                 log_hyper = fit_hyperparameters(inputs, targets, log_hyper, self.rng, restarts)
                 fitted_at = n
-            model = fit_gp(
-                self._inputs(all_contexts, all_params, scale),
-                self._targets(all_returns),
-                log_hyper,
-                self._trend,
-            )
+            model = fit_gp(all_inputs, self._targets(all_returns, None, transform), log_hyper, self._trend)
         except BaseException:
             self.rng.bit_generator.state = rng_state  # a failed tell changes nothing
             raise
         self.contexts, self.params, self.returns = all_contexts, all_params, all_returns
         self.log_hyper, self.context_scale, self.fitted_at, self.model = log_hyper, scale, fitted_at, model
+        self._transform = transform
         self._diagnostics = self._model_diagnostics(refit)
 
     def _model_diagnostics(self, refitted: bool) -> dict[str, float]:
@@ -204,14 +208,14 @@ class ContextualBO(ContextualOptimizer):
             "signal_variance": float(np.exp(self.log_hyper[-2])),
             "noise_variance": float(np.exp(self.log_hyper[-1])),
             "best_return": float(self.returns.max()),
-        }
+        } | ({"transform_log": float(self._transform == "log")} if self.config.transform == "auto" else {})
 
     def stop(self) -> dict[str, Any]:
         """Met once at least :data:`STOP_EPISODES` episodes are told: ``no_signal`` (the fitted noise is at
         least :data:`NOISE_SHARE` of the model's variance, σ_n²/(σ_f² + σ_n²), and with a quadratic trend
-        that pure noise fits as well less often than :data:`TREND_P` (an F-test), that share times the
-        share of the transformed returns' variance the trend leaves: the returns look like noise in θ and
-        s) or ``tolflatfitness`` (every told return is equal)."""
+        that is signal, that share times the share of the returns' variance the trend leaves
+        (:func:`~creps_gym.optimizers.gp_trend.residual_share`): the returns look like noise in θ and s)
+        or ``tolflatfitness`` (every told return is equal)."""
         n = self.returns.shape[0]
         if n < STOP_EPISODES:
             return {}
@@ -219,11 +223,8 @@ class ContextualBO(ContextualOptimizer):
             return {"tolflatfitness": n}
         noise, signal = math.exp(self.log_hyper[-1]), math.exp(self.log_hyper[-2])
         share = noise / (noise + signal)
-        model = self.model
-        if model is not None and model.beta is not None:  # the residuals' share, if the trend is signal
-            unexplained = model.scale**2 / max(float(np.var(self._targets(self.returns))), 1e-300)
-            if trend_p_value(model.targets.shape[0], model.beta.shape[0], 1.0 - unexplained) < TREND_P:
-                share *= unexplained
+        if self.model is not None and self.model.beta is not None:
+            share *= residual_share(self.model.scale, self.model.beta, self._targets(self.returns))
         return {"no_signal": share} if share >= NOISE_SHARE else {}
 
     # -- ask -----------------------------------------------------------------------------------------------
@@ -389,6 +390,7 @@ class ContextualBO(ContextualOptimizer):
         self.log_hyper, self.context_scale, self.fitted_at = data.log_hyper, data.scale, data.fitted_at
         if self.returns.shape[0] >= 1 and self.fitted_at > 0:
             inputs = self._inputs(self.contexts, self.params)
+            self._transform = self._chosen_transform(inputs, self.returns)
             self.model = fit_gp(inputs, self._targets(self.returns), self.log_hyper, self._trend)
 
 

@@ -32,7 +32,7 @@ MAX_COUNTS = {
     "fit_points": 10_000,
     "grid": 10_000,
 }
-TRANSFORMS = ("none", "log", "rank")
+TRANSFORMS = ("none", "log", "rank", "auto")
 PRIOR_MEANS = ("min", "mean")
 TRENDS = ("constant", "quadratic")
 _BOX_ARRAYS = ("param_low", "param_high", "context_low", "context_high")
@@ -83,7 +83,9 @@ class CBOConfig:
     transform : str                 the returns' transform before the GP, order-preserving: ``"log"``
         (−log(1 + (R_max − R)/c), c the median gap to the best return; it compresses long tails of bad
         returns), ``"none"`` or ``"rank"`` (the Gaussian copula of the ranks); see
-        :func:`~creps_gym.optimizers.cbo.transformed_returns`.
+        :func:`~creps_gym.optimizers.cbo.transformed_returns`; ``"auto"``: ``"none"`` or ``"log"`` at
+        every tell, whichever the prior mean (see ``trend``) fits with the larger profile likelihood,
+        Eq. (G5) of :mod:`~creps_gym.optimizers.gp_trend`.
     prior_mean : str                the GP's constant prior mean: the smallest transformed return seen
         (``"min"``, pessimistic: unexplored θ are not recommended for their prior) or their mean (``"mean"``).
     trend : str                     ``"constant"`` (that prior mean alone) or ``"quadratic"``: a quadratic in

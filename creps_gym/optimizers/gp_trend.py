@@ -24,8 +24,10 @@ from scipy import special
 
 __all__ = [
     "TREND_RATIO",
+    "chosen_transform",
     "detrend",
     "quadratic_basis",
+    "residual_share",
     "trend_and_gradient",
     "trend_maximiser",
     "trend_p_value",
@@ -35,6 +37,8 @@ __all__ = [
 Array = NDArray[np.float64]
 #: The trend is fitted once there are at least this many episodes per basis function.
 TREND_RATIO = 2
+#: A trend counts as signal (:func:`residual_share`) when noise would fit as well less often than this.
+TREND_P = 0.01
 
 
 def quadratic_basis(x: Array) -> Array:
@@ -112,3 +116,40 @@ def with_trend_maximiser(
     q = candidates.shape[1]
     best = trend_maximiser(beta, context, *(np.broadcast_to(b, (q,)) for b in bounds))
     return candidates if best is None else np.vstack([candidates, best[None, :]])
+
+
+def _profile_log_likelihood(inputs: Array, values: Array, log_jacobian: float, trend: bool) -> float:
+    """−(n/2) log σ̂² + log |dT/dR| of a least-squares model of transformed returns ``values`` (n,): a
+    quadratic in the inputs (n, d) with ``trend`` and at least :data:`TREND_RATIO` · q episodes, else a
+    constant (Box & Cox 1964: the transform's profile likelihood in the returns' own units)."""
+    basis = quadratic_basis(inputs)
+    if not trend or basis.shape[0] < TREND_RATIO * basis.shape[1]:
+        basis = basis[:, :1]
+    residuals = values - basis @ np.linalg.lstsq(basis, values, rcond=None)[0]
+    return -0.5 * values.shape[0] * float(np.log(max(float(np.mean(residuals**2)), 1e-300))) + log_jacobian
+
+
+def chosen_transform(inputs: Array, returns: Array, trend: bool) -> str:
+    """``"none"`` or ``"log"``, whichever gives the returns (n,) the larger profile likelihood under the GP's
+    prior mean (the quadratic of Eq. G4 with ``trend``, else a constant), Eq. (G5):
+
+        ℓ(T) = −(n/2) log σ̂²_T + Σ_k log T′(R_k),   T_none(R) = R,   T_log(R) = −log(1 + (R_max − R)/c),
+
+    with σ̂²_T the mean squared residual of the least-squares fit of T(R) and c the log transform's scale
+    (:func:`~creps_gym.optimizers.gp_model.transformed_returns`); ties keep ``"log"``. Returns that are
+    quadratic in (s, θ) choose ``"none"`` (σ̂² vanishes), long tails of bad returns ``"log"``."""
+    gaps = returns.max() - returns
+    scale = max(float(np.median(gaps)), 1e-12 * float(gaps.max()), 1e-300)
+    logged = -np.log1p(gaps / scale)
+    jacobian = -float(np.log(scale + gaps).sum())
+    plain = _profile_log_likelihood(inputs, returns, 0.0, trend)
+    return "none" if plain > _profile_log_likelihood(inputs, logged, jacobian, trend) else "log"
+
+
+def residual_share(scale: float, beta: Array, targets: Array) -> float:
+    """The share σ_r²/Var(y) of the targets y (n,) that the trend (q coefficients ``beta``) leaves to the
+    GP, if an F-test says pure noise fits as well less often than :data:`TREND_P` (the trend is signal);
+    1.0 otherwise. c-bo's ``no_signal`` stop multiplies the GP's noise share by it."""
+    unexplained = scale**2 / max(float(np.var(targets)), 1e-300)
+    significant = trend_p_value(targets.shape[0], beta.shape[0], 1.0 - unexplained) < TREND_P
+    return unexplained if significant else 1.0

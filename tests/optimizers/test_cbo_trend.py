@@ -13,6 +13,7 @@ from creps_gym.optimizers.cbo import ContextualBO
 from creps_gym.optimizers.gp_model import default_start, fit_gp
 from creps_gym.optimizers.gp_trend import (
     TREND_RATIO,
+    chosen_transform,
     detrend,
     quadratic_basis,
     trend_and_gradient,
@@ -113,6 +114,26 @@ def test_the_trends_maximiser_over_theta_solves_its_gradient_and_is_a_candidate_
     grown = with_trend_maximiser(candidates, beta, context, (0.0, 1.0))
     assert grown.shape == (6, q) and np.array_equal(grown[:5], candidates)
     assert with_trend_maximiser(candidates, None, context, (0.0, 1.0)) is candidates
+
+
+def test_auto_chooses_no_transform_for_quadratic_returns_and_the_log_for_a_long_tail():
+    """Eq. (G5), the Box–Cox choice in the returns' units: an exact quadratic leaves no residual
+    untransformed; Rosenbrock's quartic walls, a long tail of bad returns, fit better after the log (its
+    Jacobian included)."""
+    rng = np.random.default_rng(6)
+    x = rng.uniform(size=(60, 3))
+    assert chosen_transform(x, _quadratic(x), trend=True) == "none"
+    theta = 4.0 * x - 2.0
+    walls = 100.0 * (theta[:, 1:] - theta[:, :-1] ** 2) ** 2 + (1.0 - theta[:, :-1]) ** 2
+    assert chosen_transform(x, -walls.sum(axis=1), trend=True) == "log"
+    assert chosen_transform(x, -walls.sum(axis=1), trend=False) == "log"
+
+
+def test_auto_is_recomputed_on_restore_and_reported():
+    optimizer, regret = _sphere(2, trend="quadratic", transform="auto")
+    assert optimizer.diagnostics["transform_log"] == 0.0 and regret < 1e-20
+    restored = ContextualBO.from_state_dict(optimizer.state_dict())
+    assert restored._transform == "none" and restored.model.alpha.tobytes() == optimizer.model.alpha.tobytes()
 
 
 def _sphere(p: int, **options) -> tuple[ContextualBO, float]:

@@ -12,6 +12,10 @@ standardised targets). Where the returns are quadratic in (s, θ), as on a conte
 optimum, the trend is exact and the posterior mean's maximiser is the optimum whatever the GP's lengthscales;
 elsewhere the GP carries what the quadratic misses. The trend is used from 2q episodes on (fewer would let
 it interpolate noise); before, the GP has its constant prior mean alone.
+
+A quadratic is exact only on untransformed returns, while c-bo's default log transform is what keeps long
+tails of bad returns from swamping the model. :func:`chosen_transform` chooses between them at every tell
+by the Box–Cox profile likelihood of the prior mean's fit in the returns' own units, Eq. (G5).
 """
 
 from __future__ import annotations
@@ -64,7 +68,7 @@ def detrend(inputs: Array, targets: Array) -> tuple[Array, Array | None, float]:
     basis = quadratic_basis(inputs)
     if basis.shape[0] < TREND_RATIO * basis.shape[1]:
         return targets, None, 1.0
-    beta = np.linalg.lstsq(basis, targets, rcond=None)[0]
+    beta = np.linalg.lstsq(basis, targets, rcond=None)[0]  # Eq. (G4)
     residuals = targets - basis @ beta
     size = float(np.sqrt(np.mean(targets**2)))
     scale = max(float(np.sqrt(np.mean(residuals**2))), 1e-12 * size, 1e-300)
@@ -126,7 +130,8 @@ def _profile_log_likelihood(inputs: Array, values: Array, log_jacobian: float, t
     if not trend or basis.shape[0] < TREND_RATIO * basis.shape[1]:
         basis = basis[:, :1]
     residuals = values - basis @ np.linalg.lstsq(basis, values, rcond=None)[0]
-    return -0.5 * values.shape[0] * float(np.log(max(float(np.mean(residuals**2)), 1e-300))) + log_jacobian
+    variance = max(float(np.mean(residuals**2)), 1e-300)
+    return -0.5 * values.shape[0] * float(np.log(variance)) + log_jacobian  # Eq. (G5)
 
 
 def chosen_transform(inputs: Array, returns: Array, trend: bool) -> str:

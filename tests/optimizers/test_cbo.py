@@ -348,6 +348,21 @@ def test_a_tampered_state_is_refused_naming_the_key(key, value, match):
         ContextualBO.from_state_dict(state)
 
 
+@pytest.mark.parametrize(
+    ("option", "value", "match"),
+    [
+        ("trend", "cubic", r"trend: expected one of \('constant', 'quadratic'\), got 'cubic'"),
+        ("transform", ["auto"], r"transform: expected one of .*'auto'\), got \['auto'\]"),
+    ],
+)
+def test_a_checkpoints_config_with_an_unknown_trend_or_transform_is_refused(option, value, match):
+    """The options of c-bo's quadratic prior mean (Eq. G4, G5) come from an untrusted checkpoint too."""
+    state = copy.deepcopy(_trained_state())
+    state["config"] = {**state["config"], option: value}
+    with pytest.raises(ValueError, match=match):
+        ContextualBO.from_state_dict(state)
+
+
 @pytest.mark.slow
 def test_a_restored_optimizer_rebuilds_the_same_gp_bit_for_bit():
     optimizer = _trained(context_low=[0.0], context_high=[1.0], param_low=-2.0, param_high=3.0)

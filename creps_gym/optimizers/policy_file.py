@@ -69,6 +69,12 @@ def _check_json_scalars(value: Any, name: str) -> dict[str, Any]:
     return dict(value)
 
 
+def _floats_only(values: list[Any]) -> bool:
+    """Whether ``values`` holds only floats, or only lists of floats (checked in one pass, not walked)."""
+    rows = all(type(item) is list and all(type(x) is float for x in item) for item in values)
+    return rows or all(type(item) is float for item in values)
+
+
 def _check_spec_ints(value: Any, name: str) -> None:
     """Refuse ints in a feature map's spec beyond :data:`MAX_SPEC_INT` (other than its context_dim)."""
     if isinstance(value, Mapping):
@@ -76,6 +82,8 @@ def _check_spec_ints(value: Any, name: str) -> None:
             if key != "context_dim":
                 _check_spec_ints(item, f"{name}[{key!r}]")
     elif isinstance(value, list):
+        if _floats_only(value):  # a list of floats, or of rows of floats (RBF centres): no int to refuse
+            return
         for index, item in enumerate(value):
             _check_spec_ints(item, f"{name}[{index}]")
     elif isinstance(value, int) and not isinstance(value, bool) and abs(value) > MAX_SPEC_INT:

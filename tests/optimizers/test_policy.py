@@ -173,6 +173,25 @@ def test_hostile_policy_files_are_refused_with_a_value_error(tmp_path, name):
         Policy.load(path)
 
 
+@pytest.mark.parametrize(
+    ("centres", "path"),
+    [
+        ([[0.0]] * 5 + [[10**30]], r"features\['centres'\]\[5\]\[0\]"),
+        ([[0.0, 1.0], [2.0, -(10**30)]], r"features\['centres'\]\[1\]\[1\]"),
+        ([[0.5]] * 3 + [10**30], r"features\['centres'\]\[3\]"),
+    ],
+)
+def test_a_huge_int_anywhere_in_a_spec_is_refused_naming_its_place(centres, path):
+    """Lists of floats, or of rows of floats, are checked in one pass; any other list is walked, so an int
+    among floats is still found and named."""
+    z = len(centres[0])
+    spec = {"name": "rbf", "context_dim": z, "centres": centres, "bandwidth": 1.0}
+    with pytest.raises(ValueError, match=path + ": expected an int of at most 1000 in magnitude"):
+        Policy(spec, np.zeros((len(centres), 1)), context_dim=z)
+    rows = {"name": "rbf", "context_dim": 2, "centres": [[0.0, 1.0]] * 4, "bandwidth": 1.0}
+    assert Policy(rows, np.zeros((4, 1)), context_dim=2).features.n_features == 4
+
+
 def test_a_header_that_claims_a_huge_array_is_refused_before_allocating(tmp_path):
     good = _npz(_good_entries())
     with zipfile.ZipFile(io.BytesIO(good)) as archive:

@@ -7,6 +7,7 @@ A cell with fewer finished seeds than the study's says how many (``[k/n]``); a c
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -17,12 +18,14 @@ from benchmarks.low_budget.study import BUDGETS, NON_QUADRATIC, task_by_name
 
 __all__ = [
     "ANCHORS",
+    "acquisition_table",
     "anchors_text",
     "cells",
     "completeness_text",
     "cost_text",
     "grouped_tasks",
     "plot_curves",
+    "sign_test",
     "targets_table",
     "task_table",
     "timing_table",
@@ -129,6 +132,42 @@ def targets_table(grouped: Cells, tasks: Sequence[str], methods: Sequence[Any], 
             + f" | {_ratio(ours, rivals.get(best), lower)} | {_ratio(ours, surrogate, lower)} "
             + f"| {_ratio(quadratic, surrogate, lower)} |"
         )
+    return "\n".join(lines) + "\n"
+
+
+def _by_seed(runs: Sequence[dict[str, Any]] | None, budget: int) -> dict[int, float]:
+    """Each run's value at ``budget``, by its seed."""
+    found = {}
+    for run in runs or []:
+        if budget in run["budgets"] and (value := run["values"][run["budgets"].index(budget)]) is not None:
+            found[int(run["spec"]["seed"])] = float(value)
+    return found
+
+
+def sign_test(wins: int, trials: int) -> float:
+    """The two-sided sign test's p-value of ``wins`` in ``trials`` fair coin flips (exact binomial)."""
+    if trials == 0:
+        return 1.0
+    tail = sum(math.comb(trials, k) for k in range(min(wins, trials - wins) + 1)) / 2.0**trials
+    return min(1.0, 2.0 * tail)
+
+
+def acquisition_table(grouped: Cells, tasks: Sequence[str], budgets: Sequence[int]) -> str:
+    """``c-bo`` (max-value entropy search) against ``c-bo-ucb``, paired by seed (the same seed draws the
+    same initial design): per task and budget, the seeds where MES is better, of those both finished,
+    and the sign test's two-sided p-value; a tie counts for neither."""
+    head = " | ".join(f"{b} episodes" for b in budgets)
+    lines = [f"| task | {head} |", "|---|" + "---|" * len(budgets)]
+    for task in tasks:
+        lower = task_by_name(task).lower_is_better
+        cells_ = []
+        for budget in budgets:
+            mes, ucb = (_by_seed(grouped.get((task, m)), budget) for m in ("c-bo", "c-bo-ucb"))
+            pairs = [(mes[s], ucb[s]) for s in sorted(set(mes) & set(ucb)) if mes[s] != ucb[s]]
+            wins = sum((a < b) == lower for a, b in pairs)
+            cells_.append(f"{wins}/{len(pairs)} (p {sign_test(wins, len(pairs)):.2g})" if pairs else "—")
+        if any(cell != "—" for cell in cells_):
+            lines.append(f"| {task} | {' | '.join(cells_)} |")
     return "\n".join(lines) + "\n"
 
 

@@ -29,6 +29,7 @@ if not __package__:
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
 from benchmarks.low_budget.report import (
+    acquisition_table,
     anchors_text,
     cells,
     completeness_text,
@@ -162,6 +163,12 @@ def write_report(args: argparse.Namespace, documents: list[dict[str, Any]], timi
         completeness_text(documents, args.specs),
         anchors_text(),
         *targets,
+        "## Max-value entropy search against UCB, seed by seed",
+        "",
+        "Seeds where `c-bo` (MES) ends better than `c-bo-ucb`, of the seeds both finished, and the sign "
+        "test's two-sided p-value (the same seed starts both from the same initial design).",
+        "",
+        acquisition_table(grouped, tasks, budgets),
         f"## The optimiser's own seconds per asked episode at {budgets[-1]} episodes",
         "",
         "The last batch's ask + tell per episode in CPU seconds (median over seeds, and the largest), its "

@@ -65,6 +65,24 @@ def test_a_committed_c_bo_run_is_what_the_code_computes() -> None:
         assert computed[field] == committed[field], field
 
 
+def test_mes_against_ucb_is_counted_seed_by_seed_with_an_exact_sign_test() -> None:
+    from benchmarks.low_budget.report import acquisition_table, sign_test
+
+    assert sign_test(5, 10) == 1.0 and sign_test(0, 0) == 1.0
+    assert sign_test(10, 10) == pytest.approx(2 / 1024) and sign_test(1, 10) == pytest.approx(22 / 1024)
+
+    def run(method, seed, value):
+        spec = {"task": "KickFlexibilityLowDim", "method": method, "seed": seed}
+        return {"spec": spec, "budgets": [200], "values": [value]}
+
+    grouped = {  # distance: higher is better; seed 2 ties, seed 3 has no UCB run
+        ("KickFlexibilityLowDim", "c-bo"): [run("c-bo", s, v) for s, v in enumerate([3.0, 1.0, 2.0, 5.0])],
+        ("KickFlexibilityLowDim", "c-bo-ucb"): [run("c-bo-ucb", s, v) for s, v in enumerate([2.0, 4.0, 2.0])],
+    }
+    table = acquisition_table(grouped, ["KickFlexibilityLowDim", "Sphere-p2-z1"], [200])
+    assert "| KickFlexibilityLowDim | 1/2 (p 1) |" in table and "Sphere" not in table
+
+
 def test_every_method_starts_from_the_same_distribution(monkeypatch: pytest.MonkeyPatch) -> None:
     seen = []
 

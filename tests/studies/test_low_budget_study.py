@@ -188,3 +188,18 @@ def test_an_active_column_chooses_its_contexts_with_the_optimisers_model():
     for path in runs:
         alone = path.with_name(path.name.replace("+active", ""))
         assert json.loads(path.read_text())["values"] != json.loads(alone.read_text())["values"], path.name
+
+
+def test_every_committed_run_records_its_columns_optimiser_options_and_selector():
+    """A run's file name holds its column's name, not its options: a column whose options changed (as
+    c-bo+quadratic's transform did) must not leave runs of the old options behind under the same name."""
+    methods = {method.name: method for method in study.METHODS}
+    runs = Path(__file__).resolve().parents[2] / "benchmarks/low_budget/runs"
+    paths = sorted(runs.rglob("*.json"))
+    assert len(paths) > 1000
+    for path in paths:
+        document = json.loads(path.read_text(encoding="utf-8"))
+        method = methods[document["spec"]["method"]]
+        options = dict(method.options)
+        expected = {"optimizer": method.optimizer, "options": options, "selector": method.selector}
+        assert {key: document["method"][key] for key in expected} == expected, path.name

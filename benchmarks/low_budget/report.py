@@ -65,14 +65,17 @@ def cells(documents: Sequence[dict[str, Any]]) -> Cells:
 
 
 def _values(runs: Sequence[dict[str, Any]], budget: int, field: str = "values") -> np.ndarray:
-    """The runs' ``field`` at ``budget`` (the runs that recorded it, finite ones)."""
-    found = []
-    for run in runs:
-        if budget in run["budgets"]:
-            value = run[field][run["budgets"].index(budget)]
-            if value is not None:
-                found.append(value)
-    return np.asarray(found, dtype=np.float64)
+    """The runs' ``field`` at ``budget`` (the runs that recorded it, finite ones), in the runs' order."""
+    return np.asarray(list(_by_seed(runs, budget, field).values()), dtype=np.float64)
+
+
+def _by_seed(runs: Sequence[dict[str, Any]] | None, budget: int, field: str = "values") -> dict[int, float]:
+    """Each run's ``field`` at ``budget`` by its seed (the runs that recorded it)."""
+    found = {}
+    for run in runs or []:
+        if budget in run["budgets"] and (value := run[field][run["budgets"].index(budget)]) is not None:
+            found[int(run["spec"]["seed"])] = float(value)
+    return found
 
 
 def _cell(values: np.ndarray, seeds: int) -> str:
@@ -102,8 +105,8 @@ def task_table(grouped: Cells, task: str, methods: Sequence[Any], seeds: int, bu
     return "\n".join(lines) + f"\n\nMetric: {metric} ({better} is better).\n"
 
 
-#: The c-bo columns of the targets table.
-QUADRATIC_ROW = ("c-bo", "c-bo-ucb", "c-bo+quadratic")
+#: The c-bo columns of the targets table, beside the best other method.
+CBO_COLUMNS = ("c-bo", "c-bo-ucb", "c-bo+quadratic")
 
 
 def targets_table(grouped: Cells, tasks: Sequence[str], methods: Sequence[Any], budget: int) -> str:
@@ -122,7 +125,7 @@ def targets_table(grouped: Cells, tasks: Sequence[str], methods: Sequence[Any], 
     others = [m.name for m in methods if not m.name.startswith("c-bo")]
     for task in tasks:
         lower = task_by_name(task).lower_is_better
-        ours, ucb, quadratic = (_median(grouped.get((task, m)), budget) for m in QUADRATIC_ROW)
+        ours, ucb, quadratic = (_median(grouped.get((task, m)), budget) for m in CBO_COLUMNS)
         rivals = {m: v for m in others if (v := _median(grouped.get((task, m)), budget)) is not None}
         best = (min if lower else max)(rivals, key=rivals.get) if rivals else None
         surrogate = rivals.get("c-cma-es-surrogate")
@@ -133,15 +136,6 @@ def targets_table(grouped: Cells, tasks: Sequence[str], methods: Sequence[Any], 
             + f"| {_ratio(quadratic, surrogate, lower)} |"
         )
     return "\n".join(lines) + "\n"
-
-
-def _by_seed(runs: Sequence[dict[str, Any]] | None, budget: int) -> dict[int, float]:
-    """Each run's value at ``budget``, by its seed."""
-    found = {}
-    for run in runs or []:
-        if budget in run["budgets"] and (value := run["values"][run["budgets"].index(budget)]) is not None:
-            found[int(run["spec"]["seed"])] = float(value)
-    return found
 
 
 def sign_test(wins: int, trials: int) -> float:

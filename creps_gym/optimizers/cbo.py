@@ -182,7 +182,7 @@ class ContextualBO(ContextualOptimizer):
             transform = self._chosen_transform(all_inputs, all_returns)
             if refit:
                 recent = slice(max(0, n - self.config.fit_points), n)
-                inputs = self._inputs(all_contexts[recent], all_params[recent], scale)
+                inputs = all_inputs[recent]
                 restarts = self.config.hyper_restarts
                 targets = self._targets(all_returns, "mean", transform)[recent]
                 if self._trend:  # the hyperparameters of the residuals' GP, Eq. (G4)
@@ -258,10 +258,10 @@ class ContextualBO(ContextualOptimizer):
         contexts are nearest to ``context`` (the first on ties), candidates that know where returns were
         good, and those episodes' indices."""
         units = np.clip(self._scaled_params(self.params), 0.0, 1.0)
-        nearest = np.arange(units.shape[0])
-        if units.shape[0] > max(1, self.config.candidates // 4):
+        keep, nearest = max(1, self.config.candidates // 4), np.arange(units.shape[0])
+        if units.shape[0] > keep:
             distance = ((self._scaled_contexts(self.contexts) - context) ** 2).sum(axis=1)
-            nearest = np.argsort(distance, kind="stable")[: max(1, self.config.candidates // 4)]
+            nearest = np.argsort(distance, kind="stable")[:keep]
         return units[nearest], nearest
 
     def _propose(self, model: GPModel, context: Array) -> Array:

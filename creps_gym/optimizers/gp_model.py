@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from scipy import linalg, special
 from scipy.linalg.lapack import dtrtrs
 
-from creps_gym.optimizers.gp_trend import detrend, trend_and_gradient
+from creps_gym.optimizers.gp_trend import detrend, log_transform, trend_and_gradient
 
 __all__ = [
     "LOG_BOUNDS",
@@ -144,9 +144,7 @@ class GPModel:
 
     def predict(self, x: Array) -> tuple[Array, Array]:
         """Posterior mean and latent variance at x (m, d), Eq. (G2) (and G4): two arrays of shape (m,)."""
-        cross = matern52(x, self.inputs, self.lengthscales, self.signal)
-        v = _solve_lower(self.chol, cross.T)
-        variance = np.maximum(self.signal - np.einsum("nm,nm->m", v, v), 1e-300)
+        cross, variance = self._latent(x)
         if self.beta is None:
             return cross @ self.alpha, variance
         trend = trend_and_gradient(x, self.beta)[0]
@@ -154,9 +152,13 @@ class GPModel:
 
     def latent_variance(self, x: Array) -> Array:
         """σ²(x) of the GP of Eq. (G2) itself, in the units of ``signal`` and ``noise``: shape (m,)."""
+        return self._latent(x)[1]
+
+    def _latent(self, x: Array) -> tuple[Array, Array]:
+        """k(x, X) (m, n) and the GP's own posterior variance σ²(x) (m,), Eq. (G2)."""
         cross = matern52(x, self.inputs, self.lengthscales, self.signal)
         v = _solve_lower(self.chol, cross.T)
-        return np.maximum(self.signal - np.einsum("nm,nm->m", v, v), 1e-300)
+        return cross, np.maximum(self.signal - np.einsum("nm,nm->m", v, v), 1e-300)
 
     def predict_with_gradient(self, x: Array) -> tuple[Array, Array, Array, Array]:
         """Mean (m,), variance (m,) and their gradients with respect to x, each of shape (m, d)."""
@@ -332,9 +334,7 @@ def transformed_returns(returns: Array, transform: str, prior_mean: str = "min")
     share their mean rank).
     """
     if transform == "log":
-        gaps = returns.max() - returns
-        scale = max(float(np.median(gaps)), 1e-12 * float(gaps.max()), 1e-300)
-        values = -np.log1p(gaps / scale)
+        values = log_transform(returns)[0]
     elif transform == "rank":
         values = special.ndtri((mean_ranks(returns) - 0.5) / returns.shape[0])
     else:

@@ -30,6 +30,7 @@ __all__ = [
     "TREND_RATIO",
     "chosen_transform",
     "detrend",
+    "log_transform",
     "quadratic_basis",
     "residual_share",
     "trend_and_gradient",
@@ -51,14 +52,23 @@ def quadratic_basis(x: Array) -> Array:
     return np.hstack([np.ones((x.shape[0], 1)), x, x[:, i] * x[:, j]])
 
 
-def trend_and_gradient(x: Array, beta: Array) -> tuple[Array, Array]:
-    """h(x)ᵀβ (m,) and its gradient with respect to x (m, d): β_lin + (U + Uᵀ)x, U the upper triangle of
-    the quadratic coefficients."""
-    d = x.shape[1]
+def _fits_a_trend(basis: Array) -> bool:
+    """Whether the rows of ``basis`` (n, q) are at least :data:`TREND_RATIO` · q episodes."""
+    return basis.shape[0] >= TREND_RATIO * basis.shape[1]
+
+
+def _hessian(beta: Array, d: int) -> Array:
+    """Q = U + Uᵀ (d, d), U the upper triangle of β's quadratic coefficients: h(x)ᵀβ's Hessian."""
     i, j = np.triu_indices(d)
     upper = np.zeros((d, d))
     upper[i, j] = beta[d + 1 :]
-    return quadratic_basis(x) @ beta, beta[1 : d + 1] + x @ (upper + upper.T)
+    return upper + upper.T
+
+
+def trend_and_gradient(x: Array, beta: Array) -> tuple[Array, Array]:
+    """h(x)ᵀβ (m,) and its gradient with respect to x (m, d): β_lin + Qx (:func:`_hessian`)."""
+    d = x.shape[1]
+    return quadratic_basis(x) @ beta, beta[1 : d + 1] + x @ _hessian(beta, d)
 
 
 def detrend(inputs: Array, targets: Array) -> tuple[Array, Array | None, float]:
@@ -66,7 +76,7 @@ def detrend(inputs: Array, targets: Array) -> tuple[Array, Array | None, float]:
     while n < :data:`TREND_RATIO` · q. σ_r is floored at 1e-12 times the targets' root mean square, so
     residuals that vanish (an exact quadratic) stay finite."""
     basis = quadratic_basis(inputs)
-    if basis.shape[0] < TREND_RATIO * basis.shape[1]:
+    if not _fits_a_trend(basis):
         return targets, None, 1.0
     beta = np.linalg.lstsq(basis, targets, rcond=None)[0]  # Eq. (G4)
     residuals = targets - basis @ beta
@@ -97,10 +107,7 @@ def trend_maximiser(beta: Array, context: Array, low: Array, high: Array) -> Arr
     ill-conditioned quadratic, L-BFGS-B stops once the value no longer changes in its ninth digit, far from
     the maximiser along the flat directions."""
     c, d = context.shape[0], context.shape[0] + low.shape[0]
-    i, j = np.triu_indices(d)
-    upper = np.zeros((d, d))
-    upper[i, j] = beta[d + 1 :]
-    hessian = upper + upper.T
+    hessian = _hessian(beta, d)
     block = hessian[c:, c:]
     try:
         np.linalg.cholesky(-block)
@@ -122,12 +129,20 @@ def with_trend_maximiser(
     return candidates if best is None else np.vstack([candidates, best[None, :]])
 
 
+def log_transform(returns: Array) -> tuple[Array, float]:
+    """c-bo's log transform of the returns (n,), −log(1 + (R_max − R)/c), and its scale c: the median of
+    R_max − R (at least 1e-12 times their largest). Its derivative in R is 1/(c + R_max − R)."""
+    gaps = returns.max() - returns
+    scale = max(float(np.median(gaps)), 1e-12 * float(gaps.max()), 1e-300)
+    return -np.log1p(gaps / scale), scale
+
+
 def _profile_log_likelihood(inputs: Array, values: Array, log_jacobian: float, trend: bool) -> float:
     """−(n/2) log σ̂² + log |dT/dR| of a least-squares model of transformed returns ``values`` (n,): a
     quadratic in the inputs (n, d) with ``trend`` and at least :data:`TREND_RATIO` · q episodes, else a
     constant (Box & Cox 1964: the transform's profile likelihood in the returns' own units)."""
     basis = quadratic_basis(inputs)
-    if not trend or basis.shape[0] < TREND_RATIO * basis.shape[1]:
+    if not (trend and _fits_a_trend(basis)):
         basis = basis[:, :1]
     residuals = values - basis @ np.linalg.lstsq(basis, values, rcond=None)[0]
     variance = max(float(np.mean(residuals**2)), 1e-300)
@@ -141,12 +156,10 @@ def chosen_transform(inputs: Array, returns: Array, trend: bool) -> str:
         ℓ(T) = −(n/2) log σ̂²_T + Σ_k log T′(R_k),   T_none(R) = R,   T_log(R) = −log(1 + (R_max − R)/c),
 
     with σ̂²_T the mean squared residual of the least-squares fit of T(R) and c the log transform's scale
-    (:func:`~creps_gym.optimizers.gp_model.transformed_returns`); ties keep ``"log"``. Returns that are
-    quadratic in (s, θ) choose ``"none"`` (σ̂² vanishes), long tails of bad returns ``"log"``."""
-    gaps = returns.max() - returns
-    scale = max(float(np.median(gaps)), 1e-12 * float(gaps.max()), 1e-300)
-    logged = -np.log1p(gaps / scale)
-    jacobian = -float(np.log(scale + gaps).sum())
+    (:func:`log_transform`); ties keep ``"log"``. Returns that are quadratic in (s, θ) choose ``"none"``
+    (σ̂² vanishes), long tails of bad returns ``"log"``."""
+    logged, scale = log_transform(returns)
+    jacobian = -float(np.log(scale + (returns.max() - returns)).sum())
     plain = _profile_log_likelihood(inputs, returns, 0.0, trend)
     return "none" if plain > _profile_log_likelihood(inputs, logged, jacobian, trend) else "log"
 

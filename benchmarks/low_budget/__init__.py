@@ -1,6 +1,7 @@
 """The low-budget studies (issue 44): ``run.py`` (the 50–500 episode study of item 5: ``study.py``,
-``report.py``), ``compare.py`` (regret after a fixed episode budget) and ``gp_backends.py`` (the GP's cost
-against scikit-learn's)."""
+``report.py``), ``compare.py`` (regret after a fixed episode budget), ``gp_backends.py`` (the GP's cost
+against scikit-learn's), ``active_contexts.py`` (active context choice against uniform draws) and
+``reach.py`` (what the low-dimensional kicks can reach at all)."""
 
 from __future__ import annotations
 

@@ -19,6 +19,11 @@ u_i = ±0.5 and ±1 (eight contexts): none of them makes the robot fall alone, w
 (wind-up) pose of the kicking leg by half its swing, or the hips' roll by twice the ``lean`` scale, does,
 which is why neither is a larger direction. They are not fitted, and a combination of several large u_i
 can still fall.
+
+What the subspace reaches (``benchmarks/low_budget/reach.py``, pycma per context, 300 episodes each):
+the farthest precision kick that stands is 9.68 m, short of the paper's 10–12 m targets (best mean
+error over its 10 targets 0.427 m, above the paper's 0.34 m), and no flexibility kick moves a ball at
+x_B = 0.30 m (best mean distance over the 28 positions 4.1 m, below the paper's 6.5 m).
 """
 
 from __future__ import annotations

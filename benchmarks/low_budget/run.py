@@ -81,8 +81,9 @@ PRESETS = {
 }
 #: The issue's target cells, computed first: p = 4, z = 1 on the non-quadratic functions, then the kick
 #: precision, then the quadratic functions at p = 4, z = 1 and the other robot tasks.
-FIRST = [f"{f}-p4-z1" for f in NON_QUADRATIC] + ["KickPrecisionLowDim"]
-FIRST += [f"{f}-p4-z1" for f in QUADRATIC] + ["KickFlexibilityLowDim", "PlanarReacherLowDim"]
+FIRST = [f"{f}-p4-z1" for f in NON_QUADRATIC] + ["KickPrecisionLowDim", "KickPrecisionLowDim-v1"]
+FIRST += [f"{f}-p4-z1" for f in QUADRATIC]
+FIRST += ["KickFlexibilityLowDim", "KickFlexibilityLowDim-v1", "PlanarReacherLowDim"]
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -91,7 +92,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     add_mode_options(parser, quick="p = 2, z = 1, 2 seeds, 100 episodes", full="the whole study")
-    parser.add_argument("--functions", nargs="+", choices=FUNCTIONS, help="contextual functions")
+    parser.add_argument(
+        "--functions", nargs="*", choices=FUNCTIONS, help="contextual functions (none: only robots)"
+    )
     parser.add_argument("--dims", nargs="+", type=int, help="parameter dimensions p")
     parser.add_argument("--context-dims", nargs="+", type=int, help="context dimensions z")
     parser.add_argument("--robots", nargs="*", choices=ROBOTS, help="low-dimensional robot tasks")

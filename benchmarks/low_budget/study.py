@@ -139,6 +139,8 @@ def function_task(function: str, dim: int, context_dim: int) -> Task:
 ROBOT_TASKS = (
     Task("KickPrecisionLowDim", "creps_gym/KickPrecisionLowDim-v0", "error"),
     Task("KickFlexibilityLowDim", "creps_gym/KickFlexibilityLowDim-v0", "distance"),
+    Task("KickPrecisionLowDim-v1", "creps_gym/KickPrecisionLowDim-v1", "error"),
+    Task("KickFlexibilityLowDim-v1", "creps_gym/KickFlexibilityLowDim-v1", "distance"),
     Task("PlanarReacherLowDim", "creps_gym/PlanarReacherLowDim-v0", "cost"),
 )
 

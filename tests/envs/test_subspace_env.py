@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from helpers import EXTRAS
 
-from creps_gym.envs.kick.subspace import METAPARAMETERS, kick_metaparameters
+from creps_gym.envs.kick import REGISTRATIONS as KICK_REGISTRATIONS
+from creps_gym.envs.kick.subspace import METAPARAMETERS, POWER_KICK, REACH_KICK, kick_metaparameters
 from creps_gym.envs.reacher.subspace import via_point_bumps
 from creps_gym.envs.subspace import AffineSubspaceEnv
 
@@ -64,6 +65,56 @@ def test_the_kick_recipe_has_six_independent_metaparameters_around_the_reference
     swing = reference[12:18] - reference[0:6]
     np.testing.assert_allclose(basis[12:18, 0], 0.5 * swing)  # the amplitude scales the kicking leg's swing
     assert basis[24].tolist() == [0, 0, 0, 0.5, 0, 0]  # only `duration` moves the swing time
+
+
+def test_the_v1_recipes_add_the_columns_to_the_power_and_reach_kicks_after_the_six():
+    reference = _Kick().reference_params()
+    six = kick_metaparameters(_Kick())[1]
+    for extra in (("power",), ("power", "reach"), ("reach",)):
+        _, basis, names = kick_metaparameters(_Kick(), (*METAPARAMETERS, *extra))
+        assert names == [*METAPARAMETERS, *extra] and basis.shape == (25, 6 + len(extra))
+        assert basis[:, :6].tobytes() == six.tobytes() and np.linalg.matrix_rank(basis) == basis.shape[1]
+        for column, name in enumerate(extra, start=6):
+            kick = POWER_KICK if name == "power" else REACH_KICK
+            np.testing.assert_allclose(
+                reference + basis[:, column], kick, rtol=0, atol=1e-15
+            )  # u = 1: the kick
+    registered = {r["id"]: r["kwargs"].get("names") for r in KICK_REGISTRATIONS if "LowDim" in r["id"]}
+    assert registered == {
+        "creps_gym/KickPrecisionLowDim-v0": None,
+        "creps_gym/KickFlexibilityLowDim-v0": None,
+        "creps_gym/KickPrecisionLowDim-v1": (*METAPARAMETERS, "power"),
+        "creps_gym/KickFlexibilityLowDim-v1": (*METAPARAMETERS, "power", "reach"),
+    }
+
+
+@pytest.mark.parametrize(
+    "names",
+    [
+        ("amplitude",),
+        (*METAPARAMETERS, "power", "power"),
+        (*METAPARAMETERS, "speed"),
+        ("power", *METAPARAMETERS),
+    ],
+)
+def test_a_recipe_of_unknown_or_misordered_names_is_refused_naming_them(names):
+    with pytest.raises(
+        ValueError, match=r"^names: expected \['amplitude', .* followed by distinct names of "
+    ):
+        kick_metaparameters(_Kick(), names)
+
+
+@EXTRAS
+@pytest.mark.parametrize(
+    ("low", "context", "column", "forward"),
+    [("Precision", [12.0], 6, (11.95, 12.05)), ("Flexibility", [0.30, 0.0], 7, (12.0, 12.5))],
+)
+def test_the_v1_kicks_at_their_unit_vectors_stand_and_go_as_far_as_documented(low, context, column, forward):
+    env = gym.make(f"creps_gym/Kick{low}LowDim-v1").unwrapped
+    u = np.zeros((1, env.action_space.shape[0]))
+    u[0, column] = 1.0
+    info = env.evaluate(np.array([context]), u)[1]
+    assert not info["fell"][0] and forward[0] < info["ball_displacement"][0, 0] < forward[1]
 
 
 @EXTRAS

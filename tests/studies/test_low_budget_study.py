@@ -120,9 +120,14 @@ def test_unknown_tasks_methods_and_bad_budgets_are_rejected() -> None:
 def test_the_full_study_computes_the_issues_target_cells_first() -> None:
     specs = study_run.study_specs(study_run.parse_args(["--full"]))
     methods = len(study.METHODS)
-    assert len(specs) == 33 * methods * 10 and len({s.key for s in specs}) == len(specs)
-    first = [s.task for s in specs[: 4 * methods * 10 : methods * 10]]
-    assert first == ["Rosenbrock-p4-z1", "DifferentPowers-p4-z1", "Rastrigin-p4-z1", "KickPrecisionLowDim"]
+    assert len(specs) == 35 * methods * 10 and len({s.key for s in specs}) == len(specs)
+    first = [s.task for s in specs[: 5 * methods * 10 : methods * 10]]
+    targets = ["Rosenbrock-p4-z1", "DifferentPowers-p4-z1", "Rastrigin-p4-z1", "KickPrecisionLowDim"]
+    assert first == [*targets, "KickPrecisionLowDim-v1"]
+    robots = study_run.study_specs(
+        study_run.parse_args(["--full", "--functions", "--robots", "KickPrecisionLowDim"])
+    )
+    assert {s.task for s in robots} == {"KickPrecisionLowDim"}  # `--functions` with none: only the robots
     assert [(s.method, s.seed) for s in specs[: methods + 1]][-1] == ("c-bo", 1)  # seed by seed, every method
 
 

@@ -29,14 +29,15 @@ def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path)
 def test_the_committed_results_cover_every_test_context_of_both_ids_with_provenance():
     document = json.loads((RESULTS / "reach.json").read_text(encoding="utf-8"))
     assert document["provenance"]["recorded"] is True
-    assert [result["task"] for result in document["results"]] == list(reach.TASKS)
+    assert [result["task"] for result in document["results"]] == list(reach.TASKS[:2])  # the v0 ids
     for result in document["results"]:
         env = gym.make(f"creps_gym/{result['task']}-v0").unwrapped
         contexts = evaluation_contexts(task_by_name(result["task"]), env)
         assert [row["context"] for row in result["contexts"]] == contexts.tolist()
         assert result["evaluations"] == 300
         for row in result["contexts"]:
-            assert np.isfinite(row["best"]) and len(row["u"]) == 6 and max(map(abs, row["u"])) <= 1.0
+            assert np.isfinite(row["best"]) and len(row["u"]) == env.action_space.shape[0]
+            assert max(map(abs, row["u"])) <= 1.0
         env.close()
 
 

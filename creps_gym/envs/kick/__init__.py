@@ -17,8 +17,12 @@ Registered ids
     As v1, and a kick that misses the ball scores minus its closest foot-ball distance (m) instead of 0.
 ``creps_gym/KickPrecisionLowDim-v0``, ``creps_gym/KickFlexibilityLowDim-v0``
     KickPrecision-v1 and KickFlexibility-v2 searched over six metaparameters around the reference kick
-    (swing amplitude, wind-up, duration, aim, lean, reach: :mod:`creps_gym.envs.kick.subspace`, through
-    :class:`creps_gym.envs.subspace.AffineSubspaceEnv`).
+    (swing amplitude, hip, ankle, duration, aim, lean: :mod:`creps_gym.envs.kick.subspace`, through
+    :class:`creps_gym.envs.subspace.AffineSubspaceEnv`). They kick no farther than 9.68 m and reach no
+    ball at x_B = 0.30 m.
+``creps_gym/KickPrecisionLowDim-v1``, ``creps_gym/KickFlexibilityLowDim-v1``
+    As v0, with ``power`` (towards a standing 12 m kick) and, for the flexibility, ``reach`` (towards a
+    standing kick of a ball at x_B = 0.30 m) as a seventh and eighth metaparameter.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from typing import Any
 __all__ = ["REGISTRATIONS"]
 
 _TASKS = "creps_gym.envs.kick.tasks"
+_SIX = ("amplitude", "hip", "ankle", "duration", "aim", "lean")  # subspace.METAPARAMETERS (a test compares)
 
 REGISTRATIONS: list[dict[str, Any]] = [
     {
@@ -67,5 +72,16 @@ REGISTRATIONS: list[dict[str, Any]] = [
             "kwargs": {"full_id": f"creps_gym/Kick{task}-{version}", "initial_std": 0.3},
         }
         for task, version in (("Precision", "v1"), ("Flexibility", "v2"))
+    ),
+    *(
+        {
+            "id": f"creps_gym/Kick{task}LowDim-v1",
+            "entry_point": "creps_gym.envs.kick.subspace:make_low_dimensional_kick",
+            "kwargs": {"full_id": f"creps_gym/Kick{task}-{version}", "initial_std": 0.3, "names": names},
+        }
+        for task, version, names in (
+            ("Precision", "v1", (*_SIX, "power")),
+            ("Flexibility", "v2", (*_SIX, "power", "reach")),
+        )
     ),
 ]

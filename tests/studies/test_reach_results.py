@@ -56,3 +56,18 @@ def test_the_best_u_found_gives_the_recorded_error_and_the_farthest_kick_does_no
     info = env.evaluate(np.array([[12.0]]), np.array([farthest["u"]]))[1]
     assert not info["fell"][0] and info["ball_displacement"][0, 0] == pytest.approx(farthest["distance"])
     env.close()
+
+
+def test_the_v1_kicks_in_the_package_are_the_committed_strong_kicks_to_6_decimals():
+    """``creps_gym/envs/kick/subspace.py`` keeps the θ that ``strong_kicks.py`` found (its committed JSON)."""
+    from benchmarks.low_budget import strong_kicks
+    from creps_gym.envs.kick.subspace import POWER_KICK, REACH_KICK
+
+    document = json.loads((RESULTS / "strong_kicks.json").read_text(encoding="utf-8"))
+    assert document["provenance"]["recorded"] is True and set(document["kicks"]) == set(strong_kicks.KICKS)
+    for name, kept in (("power", POWER_KICK), ("reach", REACH_KICK)):
+        kick = document["kicks"][name]
+        experiment, context = strong_kicks.KICKS[name]
+        assert (kick["experiment"], kick["context"], kick["fell"]) == (experiment, list(context), False)
+        assert tuple(round(value, 6) for value in kick["theta"]) == kept
+    assert document["kicks"]["power"]["metric"] < 0.05 and document["kicks"]["reach"]["metric"] > 12.0

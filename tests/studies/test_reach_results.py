@@ -19,19 +19,25 @@ from benchmarks.low_budget.study import evaluation_contexts, task_by_name
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 
 
-def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path):
-    copy = tmp_path / "reach.json"
-    shutil.copy(RESULTS / "reach.json", copy)
-    assert reach.render(copy) == (RESULTS / "reach.md").read_text(encoding="utf-8")
+#: The committed results: the v0 ids', the v1 ids'.
+FILES = {"reach": reach.TASKS[:2], "reach_v1": reach.TASKS[2:]}
+
+
+@pytest.mark.parametrize("name", sorted(FILES))
+def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path, name):
+    copy = tmp_path / f"{name}.json"
+    shutil.copy(RESULTS / f"{name}.json", copy)
+    assert reach.render(copy) == (RESULTS / f"{name}.md").read_text(encoding="utf-8")
 
 
 @EXTRAS  # the kick (MuJoCo)
-def test_the_committed_results_cover_every_test_context_of_both_ids_with_provenance():
-    document = json.loads((RESULTS / "reach.json").read_text(encoding="utf-8"))
+@pytest.mark.parametrize("name", sorted(FILES))
+def test_the_committed_results_cover_every_test_context_of_both_ids_with_provenance(name):
+    document = json.loads((RESULTS / f"{name}.json").read_text(encoding="utf-8"))
     assert document["provenance"]["recorded"] is True
-    assert [result["task"] for result in document["results"]] == list(reach.TASKS[:2])  # the v0 ids
+    assert [result["task"] for result in document["results"]] == list(FILES[name])
     for result in document["results"]:
-        env = gym.make(f"creps_gym/{result['task']}-v0").unwrapped
+        env = gym.make(task_by_name(result["task"]).env_id).unwrapped
         contexts = evaluation_contexts(task_by_name(result["task"]), env)
         assert [row["context"] for row in result["contexts"]] == contexts.tolist()
         assert result["evaluations"] == 300

@@ -11,12 +11,11 @@ pytest's ``pythonpath`` (``pyproject.toml``), so every folder imports ``helpers`
 
 from __future__ import annotations
 
-import json
 import os
 import sys
-from pathlib import Path
 
 import pytest
+from suite_order import DURATIONS, file_of, order_by_durations, write_durations
 
 # One BLAS thread per test process: the suite runs two workers on CI's two cores, and each worker's BLAS
 # threads would oversubscribe them (OpenBLAS spins while it waits: c-bo's small Cholesky factorisations ran
@@ -27,13 +26,7 @@ if "numpy" not in sys.modules:
         os.environ.setdefault(_variable, "1")
 
 
-# -- the order test files run in -------------------------------------------------------------------------
-# The two workers take whole files (`--dist loadfile`); the longest files go first, so that no long file is
-# left to run alone at the end while the other worker idles. `durations.json` holds each file's seconds
-# from a whole run (`python -m pytest --store-durations` writes it again). A file it does not list runs
-# last; a stale entry only changes the order, never a result. (`--no-loadscope-reorder` keeps this order:
-# pytest-xdist would otherwise order the files by their number of tests.)
-DURATIONS = Path(__file__).with_name("durations.json")
+# -- the order test files run in: the longest first (tests/suite_order.py) --------------------------------
 _SECONDS: dict[str, float] = {}  # --store-durations: each file's seconds in this run (setup, call, teardown)
 
 
@@ -45,21 +38,14 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
 
 
-def _file(nodeid: str) -> str:
-    return nodeid.split("::", 1)[0]
-
-
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    seconds = json.loads(DURATIONS.read_text(encoding="utf-8")) if DURATIONS.is_file() else {}
-    items.sort(key=lambda item: -seconds.get(_file(item.nodeid), 0.0))  # stable: a file stays in one piece
+    order_by_durations(items)
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
-    _SECONDS[_file(report.nodeid)] = _SECONDS.get(_file(report.nodeid), 0.0) + report.duration
+    _SECONDS[file_of(report.nodeid)] = _SECONDS.get(file_of(report.nodeid), 0.0) + report.duration
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:
     if session.config.getoption("store_durations") and not hasattr(session.config, "workerinput"):
-        ordered = dict(sorted(_SECONDS.items(), key=lambda item: (-item[1], item[0])))
-        text = json.dumps({name: round(value, 1) for name, value in ordered.items()}, indent=1)
-        DURATIONS.write_text(text + "\n", encoding="utf-8")
+        write_durations(_SECONDS)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import time
 import zlib
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +41,7 @@ from creps_gym.envs.base import initial_distribution
 from creps_gym.optimizers.registry import make_optimizer, recommended_samples
 from creps_gym.wrappers import OffsetParams
 
-__all__ = ["oracle_point", "read_oracle"]
+__all__ = ["SIGN", "ipop_starts", "oracle_point", "read_oracle"]
 
 SIGN = {"precision": -1.0, "flexibility": 1.0}  # better metric: smaller error, farther kick
 
@@ -74,8 +75,9 @@ def _one_start(
     budget: int,
     seed: int,
     name: str,
-) -> dict[str, Any]:
-    """One CMA-ES start at ``population`` until it stops or the next iteration exceeds ``budget``."""
+) -> tuple[dict[str, Any], np.ndarray]:
+    """One CMA-ES start at ``population`` until it stops or the next iteration exceeds ``budget``: its
+    record and its final mean's offsets (1, p)."""
     p, z = env.action_space.shape[0], env.unwrapped.context_dim
     mean, std = initial_distribution(env)
     opt = make_optimizer(name, p, z, seed, initial_mean=mean, initial_cov=std**2)
@@ -90,9 +92,17 @@ def _one_start(
         metric = episode_metric(experiment, contexts, info)
         best = max(best, float(np.max(np.where(info["fell"], -np.inf, sign * metric))))
         stop = opt.stop()
-    _, info = evaluate(env, context[None], opt.recommend(context[None]))
+    final = opt.recommend(context[None])
+    _, info = evaluate(env, context[None], final)
     value = float(episode_metric(experiment, context[None], info)[0])
-    return {"population": population, "episodes": opt.evaluations, "value": value, "stop": stop, "best": best}
+    record = {
+        "population": population,
+        "episodes": opt.evaluations,
+        "value": value,
+        "stop": stop,
+        "best": best,
+    }
+    return record, final
 
 
 def _start_seed(sequence: np.random.SeedSequence, start: int) -> int:
@@ -100,6 +110,27 @@ def _start_seed(sequence: np.random.SeedSequence, start: int) -> int:
     ``start``-th child."""
     child = sequence if start == 0 else np.random.SeedSequence(sequence.entropy, spawn_key=(start,))
     return int(child.generate_state(1)[0])
+
+
+def ipop_starts(
+    env: OffsetParams,
+    experiment: str,
+    context: np.ndarray,
+    episodes: int,
+    seed_of: Callable[[int, int], int],
+    name: str = "cma",
+) -> list[tuple[dict[str, Any], np.ndarray]]:
+    """IPOP starts of ``name`` at ``context``: the registry's population first, each next start twice the
+    last one's, while a start's first iteration fits in the ``episodes`` left. Start k's seed is
+    ``seed_of(k, used)`` (``used``: the episodes spent before it). Each start's record and final mean's
+    offsets (:func:`_one_start`)."""
+    population, used, starts = recommended_samples(name, env.action_space.shape[0], 0), 0, []
+    while used + population <= episodes:
+        seed = seed_of(len(starts), used)
+        starts.append(_one_start(env, experiment, context, population, episodes - used, seed, name))
+        used += starts[-1][0]["episodes"]
+        population *= 2
+    return starts
 
 
 def oracle_point(
@@ -126,15 +157,14 @@ def oracle_point(
     if path.exists() and not fresh and _reusable(read_json(path), experiment, episodes):
         return read_oracle(path, experiment)
     context = TARGETS[index : index + 1] if experiment == "precision" else grid_contexts()[index]
-    population = recommended_samples(name, env.action_space.shape[0], 0)
     sequence = np.random.SeedSequence([seed, zlib.crc32(experiment.encode()), index])
-    sign = SIGN[experiment]
-    starts, used, begin = [], 0, time.perf_counter()
-    while used + population <= episodes:
-        seed_r = _start_seed(sequence, len(starts))
-        starts.append(_one_start(env, experiment, context, population, episodes - used, seed_r, name))
-        used += starts[-1]["episodes"]
-        population *= 2
+    sign, begin = SIGN[experiment], time.perf_counter()
+
+    def seed_of(start: int, used: int) -> int:
+        return _start_seed(sequence, start)
+
+    starts = [record for record, _ in ipop_starts(env, experiment, context, episodes, seed_of, name)]
+    used = sum(s["episodes"] for s in starts)
     best = max(s.pop("best") for s in starts)
     result = {
         "index": index,

@@ -46,11 +46,9 @@ PAPER = {"error": 0.34, "distance": 6.5}
 SEED = 1
 
 
-def _kind(task_name: str) -> str:
-    return "precision" if task_by_name(task_name).metric == "error" else "flexibility"
-
-
-def search(score: Callable[[np.ndarray], np.ndarray], start: Any, sigma: float, evaluations: int) -> tuple:
+def search(
+    score: Callable[[np.ndarray], np.ndarray], start: Any, sigma: float, evaluations: int
+) -> tuple[float, list[float] | None]:
     """pycma's best (lowest) ``score`` in the box [−1, 1]^k from ``start``: (best score, its u as a list).
 
     ``score`` maps a batch of u (n, k) to scores (n,); every asked u is scored once, in pycma's batches.
@@ -84,7 +82,8 @@ def _scorer(env: Any, kind: str, context: np.ndarray, sign: float) -> Callable[[
 def reach(task_name: str, evaluations: int, contexts: Any = None) -> dict[str, Any]:
     """The task's best metric per test context (or per row of ``contexts``) and, for the precision task,
     the farthest kick without a fall."""
-    kind, task = _kind(task_name), task_by_name(task_name)
+    task = task_by_name(task_name)
+    kind = task.kick_experiment
     env = gym.make(task.env_id).unwrapped
     contexts = evaluation_contexts(task, env) if contexts is None else np.asarray(contexts, np.float64)
     start, std = env.initial_distribution()

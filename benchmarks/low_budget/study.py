@@ -121,6 +121,11 @@ class Task:
         """Whether a smaller metric is better (all but the kick flexibility's distance)."""
         return self.metric != "distance"
 
+    @property
+    def kick_experiment(self) -> str:
+        """The kick study's experiment for a kick task: `"precision"` (error) or `"flexibility"`."""
+        return "precision" if self.metric == "error" else "flexibility"
+
     def make_env(self, seed: int) -> Any:
         """The env's model (a function's instance is the run's seed, as in the other function studies)."""
         kwargs = dict(self.env_kwargs)
@@ -229,7 +234,7 @@ def evaluation_contexts(task: Task, model: Any) -> Array:
     if task.name.startswith("Kick"):
         from benchmarks.kick.study import evaluation_contexts as kick_contexts
 
-        return kick_contexts("precision" if task.metric == "error" else "flexibility")
+        return kick_contexts(task.kick_experiment)
     count = FUNCTION_TEST_CONTEXTS if task.function is not None else ROBOT_TEST_CONTEXTS
     return test_contexts(model, count, TEST_SEED)
 
@@ -243,9 +248,7 @@ def policy_metric(task: Task, model: Any, contexts: Array, params: Array) -> flo
         return -float(np.mean(returns))
     from benchmarks.kick.study import episode_metric
 
-    return float(
-        np.mean(episode_metric("precision" if task.metric == "error" else "flexibility", contexts, info))
-    )
+    return float(np.mean(episode_metric(task.kick_experiment, contexts, info)))
 
 
 def initial_distribution(task: Task, model: Any) -> tuple[Array, Array]:

@@ -114,7 +114,7 @@ def kick_metaparameters(env: Any, names: tuple[str, ...] = METAPARAMETERS) -> tu
     if (
         names[: len(METAPARAMETERS)] != METAPARAMETERS
         or any(n not in _KICKS for n in extra)
-        or (len(set(extra)) != len(extra))
+        or len(set(extra)) != len(extra)
     ):
         raise ValueError(
             f"names: expected {list(METAPARAMETERS)} followed by distinct names of {sorted(_KICKS)}, "

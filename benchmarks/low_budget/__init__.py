@@ -1,15 +1,58 @@
 """The low-budget studies (issue 44): ``run.py`` (the 50–500 episode study of item 5: ``study.py``,
 ``report.py``), ``compare.py`` (regret after a fixed episode budget), ``gp_backends.py`` (the GP's cost
 against scikit-learn's), ``active_contexts.py`` (active context choice against uniform draws) and
-``reach.py`` (what the low-dimensional kicks can reach at all)."""
+``reach.py`` (what the low-dimensional kicks can reach at all), ``strong_kicks.py`` (the v1 kicks'
+columns) and ``recommenders.py`` (c-bo's two recommendation rules on the same runs)."""
 
 from __future__ import annotations
 
 import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 
 def add_output_arguments(parser: argparse.ArgumentParser) -> None:
     """``--out`` (the results' JSON) and ``--render-only`` (redraw the table from it), as both take."""
     parser.add_argument("--out", type=Path, required=True, help="the results' JSON (read with --render-only)")
     parser.add_argument("--render-only", action="store_true", help="only write the table next to --out")
+
+
+def parse_runs_arguments(
+    parser: argparse.ArgumentParser, argv: list[str] | None, seeds: int, render: Callable[[Path], str]
+) -> argparse.Namespace | None:
+    """Add ``--seeds`` (default ``seeds``), ``--workers`` and the output arguments to ``parser`` and parse
+    ``argv``; with ``--render-only`` print ``render(out)`` and return None."""
+    parser.add_argument("--seeds", type=int, default=seeds)
+    parser.add_argument("--workers", type=int, default=1)
+    add_output_arguments(parser)
+    args = parser.parse_args(argv)
+    if args.render_only:
+        print(render(args.out))
+        return None
+    return args
+
+
+def run_and_write(
+    job: Callable[[Any], dict[str, Any]],
+    jobs: Sequence[Any],
+    workers: int,
+    out: Path,
+    render: Callable[[Path], str],
+) -> None:
+    """Run ``job`` on each of ``jobs`` in ``workers`` processes, print each result as a JSON line in the
+    jobs' order, write the document ``{"command", "runs", "provenance"}`` to ``out`` and print
+    ``render(out)``."""
+    from benchmarks.provenance import provenance
+
+    with ProcessPoolExecutor(workers) as pool:
+        runs = []
+        for result in pool.map(job, jobs):
+            runs.append(result)
+            print(json.dumps(result), flush=True)
+    document = {"command": sys.argv, "runs": runs, "provenance": provenance()}
+    out.write_text(json.dumps(document, indent=1) + "\n")
+    print(render(out))

@@ -26,15 +26,13 @@ if not __package__:  # run by path: the repository root first on sys.path, as `p
 import argparse
 import json
 import time
-from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 import creps_gym  # noqa: F401  (registers the ids)
-from benchmarks.low_budget import add_output_arguments
-from benchmarks.provenance import provenance
+from benchmarks.low_budget import parse_runs_arguments, run_and_write
 from creps_gym.envs.evaluation import test_contexts
 from creps_gym.optimizers import make_optimizer, recommended_samples
 from creps_gym.selectors import make_selector
@@ -141,12 +139,8 @@ def main(argv: list[str] | None = None) -> None:
         "--tasks", nargs="+", default=["Sphere:2:2", "Rosenbrock:2:2", "Rosenbrock:4:1"], help="FUNCTION:P:Z"
     )
     parser.add_argument("--budgets", nargs="+", type=int, default=[100, 200])
-    parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--workers", type=int, default=1)
-    add_output_arguments(parser)
-    args = parser.parse_args(argv)
-    if args.render_only:
-        print(render(args.out))
+    args = parse_runs_arguments(parser, argv, 5, render)
+    if args is None:
         return
     jobs = []
     for task in args.tasks:
@@ -154,14 +148,7 @@ def main(argv: list[str] | None = None) -> None:
         for seed in range(args.seeds):
             for name in SELECTORS:
                 jobs.append((function, int(p), int(z), name, args.budgets, seed))
-    with ProcessPoolExecutor(args.workers) as pool:
-        runs = []
-        for result in pool.map(_job, jobs):
-            runs.append(result)
-            print(json.dumps(result), flush=True)
-    document = {"command": sys.argv, "runs": runs, "provenance": provenance()}
-    args.out.write_text(json.dumps(document, indent=1) + "\n")
-    print(render(args.out))
+    run_and_write(_job, jobs, args.workers, args.out, render)
 
 
 if __name__ == "__main__":

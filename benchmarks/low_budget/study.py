@@ -259,7 +259,7 @@ def initial_distribution(task: Task, model: Any) -> tuple[Array, Array]:
     return np.asarray(mean, dtype=np.float64), np.asarray(std, dtype=np.float64)
 
 
-def _make_selector(method: Method, model: Any) -> Any:
+def make_run_selector(method: Method, model: Any) -> Any:
     """The method's context selector bound to the env's context box, or None."""
     if method.selector is None:
         return None
@@ -271,7 +271,7 @@ def _make_selector(method: Method, model: Any) -> Any:
     return selector
 
 
-#: What a run's curve records at each budget: the state's entries (see :func:`_batch`) and the value.
+#: What a run's curve records at each budget: the state's entries (see :func:`run_batch`) and the value.
 CURVE_FIELDS = ("episodes", "values", "spent", "spent_cpu", "last", "last_cpu")
 
 
@@ -285,7 +285,7 @@ def one_run(spec: LowBudgetSpec) -> dict[str, Any]:
     optimizer = make_optimizer(
         method.optimizer, model.param_dim, model.context_dim, spec.seed, **start_options
     )
-    selector = _make_selector(method, model)
+    selector = make_run_selector(method, model)
     contexts_rng = np.random.default_rng([spec.seed, 1])  # training contexts (or the selector's stream)
     test = evaluation_contexts(task, model)
     curve: dict[str, list[Any]] = {name: [] for name in CURVE_FIELDS}
@@ -298,7 +298,7 @@ def one_run(spec: LowBudgetSpec) -> dict[str, Any]:
                 _record(curve, state, policy_metric(task, model, test, optimizer.recommend(test)))
                 pending.pop(0)
             else:
-                _batch(spec, model, optimizer, selector, contexts_rng, state)
+                run_batch(spec, model, optimizer, selector, contexts_rng, state)
     except (ArithmeticError, ValueError, RuntimeError, np.linalg.LinAlgError) as error:
         stop_reason = f"error: {type(error).__name__}: {error}"  # the budgets left are recorded as None
         for _ in pending:
@@ -313,7 +313,7 @@ def _record(curve: dict[str, list[Any]], state: dict[str, Any], value: float | N
         curve[name].append(value if name == "values" else state[name])
 
 
-def _batch(
+def run_batch(
     spec: LowBudgetSpec, model: Any, optimizer: Any, selector: Any, rng: np.random.Generator, state: dict
 ) -> None:
     """Ask, evaluate and tell one batch; ``state`` gains its episodes and the optimiser's seconds (wall:

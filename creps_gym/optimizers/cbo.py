@@ -20,17 +20,10 @@ acquisitions of :mod:`creps_gym.optimizers.acquisitions`):
 the data have grown by ``refit_growth`` since the last fit, and otherwise kept, so an ask costs one Cholesky
 factor and the acquisition's optimisation.
 
-``recommend(contexts)`` is the posterior mean's maximiser at each s within a trust region of the data. With
-N(s) the k = max(1, ``candidates`` // 4) episodes whose scaled contexts are nearest to s (the first on ties)
-and G(s) the best ⌈q k⌉ of them by return (q = ``trust_share``),
-
-    θ̂(s) = argmax_{θ ∈ B(s)} μ(s, θ),   B(s) = [min_{i ∈ G(s)} θ_i, max_{i ∈ G(s)} θ_i]               (R1)
-
-(componentwise, on the observed θ clipped to the box; ``trust_share=None``: the whole box). Over the whole
-box the mean extrapolates: after a refit with a long lengthscale and an interpolating fit it keeps rising
-past the good episodes, above every told return and with a small σ (so μ − κσ does not help), and its
-maximiser runs to a face of the box far from the data (issue 44's study: regrets of 10⁴–10⁷ after 500
-episodes where 300 gave 10⁻³). :meth:`ContextualBO.mean_policy` distils the recommendation into a
+``recommend(contexts)`` follows ``recommend_over``, Eqs. (R1) and (R2) of
+:mod:`creps_gym.optimizers.cbo_recommend`: the posterior mean's maximiser at each s within a trust region of
+the data (the default), or the told θ with the largest posterior mean at s.
+:meth:`ContextualBO.mean_policy` distils the recommendation into a
 :class:`~creps_gym.optimizers.policy_file.Policy` (least squares of the maximisers on a context grid) and
 reports the distillation error in ``diagnostics``.
 
@@ -51,6 +44,7 @@ from creps_gym._validation import check_positive_int
 from creps_gym.optimizers.acquisitions import Acquisition, AcquisitionMaximiser, gumbel_max_values, mes, ucb
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.cbo_config import MAX_COUNTS, CBOConfig
+from creps_gym.optimizers.cbo_recommend import observed_maximiser, trust_region, trust_region_maximiser
 from creps_gym.optimizers.cbo_state import GPData, check_kernel_memory, read_gp_data
 from creps_gym.optimizers.ccmaes_config import options_doc, options_signature
 from creps_gym.optimizers.context_value import context_information, utility_thetas
@@ -280,8 +274,9 @@ class ContextualBO(ContextualOptimizer):
 
     # -- recommend and the policy --------------------------------------------------------------------------
     def recommend(self, contexts: Any) -> Array:
-        """The posterior mean's maximiser at each context within the trust region of the data, Eq. (R1):
-        shape (n, p).
+        """At each context, Eq. (R1) (``recommend_over="trust_region"``: the posterior mean's maximiser
+        within the trust region of the data) or Eq. (R2) (``"observed"``: the told θ with the largest
+        posterior mean) of :mod:`~creps_gym.optimizers.cbo_recommend`: shape (n, p).
 
         Before the GP exists (fewer than two episodes told) it is the initial mean. Deterministic: the
         candidates come from a fixed seed, so a context gives the same θ alone or in any batch.
@@ -289,29 +284,29 @@ class ContextualBO(ContextualOptimizer):
         contexts = self._check_contexts(contexts, "contexts")
         if self.model is None:
             return np.tile(self.config.initial_mean, (contexts.shape[0], 1))
+        scaled, model = self._scaled_contexts(contexts), self.model
+        if self.config.recommend_over == "observed":
+            told = np.clip(self._scaled_params(self.params), 0.0, 1.0)
+            chosen = [observed_maximiser(model, row, told) for row in scaled]
+            return np.clip(self.params[chosen], *self.config.param_box)  # the told θ themselves
         if self._recommend_candidates is None:
             fixed = np.random.default_rng(RECOMMEND_SEED).uniform(
                 size=(self.config.candidates, self.n_params)
             )
             self._recommend_candidates = fixed
-        fixed, model = self._recommend_candidates, self.model
         units = []
-        for row in self._scaled_contexts(contexts):
-            observed, (low, high) = self.trust_region(row)
-            candidates = np.vstack([low + fixed * (high - low), observed])
-            candidates = with_trend_maximiser(candidates, model.beta, row, (low, high))
-            units.append(self._maximiser.maximise(model, row, candidates, None, (low, high))[0])
+        for row in scaled:
+            good, bounds = self.trust_region(row)
+            units.append(
+                trust_region_maximiser(model, row, good, bounds, self._recommend_candidates, self._maximiser)
+            )
         return self._unscaled_params(np.array(units))
 
     def trust_region(self, context: Array) -> tuple[Array, tuple[Array, Array]]:
         """G(s) and B(s) of Eq. (R1) at a scaled context (z,): the good episodes' θ (g, p) and the box's
         (low (p,), high (p,)), in the unit box of θ; the whole unit box for ``trust_share=None``."""
         units, nearest = self._observed_units(context)
-        if self.config.trust_share is None:
-            return units, (np.zeros(self.n_params), np.ones(self.n_params))
-        count = max(1, math.ceil(self.config.trust_share * nearest.shape[0]))
-        good = units[np.argsort(-self.returns[nearest], kind="stable")[:count]]
-        return good, (good.min(axis=0), good.max(axis=0))
+        return trust_region(units, self.returns, nearest, self.config.trust_share)
 
     def context_utility(self, candidates: Any, targets: Any, pending: Any = None) -> Array:
         """What one more episode at each candidate context (m, z) would teach the GP about the optimal θ

@@ -16,6 +16,7 @@ from creps_gym._validation import (
     check_seed,
 )
 from creps_gym.optimizers.acquisitions import ACQUISITIONS
+from creps_gym.optimizers.cbo_recommend import RECOMMEND_RULES
 from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import initial_covariance
 
@@ -102,6 +103,10 @@ class CBOConfig:
         the best share q of the ``candidates // 4`` episodes with the nearest contexts; None: over the
         whole parameter box (the posterior mean may then extrapolate to a face of it, far from the data).
         Smaller: closer to the best episodes; larger: reaches optima that move with s past the neighbours.
+    recommend_over : str            ``"trust_region"``: ``recommend`` maximises the posterior mean over that
+        trust region (Eq. R1 of :mod:`~creps_gym.optimizers.cbo_recommend`); ``"observed"``: it returns the
+        told θ with the largest posterior mean at s (Eq. R2), never a θ no episode tried (safer where some
+        parameters fail badly, as a kick that falls; it cannot interpolate between the told θ).
     refit_growth : float            the hyperparameters are refitted (maximum likelihood, G3) when the data
         have grown by this factor since the last fit (a geometric schedule); in between only the Cholesky
         factor is updated, so asks stay fast.
@@ -132,6 +137,7 @@ class CBOConfig:
     candidates: int = 256
     starts: int = 3
     trust_share: float | None = 1.0 / 3.0
+    recommend_over: str = "trust_region"
     refit_growth: float = 1.2
     hyper_restarts: int = 1
     fit_points: int = 256
@@ -173,6 +179,9 @@ class CBOConfig:
             raise ValueError(f"prior_mean: expected one of {PRIOR_MEANS}, got {self.prior_mean!r}")
         if not isinstance(self.trend, str) or self.trend not in TRENDS:
             raise ValueError(f"trend: expected one of {TRENDS}, got {self.trend!r}")
+        rule = self.recommend_over
+        if not isinstance(rule, str) or rule not in RECOMMEND_RULES:
+            raise ValueError(f"recommend_over: expected one of {RECOMMEND_RULES}, got {rule!r}")
         set_(self, "beta", check_real_in_range(self.beta, "beta", 0.0, 1e6))
         set_(self, "refit_growth", check_real_in_range(self.refit_growth, "refit_growth", 1.0, 1e6))
         if self.trust_share is not None:

@@ -257,6 +257,29 @@ def test_recommend_stays_where_the_good_episodes_are_instead_of_extrapolating_to
     np.testing.assert_allclose(new.recommend(contexts), 0.5, atol=1e-9)
 
 
+def test_recommend_over_observed_returns_the_told_theta_with_the_best_posterior_mean_at_each_context():
+    """Eq. (R2): each recommended row is one of the told θ, bit for bit, and no told θ has a larger
+    posterior mean at that context; the rule changes nothing else (the same state, the same asks), and a
+    checkpoint keeps it."""
+    default, observed = _trained(), _trained(recommend_over="observed")
+    state, other = default.state_dict(), observed.state_dict()
+    assert other["config"]["recommend_over"] == "observed"
+    for key in ("data_contexts", "data_params", "data_returns", "log_hyper"):
+        np.testing.assert_array_equal(state[key], other[key])
+    contexts = np.linspace(0, 1, 5)[:, None]
+    chosen = observed.recommend(contexts)
+    told = np.clip(observed._scaled_params(observed.params), 0.0, 1.0)
+    for context, row in zip(observed._scaled_contexts(contexts), chosen, strict=True):
+        index = np.flatnonzero((observed.params == row).all(axis=1))
+        assert index.size >= 1  # a told θ itself
+        mean = observed.model.predict(np.hstack([np.tile(context, (told.shape[0], 1)), told]))[0]
+        assert mean[index[0]] == mean.max()
+    assert chosen[3].tobytes() == observed.recommend(contexts[3:4])[0].tobytes()  # alone or in a batch
+    restored = ContextualBO.from_state_dict(copy.deepcopy(other))
+    assert restored.recommend(contexts).tobytes() == chosen.tobytes()
+    assert not np.array_equal(default.recommend(contexts), chosen)  # R1 interpolates between them
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(("share", "count"), [(1.0 / 3.0, 7), (0.5, 10)])
 def test_recommend_lies_in_the_box_of_the_best_episodes_near_each_context(share, count):
@@ -323,6 +346,11 @@ def test_the_first_asks_draw_the_initial_design_inside_the_box():
         ({"distillation_points": 20_000}, ValueError, "distillation_points: expected an integer of at most"),
         ({"trust_share": 0.0}, ValueError, r"trust_share: expected a finite value in \(0.0, 1.0\], got 0.0"),
         ({"trust_share": "all"}, TypeError, "trust_share: expected a real number"),
+        (
+            {"recommend_over": "best"},
+            ValueError,
+            r"recommend_over: expected one of \('trust_region', 'observed'\), got 'best'",
+        ),
     ],
 )
 def test_bad_options_are_refused_naming_them(options, error, match):
@@ -353,10 +381,12 @@ def test_a_tampered_state_is_refused_naming_the_key(key, value, match):
     [
         ("trend", "cubic", r"trend: expected one of \('constant', 'quadratic'\), got 'cubic'"),
         ("transform", ["auto"], r"transform: expected one of .*'auto'\), got \['auto'\]"),
+        ("recommend_over", None, r"recommend_over: expected one of .*, got None"),
     ],
 )
 def test_a_checkpoints_config_with_an_unknown_trend_or_transform_is_refused(option, value, match):
-    """The options of c-bo's quadratic prior mean (Eq. G4, G5) come from an untrusted checkpoint too."""
+    """The options of c-bo's quadratic prior mean (Eq. G4, G5) and of its recommendation (R1, R2) come
+    from an untrusted checkpoint too."""
     state = copy.deepcopy(_trained_state())
     state["config"] = {**state["config"], option: value}
     with pytest.raises(ValueError, match=match):

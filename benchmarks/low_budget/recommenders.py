@@ -1,0 +1,174 @@
+"""What c-bo should recommend on the robot tasks: Eq. (R1) against Eq. (R2) on the same runs (issue 44).
+
+``recommend`` draws nothing from the optimiser's Generator and changes none of its state, so one run
+measures both rules of ``recommend_over`` (``creps_gym/optimizers/cbo_recommend.py``): ``trust_region``
+(R1, the default: the posterior mean's maximiser within the box of the good neighbours' θ) and
+``observed`` (R2: the told θ with the largest posterior mean at s). Each run is the low-budget study's run
+of the same task, column and seed (the same start, batches, training and test contexts), so its
+``trust_region`` values are that study run's values bit for bit (the script checks it where the study's
+document is in ``runs/``). After each budget, each rule's recommended policy is evaluated on the task's test
+contexts: the study's metric and, on the kicks, how many of the test kicks fall. Writes one JSON document
+with provenance and a Markdown table next to it (``--render-only`` redraws the table).
+
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.recommenders \\
+        --out benchmarks/low_budget/results/recommenders.json
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+if not __package__:  # run by path: the repository root first on sys.path, as `python -m` puts it
+    sys.path[0] = str(Path(__file__).resolve().parents[2])
+
+import argparse
+import dataclasses
+import json
+from typing import Any
+
+import numpy as np
+
+from benchmarks.low_budget import parse_runs_arguments, run_and_write
+from benchmarks.low_budget.study import (
+    LowBudgetSpec,
+    evaluation_contexts,
+    initial_distribution,
+    make_run_selector,
+    method_by_name,
+    policy_metric,
+    run_batch,
+    task_by_name,
+)
+from creps_gym.optimizers import make_optimizer
+
+RULES = ("trust_region", "observed")
+RUNS = Path(__file__).resolve().parent / "runs"
+
+
+def recommend_with(optimizer: Any, rule: str, contexts: np.ndarray) -> np.ndarray:
+    """``optimizer.recommend(contexts)`` with ``recommend_over=rule``; the optimiser is left as it was."""
+    config = optimizer.config
+    optimizer.config = dataclasses.replace(config, recommend_over=rule)
+    try:
+        return optimizer.recommend(contexts)
+    finally:
+        optimizer.config = config
+
+
+def one_run(task_name: str, method_name: str, seed: int, budget: int) -> dict[str, Any]:
+    """The study's run of ``method_name`` (a c-bo column without a selector) on ``task_name``; at each of
+    its budgets, each rule's metric and falls (None off the kicks) on the test contexts."""
+    spec = LowBudgetSpec(task_name, method_name, seed, budget)
+    task, method = task_by_name(task_name), method_by_name(method_name)
+    if method.optimizer != "c-bo":
+        raise ValueError(f"method: expected a c-bo column, got {method_name!r} ({method.optimizer})")
+    model = task.make_env(seed)
+    mean, std = initial_distribution(task, model)
+    options = {"initial_mean": mean, "initial_cov": std**2, **dict(method.options)}
+    optimizer = make_optimizer(method.optimizer, model.param_dim, model.context_dim, seed, **options)
+    selector = make_run_selector(method, model)
+    rng = np.random.default_rng([seed, 1])  # as the study's run
+    test = evaluation_contexts(task, model)
+    state: dict[str, Any] = {"episodes": 0, "spent": 0.0, "spent_cpu": 0.0, "last": None, "last_cpu": None}
+    values: dict[str, list[float]] = {rule: [] for rule in RULES}
+    falls: dict[str, list[int | None]] = {rule: [] for rule in RULES}
+    for target in spec.budgets:
+        while state["episodes"] + spec.samples <= target:
+            run_batch(spec, model, optimizer, selector, rng, state)
+        for rule in RULES:
+            params = recommend_with(optimizer, rule, test)
+            values[rule].append(policy_metric(task, model, test, params))
+            info = model.evaluate(test, params)[1] if task.name.startswith("Kick") else {}
+            falls[rule].append(int(np.sum(info["fell"])) if "fell" in info else None)
+    run = {"task": task_name, "method": method_name, "seed": seed, "budgets": list(spec.budgets)}
+    return {**run, "key": spec.key, "values": values, "falls": falls, "test_contexts": len(test)}
+
+
+def check_against_study(run: dict[str, Any], runs: Path = RUNS) -> bool | None:
+    """Whether the run's ``trust_region`` values equal the study's committed run of the same task, column,
+    seed and batch bit for bit at every budget both record (None: the study has no document of it)."""
+    prefix, samples = run["key"].rsplit("-b", 1)[0], run["key"].rsplit("-n", 1)[1]
+    documents = sorted(runs.glob(f"{prefix}-b*-n{samples}.json"))
+    if not documents:
+        return None
+    study = json.loads(documents[-1].read_text())
+    recorded = dict(zip(study["budgets"], study["values"], strict=True))
+    own = dict(zip(run["budgets"], run["values"]["trust_region"], strict=True))
+    common = sorted(set(recorded) & set(own))
+    return bool(common) and all(recorded[b] == own[b] for b in common)
+
+
+def _row(group: list[dict[str, Any]], index: int, larger_is_better: bool) -> list[str]:
+    """The cells of one budget's row: each rule's median (min–max over seeds), the seeds where ``observed``
+    is better, and the falls of each rule summed over seeds."""
+    cells, values = [], {}
+    for rule in RULES:
+        values[rule] = column = np.array([r["values"][rule][index] for r in group])
+        cells.append(f"{np.median(column):.3g} ({column.min():.3g}–{column.max():.3g})")
+    sign = 1.0 if larger_is_better else -1.0
+    better = int(np.sum(sign * (values["observed"] - values["trust_region"]) > 0))
+    cells.append(f"{better} of {len(group)}")
+    fell = [[r["falls"][rule][index] for r in group] for rule in RULES]
+    tests = len(group) * group[0]["test_contexts"]
+    cells.append("—" if None in fell[0] else f"{sum(fell[0])} / {sum(fell[1])} of {tests}")
+    return cells
+
+
+def summary(runs: list[dict[str, Any]]) -> str:
+    """A Markdown table per task and budget: each rule's median metric (min–max over seeds), the seeds on
+    which ``observed`` is better, and the test kicks that fall (summed over seeds)."""
+    lines = [
+        "| task | column | budget | trust_region: median (min–max over seeds) | observed: median (min–max) "
+        "| seeds where observed is better | falls (trust_region / observed, summed over seeds) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for task, method in sorted({(r["task"], r["method"]) for r in runs}):
+        group = [r for r in runs if (r["task"], r["method"]) == (task, method)]
+        group.sort(key=lambda r: r["seed"])
+        larger_is_better = task_by_name(task).metric == "distance"
+        for index, budget in enumerate(group[0]["budgets"]):
+            cells = _row(group, index, larger_is_better)
+            lines.append(f"| {task} | {method} | {budget} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def render(path: Path) -> str:
+    """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
+    document = json.loads(path.read_text())
+    command = " ".join(["python -m benchmarks.low_budget.recommenders", *document["command"][1:]])
+    checked = [check_against_study(run) for run in document["runs"]]
+    agree = f"{sum(c is True for c in checked)} of {sum(c is not None for c in checked)}"
+    text = (
+        f"{summary(document['runs'])}\n\nThe metric is the study's (kick precision: mean error in m, "
+        "lower is better; flexibility: mean distance in m, higher is better). The `trust_region` values "
+        f"equal the study's committed runs bit for bit in {agree} runs that the study has.\n\n"
+        f"Command: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
+    )
+    path.with_suffix(".md").write_text(text)
+    return text
+
+
+def _job(args: tuple[str, str, int, int]) -> dict[str, Any]:
+    return one_run(*args)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--tasks",
+        nargs="+",
+        default=["KickFlexibilityLowDim-v1", "KickPrecisionLowDim-v1"],
+        help="study task names",
+    )
+    parser.add_argument("--methods", nargs="+", default=["c-bo"], help="the study's c-bo columns")
+    parser.add_argument("--budget", type=int, default=500)
+    args = parse_runs_arguments(parser, argv, 10, render)
+    if args is None:
+        return
+    jobs = [(t, m, s, args.budget) for t in args.tasks for m in args.methods for s in range(args.seeds)]
+    run_and_write(_job, jobs, args.workers, args.out, render)
+
+
+if __name__ == "__main__":
+    main()

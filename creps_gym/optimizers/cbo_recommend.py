@@ -1,0 +1,91 @@
+"""What contextual Bayesian optimisation recommends at a context: the two rules of ``recommend_over``.
+
+References: as :mod:`creps_gym.optimizers.cbo`. Everything here works in the scaled units of
+:class:`~creps_gym.optimizers.cbo.ContextualBO`: θ in the unit box of the parameter box, s scaled by the
+context scaling. With N(s) the k = max(1, ``candidates`` // 4) episodes whose scaled contexts are nearest
+to s (the first on ties) and G(s) the best ⌈q k⌉ of them by return (q = ``trust_share``):
+
+* ``"trust_region"`` (the default): the posterior mean's maximiser within the box the good neighbours span,
+
+      θ̂(s) = argmax_{θ ∈ B(s)} μ(s, θ),   B(s) = [min_{i ∈ G(s)} θ_i, max_{i ∈ G(s)} θ_i]           (R1)
+
+  (componentwise; ``trust_share=None``: the whole box). Over the whole box the mean extrapolates: after a
+  refit with a long lengthscale and an interpolating fit it keeps rising past the good episodes, above every
+  told return and with a small σ (so μ − κσ does not help), and its maximiser runs to a face of the box far
+  from the data (issue 44's study: regrets of 10⁴–10⁷ after 500 episodes where 300 gave 10⁻³).
+* ``"observed"``: the told θ with the largest posterior mean at s, over every episode,
+
+      θ̂(s) = argmax_{i ≤ N} μ(s, θ_i)                                                             (R2)
+
+  (the first on ties). It never recommends a θ that no episode has tried, so it cannot combine the
+  good episodes' coordinates into one the data has never seen: on the kick flexibility, where a fall ends
+  the return at zero, R1's maximiser moves onto the fall cliff as the data grow
+  (``benchmarks/low_budget/recommenders.py`` measures both rules on the same runs). The price: between the
+  told θ it cannot interpolate, so on smooth tasks R1 ends closer to the optimum.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym.optimizers.acquisitions import AcquisitionMaximiser
+from creps_gym.optimizers.gp_model import GPModel
+from creps_gym.optimizers.gp_trend import with_trend_maximiser
+
+__all__ = ["RECOMMEND_RULES", "observed_maximiser", "trust_region", "trust_region_maximiser"]
+
+Array = NDArray[np.float64]
+RECOMMEND_RULES = ("trust_region", "observed")
+
+
+def trust_region(
+    units: Array, returns: Array, nearest: Array, share: float | None
+) -> tuple[Array, tuple[Array, Array]]:
+    """G(s) and B(s) of Eq. (R1).
+
+    Parameters
+    ----------
+    units : (k, p)        the θ of the nearest episodes N(s), in the unit box.
+    returns : (N,)        every told return (``nearest`` indexes it).
+    nearest : (k,)        the indices of N(s).
+    share : float or None q; None: B(s) is the whole unit box.
+
+    Returns
+    -------
+    good : (g, p)         the θ of G(s) (all of N(s) for ``share=None``), best return first.
+    bounds : ((p,), (p,)) B(s)'s low and high corners.
+    """
+    p = units.shape[1]
+    if share is None:
+        return units, (np.zeros(p), np.ones(p))
+    count = max(1, math.ceil(share * nearest.shape[0]))
+    good = units[np.argsort(-returns[nearest], kind="stable")[:count]]
+    return good, (good.min(axis=0), good.max(axis=0))
+
+
+def trust_region_maximiser(
+    model: GPModel,
+    context: Array,
+    good: Array,
+    bounds: tuple[Array, Array],
+    fixed: Array,
+    maximiser: AcquisitionMaximiser,
+) -> Array:
+    """Eq. (R1) at one scaled context (z,): the posterior mean's maximiser in B(s), shape (p,).
+
+    ``fixed`` (m, p) are unit-box candidates from a fixed seed, mapped into B(s) and scored with the good
+    θ (and the trend's own maximiser within B(s)); L-BFGS-B starts from the best of them."""
+    low, high = bounds
+    candidates = np.vstack([low + fixed * (high - low), good])
+    candidates = with_trend_maximiser(candidates, model.beta, context, bounds)
+    return maximiser.maximise(model, context, candidates, None, bounds)[0]
+
+
+def observed_maximiser(model: GPModel, context: Array, units: Array) -> int:
+    """Eq. (R2) at one scaled context (z,): the index of the told θ (rows of ``units``, (N, p), in the unit
+    box) with the largest posterior mean at it (the first on ties)."""
+    mean = model.predict(AcquisitionMaximiser.inputs(context, units))[0]  # R2
+    return int(np.argmax(mean))

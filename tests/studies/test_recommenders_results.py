@@ -1,0 +1,68 @@
+"""c-bo's two recommendation rules on the same runs (benchmarks/low_budget/recommenders.py): a run is the
+low-budget study's run bit for bit, both rules are measured on it without changing it, and the committed
+table is the rendering of the committed JSON, whose every run agrees with the study's documents."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.low_budget import recommenders
+from creps_gym.optimizers import make_optimizer
+
+RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
+
+
+def test_a_run_is_the_study_run_and_both_rules_are_measured_on_it():
+    """Rosenbrock p = 2, z = 1, seed 0, to 50 episodes: the default rule's value is the committed study
+    run's at 50 bit for bit (so measuring the other rule changed nothing before it), and the other rule
+    gives its own finite value; off the kicks there are no falls to count."""
+    run = recommenders.one_run("Rosenbrock-p2-z1", "c-bo", 0, 50)
+    assert run["budgets"] == [50] and run["key"] == "Rosenbrock-p2-z1-c-bo-s0-b50-n4"
+    assert recommenders.check_against_study(run) is True
+    trust, observed = run["values"]["trust_region"][0], run["values"]["observed"][0]
+    assert trust != observed and observed > 0.0
+    assert run["falls"] == {"trust_region": [None], "observed": [None]}
+    tampered = {**run, "values": {**run["values"], "trust_region": [trust * (1 + 1e-15)]}}
+    assert recommenders.check_against_study(tampered) is False
+
+
+def test_a_run_needs_a_c_bo_column_and_leaves_the_optimisers_rule_as_it_was():
+    with pytest.raises(ValueError, match=r"method: expected a c-bo column, got 'creps' \(creps\)"):
+        recommenders.one_run("Rosenbrock-p2-z1", "creps", 0, 50)
+    assert recommenders.check_against_study({"key": "Nothing-c-bo-s0-b50-n4"}) is None
+    optimizer = make_optimizer("c-bo", 2, 1, 0)
+    rng = np.random.default_rng(0)
+    for _ in range(4):
+        contexts = rng.uniform(size=(4, 1))
+        params = optimizer.ask(contexts)
+        optimizer.tell(contexts, params, -((params - contexts) ** 2).sum(axis=1))
+    config, test = optimizer.config, np.linspace(0, 1, 3)[:, None]
+    default = optimizer.recommend(test)
+    observed = recommenders.recommend_with(optimizer, "observed", test)
+    assert optimizer.config is config and optimizer.recommend(test).tobytes() == default.tobytes()
+    assert all((optimizer.params == row).all(axis=1).any() for row in observed)
+
+
+@pytest.mark.parametrize("name", ["recommenders"])
+def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path, name):
+    copy = tmp_path / f"{name}.json"
+    shutil.copy(RESULTS / f"{name}.json", copy)
+    assert recommenders.render(copy) == (RESULTS / f"{name}.md").read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("name", ["recommenders"])
+def test_every_committed_run_is_the_study_run_of_its_task_column_and_seed(name):
+    """Each run's default-rule values equal the study's committed document bit for bit, at every budget,
+    for 10 seeds of each task, and the kicks count their falls."""
+    document = json.loads((RESULTS / f"{name}.json").read_text(encoding="utf-8"))
+    assert document["provenance"]["recorded"] is True
+    runs = document["runs"]
+    assert all(recommenders.check_against_study(run) is True for run in runs)
+    for task in {run["task"] for run in runs}:
+        assert sorted(run["seed"] for run in runs if run["task"] == task) == list(range(10))
+    assert all(None not in run["falls"]["observed"] for run in runs if run["task"].startswith("Kick"))

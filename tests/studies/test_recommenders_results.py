@@ -66,3 +66,19 @@ def test_every_committed_run_is_the_study_run_of_its_task_column_and_seed(name):
     for task in {run["task"] for run in runs}:
         assert sorted(run["seed"] for run in runs if run["task"] == task) == list(range(10))
     assert all(None not in run["falls"]["observed"] for run in runs if run["task"].startswith("Kick"))
+
+
+def test_the_side_studies_parse_their_runs_arguments_and_render_only_when_asked(tmp_path, capsys):
+    """``--seeds`` (each script's default), ``--workers`` and ``--out``; ``--render-only`` prints the table
+    rendered from ``--out`` and computes nothing."""
+    import argparse
+
+    from benchmarks.low_budget import parse_runs_arguments
+
+    out = tmp_path / "results.json"
+    args = parse_runs_arguments(argparse.ArgumentParser(), ["--out", str(out)], 10, lambda path: "never")
+    assert (args.seeds, args.workers, args.out, args.render_only) == (10, 1, out, False)
+    shutil.copy(RESULTS / "recommenders.json", out)
+    argv = ["--out", str(out), "--render-only", "--seeds", "3"]
+    assert parse_runs_arguments(argparse.ArgumentParser(), argv, 10, recommenders.render) is None
+    assert capsys.readouterr().out == (RESULTS / "recommenders.md").read_text(encoding="utf-8") + "\n"

@@ -1,19 +1,25 @@
-"""Which GP for c-bo: scikit-learn's GaussianProcessRegressor against the numpy/scipy GP of
-``creps_gym.optimizers.gp_model``, on the data an ask sees at 200 and 500 episodes (p = 4, z = 1).
+"""Which GP for c-bo: scikit-learn's GaussianProcessRegressor and BoTorch's SingleTaskGP against the
+numpy/scipy GP of ``creps_gym.optimizers.gp_model``, on the data an ask sees at 200 and 500 episodes
+(p = 4, z = 1).
 
 Measured per data size n (the Sphere's returns at random (s, θ) in the unit box, same kernel: ARD Matérn-5/2
 plus a noise term):
 
 * ``fit``: a hyperparameter fit (maximum likelihood, one random restart: sklearn's ``n_restarts_optimizer=1``,
-  ours ``fit_hyperparameters(..., restarts=1)``);
+  ours ``fit_hyperparameters(..., restarts=1)``; BoTorch: ``fit_gpytorch_mll`` from its default start, which
+  retries only on failure);
 * ``predict``: mean and standard deviation at the 320 candidates an ask scores per context;
 * ``gradient_eval``: one evaluation of the acquisition's value and gradient in θ for L-BFGS-B. scikit-learn
   gives no gradient with respect to the inputs, so its figure is q + 1 = 5 single-point predictions (central
-  differences would need 2q + 1);
-* ``ask_per_episode`` (ours only): c-bo's own time per asked episode, a batch of 4 after n episodes.
+  differences would need 2q + 1); BoTorch's is UCB (β = 4) and its autograd backward pass at one point;
+* ``ask_per_episode``: c-bo's own time per asked episode, a batch of 4 after n episodes; for BoTorch, its
+  ``optimize_acqf`` of UCB over θ with s fixed (``FixedFeatureAcquisitionFunction``, 320 raw samples, 3
+  L-BFGS-B restarts, the fitted model kept), per context of the same 4.
 
-BoTorch was not measured: it needs torch, which is not installed here (PyPI's Linux wheels pull several GB of
-CUDA libraries) and the issue keeps it out of the default install.
+BoTorch runs in float64 on one torch thread (``torch.set_num_threads(1)``, as ``OPENBLAS_NUM_THREADS=1``
+gives the others one BLAS thread). It needs torch, which the default install leaves out (PyPI's Linux
+wheels pull several GB of CUDA libraries): with a CPU build of torch, ``pip install botorch``; without it the
+BoTorch rows are left out.
 
     OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.gp_backends --out gp_backends.json
 """
@@ -93,6 +99,57 @@ def numpy_times(n: int, repeats: int) -> dict[str, float]:
     return {"fit": fit, "predict": predict, "gradient_eval": gradient, "ask_per_episode": ask}
 
 
+def botorch_times(n: int, repeats: int) -> dict[str, float] | None:
+    """BoTorch's fit, predict, gradient-evaluation and acquisition-optimisation times (see the module
+    docstring); None when BoTorch is not installed."""
+    try:
+        import torch
+        from botorch.acquisition import FixedFeatureAcquisitionFunction, UpperConfidenceBound
+        from botorch.fit import fit_gpytorch_mll
+        from botorch.models import SingleTaskGP
+        from botorch.optim import optimize_acqf
+        from gpytorch.kernels import MaternKernel, ScaleKernel
+        from gpytorch.mlls import ExactMarginalLogLikelihood
+    except ImportError:
+        return None
+    torch.set_num_threads(1)
+    torch.manual_seed(0)
+    inputs, targets = (torch.from_numpy(a) for a in _data(n, np.random.default_rng(0)))
+
+    def fitted() -> Any:  # a new model each time: every fit starts from BoTorch's default hyperparameters
+        kernel = ScaleKernel(MaternKernel(nu=2.5, ard_num_dims=P + Z))
+        model = SingleTaskGP(inputs, targets[:, None], covar_module=kernel)
+        fit_gpytorch_mll(ExactMarginalLogLikelihood(model.likelihood, model))
+        return model
+
+    fit = _seconds(fitted, repeats)
+    model = fitted()
+    candidates = torch.from_numpy(np.random.default_rng(1).uniform(size=(CANDIDATES, P + Z)))
+    model.eval()
+
+    def predict() -> tuple[Any, Any]:
+        with torch.no_grad():
+            posterior = model.posterior(candidates)
+            return posterior.mean, posterior.variance
+
+    acquisition = UpperConfidenceBound(model, beta=4.0)
+
+    def gradient() -> None:
+        point = candidates[:1, None, :].clone().requires_grad_(True)
+        acquisition(point).sum().backward()
+
+    bounds = torch.stack([torch.zeros(P), torch.ones(P)]).double()
+    asked = torch.from_numpy(np.random.default_rng(2).uniform(0, 1, (4, Z)))
+
+    def ask() -> None:
+        for context in asked:
+            fixed = FixedFeatureAcquisitionFunction(acquisition, P + Z, list(range(Z)), context[None, :])
+            optimize_acqf(fixed, bounds, q=1, num_restarts=3, raw_samples=CANDIDATES)
+
+    times = {"fit": fit, "predict": _seconds(predict, repeats), "gradient_eval": _seconds(gradient, repeats)}
+    return {**times, "ask_per_episode": _seconds(ask, repeats) / 4}
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", nargs="+", type=int, default=[200, 500])
@@ -105,8 +162,15 @@ def main(argv: list[str] | None = None) -> None:
     results = {}
     for n in args.sizes:
         results[str(n)] = {"sklearn": sklearn_times(n, args.repeats), "numpy": numpy_times(n, args.repeats)}
+        botorch = botorch_times(n, args.repeats)
+        if botorch is not None:
+            results[str(n)]["botorch"] = botorch
         print(n, json.dumps(results[str(n)]), flush=True)
-    document = {"command": sys.argv, "results": results, "provenance": provenance(["scikit-learn"])}
+    document = {
+        "command": sys.argv,
+        "results": results,
+        "provenance": provenance(["scikit-learn", "torch", "botorch", "gpytorch"]),
+    }
     args.out.write_text(json.dumps(document, indent=1) + "\n")
     print(render(args.out))
 
@@ -116,7 +180,7 @@ def render(path: Path) -> str:
     document = json.loads(path.read_text())
     lines = [
         "| episodes n | GP | fit (s) | predict, 320 candidates (s) | value + gradient in θ (s) | "
-        "c-bo's ask per episode (s) |",
+        "ask per episode (s) |",
         "|---|---|---|---|---|---|",
     ]
     for n, row in document["results"].items():

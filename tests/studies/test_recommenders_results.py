@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import EXTRAS
 
 from benchmarks.low_budget import recommenders
 from creps_gym.optimizers import make_optimizer
@@ -17,6 +18,7 @@ from creps_gym.optimizers import make_optimizer
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 
 
+@EXTRAS  # bit for bit only on the stack that computed the study's run (the full environment), not the lowest
 def test_a_run_is_the_study_run_and_both_rules_are_measured_on_it():
     """Rosenbrock p = 2, z = 1, seed 0, to 50 episodes: the default rule's value is the committed study
     run's at 50 bit for bit (so measuring the other rule changed nothing before it), and the other rule

@@ -140,8 +140,9 @@ def render(path: Path) -> str:
     checked = [check_against_study(run) for run in document["runs"]]
     agree = f"{sum(c is True for c in checked)} of {sum(c is not None for c in checked)}"
     text = (
-        f"{summary(document['runs'])}\n\nThe metric is the study's (kick precision: mean error in m, "
-        "lower is better; flexibility: mean distance in m, higher is better). The `trust_region` values "
+        f"{summary(document['runs'])}\n\nThe metric is the study's: the mean regret on a function and the "
+        "kick precision's mean error in m (lower is better), the kick flexibility's mean distance in m "
+        "(higher is better). The `trust_region` values "
         f"equal the study's committed runs bit for bit in {agree} runs that the study has.\n\n"
         f"Command: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
     )

@@ -36,7 +36,7 @@ from benchmarks.low_budget.study import (
     initial_distribution,
     make_run_selector,
     method_by_name,
-    policy_metric,
+    policy_evaluation,
     run_batch,
     task_by_name,
 )
@@ -78,8 +78,8 @@ def one_run(task_name: str, method_name: str, seed: int, budget: int) -> dict[st
             run_batch(spec, model, optimizer, selector, rng, state)
         for rule in RULES:
             params = recommend_with(optimizer, rule, test)
-            values[rule].append(policy_metric(task, model, test, params))
-            info = model.evaluate(test, params)[1] if task.name.startswith("Kick") else {}
+            value, info = policy_evaluation(task, model, test, params)  # one evaluation for both
+            values[rule].append(value)
             falls[rule].append(int(np.sum(info["fell"])) if "fell" in info else None)
     run = {"task": task_name, "method": method_name, "seed": seed, "budgets": list(spec.budgets)}
     return {**run, "key": spec.key, "values": values, "falls": falls, "test_contexts": len(test)}

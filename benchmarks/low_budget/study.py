@@ -241,14 +241,19 @@ def evaluation_contexts(task: Task, model: Any) -> Array:
 
 def policy_metric(task: Task, model: Any, contexts: Array, params: Array) -> float:
     """The task's metric of the parameters ``params`` (n, p) at ``contexts`` (n, z), a mean over them."""
+    return policy_evaluation(task, model, contexts, params)[0]
+
+
+def policy_evaluation(task: Task, model: Any, contexts: Array, params: Array) -> tuple[float, dict]:
+    """:func:`policy_metric` and the episodes' ``info`` it came from (empty for a function's regret)."""
     if task.metric == "regret":
-        return float(np.mean(model.regret(contexts, params)))
+        return float(np.mean(model.regret(contexts, params))), {}
     returns, info = model.evaluate(contexts, params)
     if task.metric == "cost":
-        return -float(np.mean(returns))
+        return -float(np.mean(returns)), info
     from benchmarks.kick.study import episode_metric
 
-    return float(np.mean(episode_metric(task.kick_experiment, contexts, info)))
+    return float(np.mean(episode_metric(task.kick_experiment, contexts, info))), info
 
 
 def initial_distribution(task: Task, model: Any) -> tuple[Array, Array]:

@@ -46,13 +46,13 @@ def finite(text: str) -> float:
 
 def add_commands(commands: Any) -> None:
     """Add ``ask`` and ``tell`` to the sub-command parsers ``commands``."""
-    ask = commands.add_parser(
+    ask = _run_command(
+        commands,
         "ask",
-        help="print the parameters to try for a context (a run driven from outside, e.g. a real robot)",
-        description="Print the parameters of the next episode for a context and keep it pending until "
+        "print the parameters to try for a context (a run driven from outside, e.g. a real robot)",
+        "Print the parameters of the next episode for a context and keep it pending until "
         "`creps-gym tell` records its return. --new starts the run.",
     )
-    ask.add_argument("run", metavar="RUN", help="the ask/tell run folder")
     ask.add_argument(
         "--context", nargs="+", type=finite, metavar="S", help="the episode's context: z numbers"
     )
@@ -61,18 +61,25 @@ def add_commands(commands: Any) -> None:
     ask.add_argument("--json", action="store_true", help="print JSON (with the episode's id)")
     _add_new(ask)
     add_import(ask)
-    tell = commands.add_parser(
+    tell = _run_command(
+        commands,
         "tell",
-        help="record the return of an episode that `ask` printed",
-        description="Record the return of a pending episode; a full batch updates the optimiser, "
+        "record the return of an episode that `ask` printed",
+        "Record the return of a pending episode; a full batch updates the optimiser, "
         "checkpoints and rewrites policy.npz.",
     )
-    tell.add_argument("run", metavar="RUN", help="the ask/tell run folder")
     outcome = tell.add_mutually_exclusive_group(required=True)
     outcome.add_argument("--return", dest="value", type=finite, metavar="R", help="the episode's return")
     outcome.add_argument("--failed", action="store_true", help="the episode gave no return (drop it)")
     tell.add_argument("--episode", type=integer(1), metavar="ID", help="its id (needed if several pending)")
     tell.add_argument("--json", action="store_true", help="print JSON")
+
+
+def _run_command(commands: Any, name: str, summary: str, description: str) -> argparse.ArgumentParser:
+    """A command on one ask/tell run folder (``RUN``)."""
+    command = commands.add_parser(name, help=summary, description=description)
+    command.add_argument("run", metavar="RUN", help="the ask/tell run folder")
+    return command
 
 
 def _add_new(ask: argparse.ArgumentParser) -> None:

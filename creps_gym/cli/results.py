@@ -31,25 +31,33 @@ def add_commands(commands: Any) -> None:
         description="List the envs (context and parameter spaces, the default initial search distribution) "
         "and the optimisers.",
     )
-    plot = commands.add_parser(
+    plot = _runs_command(
+        commands,
         "plot",
-        help="plot learning curves of run directories",
-        description="Plot learning curves: one curve (median and quartile band over seeds) per setting.",
+        "plot learning curves of run directories",
+        "Plot learning curves: one curve (median and quartile band over seeds) per setting.",
+        "image file, e.g. curves.png",
     )
-    plot.add_argument("run_dirs", nargs="+", metavar="DIR")
-    plot.add_argument("-o", "--output", required=True, metavar="FILE", help="image file, e.g. curves.png")
     plot.add_argument("--title", help="figure title (default: the env and its dimensions)")
-    export = commands.add_parser(
+    export = _runs_command(
+        commands,
         "export",
-        help="write run directories as one IOHanalyzer CSV",
-        description="Write run directories as one IOHanalyzer CSV, one algorithm_id per setting.",
+        "write run directories as one IOHanalyzer CSV",
+        "Write run directories as one IOHanalyzer CSV, one algorithm_id per setting.",
+        "CSV file",
     )
-    export.add_argument("run_dirs", nargs="+", metavar="DIR")
-    export.add_argument("-o", "--output", required=True, metavar="FILE", help="CSV file")
     for command in (plot, export):
         command.add_argument("--mix-envs", action="store_true", help="allow runs of different envs")
         command.add_argument("--label", dest="labels", action="append", metavar="TEXT", help=_LABEL_HELP)
         add_import(command)
+
+
+def _runs_command(commands: Any, name: str, summary: str, description: str, output: str) -> Any:
+    """A command that reads run directories (``DIR ...``) and writes one file (``-o FILE``)."""
+    command = commands.add_parser(name, help=summary, description=description)
+    command.add_argument("run_dirs", nargs="+", metavar="DIR")
+    command.add_argument("-o", "--output", required=True, metavar="FILE", help=output)
+    return command
 
 
 def _cmd_list(_: argparse.Namespace) -> int:

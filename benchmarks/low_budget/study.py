@@ -15,6 +15,7 @@ context selector), so a variant, e.g. c-bo with an active context selector, is o
 
 from __future__ import annotations
 
+import importlib
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -66,6 +67,9 @@ class Method:
     that picks every batch's training contexts instead of the env's sampler; it is bound to the env's
     context box and told each batch's returns and the optimiser's diagnostics, as the runner does. An
     active selector for c-bo is one more entry, e.g. ``Method("c-bo+active", "c-bo", selector="active")``.
+    ``factory`` (``"module:Class"``) builds an optimiser outside the registry (BoTorch's c-bo, whose library
+    the package does not depend on) with ``make_optimizer``'s arguments; ``optimizer`` then names the
+    registered optimiser whose batch size it takes.
     """
 
     name: str
@@ -74,6 +78,14 @@ class Method:
     selector: str | None = None
     selector_options: tuple[tuple[str, Any], ...] = ()
     note: str = ""
+    factory: str | None = None
+
+    def build(self, n_params: int, n_context_dims: int, seed: int, **options: Any) -> Any:
+        """The column's optimiser: ``make_optimizer`` of ``optimizer``, or ``factory``'s class."""
+        if self.factory is None:
+            return make_optimizer(self.optimizer, n_params, n_context_dims, seed, **options)
+        module, name = self.factory.split(":")
+        return getattr(importlib.import_module(module), name)(n_params, n_context_dims, seed=seed, **options)
 
 
 #: The study's methods (columns), in the order of the tables.
@@ -93,6 +105,12 @@ METHODS = (
         "c-bo",
         (("trend", "quadratic"), ("transform", "auto")),
         note="a quadratic prior mean (Eq. G4), the returns' transform chosen by Eq. (G5)",
+    ),
+    Method(
+        "c-bo-botorch",
+        "c-bo",
+        note="max-value entropy search on BoTorch's model and optimiser (botorch_cbo.py)",
+        factory="benchmarks.low_budget.botorch_cbo:BoTorchCBO",
     ),
     Method("creps", "creps", (("epsilon", 1.0),), note="ε = 1, as Fabisch (GECCO 2019)"),
     Method("creps-cma-old", "creps-cma-old", note="the paper's CREPS-CMA"),
@@ -287,9 +305,7 @@ def one_run(spec: LowBudgetSpec) -> dict[str, Any]:
     model = task.make_env(spec.seed)
     mean, std = initial_distribution(task, model)
     start_options = {"initial_mean": mean, "initial_cov": std**2, **dict(method.options)}
-    optimizer = make_optimizer(
-        method.optimizer, model.param_dim, model.context_dim, spec.seed, **start_options
-    )
+    optimizer = method.build(model.param_dim, model.context_dim, spec.seed, **start_options)
     selector = make_run_selector(method, model)
     contexts_rng = np.random.default_rng([spec.seed, 1])  # training contexts (or the selector's stream)
     test = evaluation_contexts(task, model)
@@ -382,6 +398,7 @@ def _document(
             "optimizer": method.optimizer,
             "options": dict(method.options),
             "selector": method.selector,
+            **({} if method.factory is None else {"factory": method.factory}),
         },
         "metric": task.metric,
         "test_contexts": test_count,

@@ -102,8 +102,8 @@ class ContextualBO(ContextualOptimizer):
         return 2
 
     def __init__(self, n_params: int, n_context_dims: int, **options: Any) -> None:
-        check_option_names(CBOConfig, options)
-        self._init_from_config(CBOConfig(n_params, n_context_dims, **options))
+        check_option_names(self.config_class, options)
+        self._init_from_config(self.config_class(n_params, n_context_dims, **options))
 
     def _init_from_config(self, config: CBOConfig) -> None:
         ContextualOptimizer.__init__(self)
@@ -371,8 +371,8 @@ class ContextualBO(ContextualOptimizer):
         if not isinstance(document, Mapping):
             raise TypeError(f"state['config']: expected a JSON object, got {type(document).__name__}")
         own = ("n_params", "n_context_dims", "has_param_box", "has_context_box")
-        check_option_names(CBOConfig, {k: v for k, v in document.items() if k not in own})
-        config = CBOConfig.from_state(state)
+        check_option_names(cls.config_class, {k: v for k, v in document.items() if k not in own})
+        config = cls.config_class.from_state(state)
         optimizer = cls.__new__(cls)
         optimizer._init_from_config(config)
         optimizer.rng.bit_generator.state = state["rng"]

@@ -1,0 +1,321 @@
+"""c-bo built on BoTorch: the low-budget study's BoTorch column (issue 44, items 1 and 5).
+
+Issue 44 asks for a GP "from a well-kept library: scikit-learn's GaussianProcessRegressor or BoTorch. Measure
+both on this issue's study and choose". ``creps_gym``'s ``c-bo`` keeps its own GP (the optimisers import only
+numpy and scipy; ``gp_backends.py`` measures its speed against both libraries), so this module is the other
+side of that choice, measured on the same study: the same contextual BO with BoTorch's model and optimisers
+in place of c-bo's own, written as a BoTorch user would write it.
+
+:class:`BoTorchCBO` subclasses :class:`~creps_gym.optimizers.cbo.ContextualBO` and keeps everything that is
+not the model: the data, the scaling of s and θ to the unit box, the initial design, the returns' transform,
+the refit schedule (``refit_growth``, ``fit_points``), the kriging believer within a batch, Eq. (R2) and
+R1's trust region, the distilled policy and the checkpoints' data. What BoTorch does:
+
+- **The model**: ``SingleTaskGP`` with BoTorch's defaults (an RBF kernel with one lengthscale per input and
+  BoTorch's dimension-scaled log-normal prior, a learned constant mean, the outcomes standardised), its
+  hyperparameters fitted by ``fit_gpytorch_mll`` on a refit and kept in between (the model is rebuilt on
+  all the data with them, so a tell costs no fit).
+- **ask**: ``UpperConfidenceBound`` (μ + √β σ, c-bo's A1 with the same β) or ``qMaxValueEntropy`` (its
+  max-value samples drawn over ``candidates`` random θ at the asked context), the context held fixed by
+  ``FixedFeatureAcquisitionFunction``, maximised over θ's unit box by ``optimize_acqf`` (``raw_samples`` =
+  ``candidates``, ``num_restarts`` = ``starts``).
+- **recommend** (R1): ``PosteriorMean`` with the context fixed, maximised by ``optimize_acqf`` over R1's
+  trust region B(s), and the best of G(s)'s θ kept if its posterior mean is larger; R2 is c-bo's own rule
+  on BoTorch's posterior mean.
+
+Randomness: every torch call runs inside ``torch.random.fork_rng`` seeded from the optimiser's numpy
+Generator (asks) or from c-bo's fixed recommendation seed (``recommend``), so the same seed gives the same
+run and torch's global generator is left as it was. Torch runs in float64 on ``threads`` threads (set
+around each call, then restored). The options ``prior_mean``, ``trend`` and ``hyper_restarts`` belong to
+c-bo's own GP and must keep their defaults; ``context_utility`` (the active selector's hook) is not
+offered. Needs torch and BoTorch, which no extra of creps_gym installs (``pip install botorch`` with a CPU
+build of torch).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from creps_gym.optimizers.cbo import RECOMMEND_SEED, ContextualBO
+from creps_gym.optimizers.cbo_config import CBOConfig, _bounded_int
+from creps_gym.optimizers.cbo_state import read_gp_data
+
+__all__ = ["BoTorchCBO", "BoTorchConfig", "TorchGP"]
+
+Array = NDArray[np.float64]
+#: The options of c-bo's own GP that BoTorch's model has no use for, with the values they must keep.
+FIXED_OPTIONS = {"prior_mean": "min", "trend": "constant", "hyper_restarts": 1}
+MAX_THREADS = 64
+_SEEDS = 2**31 - 1
+
+
+def _libraries() -> dict[str, Any]:
+    """torch and the BoTorch/GPyTorch names this module uses (ImportError saying how to install them)."""
+    try:
+        import torch
+        from botorch.acquisition import FixedFeatureAcquisitionFunction, PosteriorMean, UpperConfidenceBound
+        from botorch.acquisition.max_value_entropy_search import qMaxValueEntropy
+        from botorch.fit import fit_gpytorch_mll
+        from botorch.models import SingleTaskGP
+        from botorch.optim import optimize_acqf
+        from gpytorch.mlls import ExactMarginalLogLikelihood
+    except ImportError as error:
+        raise ImportError(
+            f"c-bo-botorch needs torch and BoTorch: `pip install botorch` with a CPU build of torch ({error})"
+        ) from None
+    return {
+        "torch": torch,
+        "FixedFeatureAcquisitionFunction": FixedFeatureAcquisitionFunction,
+        "PosteriorMean": PosteriorMean,
+        "UpperConfidenceBound": UpperConfidenceBound,
+        "qMaxValueEntropy": qMaxValueEntropy,
+        "fit_gpytorch_mll": fit_gpytorch_mll,
+        "SingleTaskGP": SingleTaskGP,
+        "optimize_acqf": optimize_acqf,
+        "ExactMarginalLogLikelihood": ExactMarginalLogLikelihood,
+    }
+
+
+@contextmanager
+def _torch_call(torch: Any, seed: int, threads: int) -> Iterator[None]:
+    """Run torch with ``threads`` threads and its generator seeded with ``seed``, both restored after."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        with torch.random.fork_rng(devices=[]), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # BoTorch's input-scaling and optimisation notices
+            torch.manual_seed(seed)
+            yield
+    finally:
+        torch.set_num_threads(previous)
+
+
+@dataclass(frozen=True, eq=False)
+class BoTorchConfig(CBOConfig):
+    """:class:`~creps_gym.optimizers.cbo_config.CBOConfig` for :class:`BoTorchCBO`, and ``threads``.
+
+    threads : int    torch's thread count during the optimiser's calls (default 1: one core, as
+        ``OPENBLAS_NUM_THREADS=1`` gives the other methods of the study).
+
+    ``prior_mean``, ``trend`` and ``hyper_restarts`` must keep their defaults (:data:`FIXED_OPTIONS`).
+    """
+
+    threads: int = 1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "threads", _bounded_int(self.threads, "threads", 1, MAX_THREADS))
+        for name, default in FIXED_OPTIONS.items():
+            if getattr(self, name) != default:
+                raise ValueError(
+                    f"{name}: expected {default!r} (an option of c-bo's own GP; c-bo-botorch uses BoTorch's "
+                    f"model), got {getattr(self, name)!r}"
+                )
+
+
+class TorchGP:
+    """A fitted ``SingleTaskGP`` behind the two calls c-bo's shared code makes of a model.
+
+    ``predict(x (m, d)) -> (mean (m,), variance (m,))``: the posterior of the latent function in the
+    targets' units; ``condition(x (d,), y)``: the model with one more observation (BoTorch's
+    ``condition_on_observations``). ``beta`` is None: no quadratic trend.
+    """
+
+    beta = None
+
+    def __init__(self, gp: Any, torch: Any) -> None:
+        self.gp, self._torch = gp, torch
+
+    def predict(self, x: Array) -> tuple[Array, Array]:
+        with self._torch.no_grad():
+            posterior = self.gp.posterior(self._torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64)))
+            mean, variance = posterior.mean.squeeze(-1), posterior.variance.squeeze(-1)
+        return mean.numpy().astype(np.float64), variance.numpy().astype(np.float64)
+
+    def condition(self, x: Array, y: float) -> TorchGP:
+        torch = self._torch
+        point, value = torch.from_numpy(np.asarray(x, np.float64)[None, :]), torch.tensor([[float(y)]])
+        return TorchGP(self.gp.condition_on_observations(point, value.double()), torch)
+
+
+class BoTorchCBO(ContextualBO):
+    """c-bo with BoTorch's model, acquisitions and optimiser (see the module docstring).
+
+    Parameters
+    ----------
+    n_params, n_context_dims : int
+        p and z.
+    **options
+        The fields of :class:`BoTorchConfig`: c-bo's options and ``threads``.
+    """
+
+    kind: ClassVar[str] = "c-bo-botorch"
+    config_class: ClassVar[type] = BoTorchConfig
+    #: The active selector's hook needs c-bo's own GP (its posterior covariances); none is offered.
+    context_utility = None  # type: ignore[assignment]
+
+    def _init_from_config(self, config: CBOConfig) -> None:
+        self._lib = _libraries()
+        super()._init_from_config(config)
+        self.hyper_names: list[str] = []
+        self.hyper = np.zeros(0)
+
+    def _call(self, seed: int) -> Any:
+        return _torch_call(self._lib["torch"], seed, self.config.threads)
+
+    def _tensor(self, array: Array) -> Any:
+        return self._lib["torch"].from_numpy(np.ascontiguousarray(array, dtype=np.float64))
+
+    # -- the model -----------------------------------------------------------------------------------------
+    def _fit(self, inputs: Array, targets: Array, seed: int) -> tuple[list[str], Array]:
+        """BoTorch's maximum a posteriori fit on (inputs (n, d), targets (n,)): the raw hyperparameters'
+        names and values, in the order of ``named_parameters``."""
+        lib = self._lib
+        with self._call(seed):
+            gp = lib["SingleTaskGP"](self._tensor(inputs), self._tensor(targets[:, None]))
+            lib["fit_gpytorch_mll"](lib["ExactMarginalLogLikelihood"](gp.likelihood, gp))
+        named = list(gp.named_parameters())
+        values = [parameter.detach().numpy().astype(np.float64).ravel() for _, parameter in named]
+        return [name for name, _ in named], np.concatenate(values)
+
+    def _model(self, inputs: Array, targets: Array, names: list[str], hyper: Array) -> TorchGP:
+        """A ``SingleTaskGP`` on every episode with the kept hyperparameters (no fit)."""
+        torch = self._lib["torch"]
+        gp = self._lib["SingleTaskGP"](self._tensor(inputs), self._tensor(targets[:, None]))
+        parameters = dict(gp.named_parameters())
+        sizes = [parameters[name].numel() if name in parameters else -1 for name in names]
+        if list(parameters) != names or sum(sizes) != hyper.shape[0]:
+            raise ValueError(
+                f"hyper_names: expected BoTorch's parameters {list(parameters)} "
+                f"({sum(p.numel() for p in parameters.values())} values), got {names} ({hyper.shape[0]})"
+            )
+        with torch.no_grad():
+            offset = 0
+            for name, size in zip(names, sizes, strict=True):
+                parameter = parameters[name]
+                parameter.copy_(self._tensor(hyper[offset : offset + size]).reshape(parameter.shape))
+                offset += size
+        gp.eval()
+        return TorchGP(gp, torch)
+
+    def _log_hyper(self, model: TorchGP) -> Array:
+        """c-bo's layout of the hyperparameters, for its diagnostics and ``stop``: log lengthscales, log
+        signal variance (1: the standardised outcomes' prior variance) and log noise variance (standardised
+        units)."""
+        gp = model.gp
+        lengthscales = gp.covar_module.lengthscale.detach().numpy().ravel()
+        noise = float(gp.likelihood.noise.detach().numpy().ravel()[0])
+        return np.concatenate([np.log(lengthscales), [0.0, np.log(noise)]]).astype(np.float64)
+
+    def _update(self, contexts: Array, params: Array, returns: Array) -> None:
+        all_contexts = np.vstack([self.contexts, contexts])
+        all_params, all_returns = np.vstack([self.params, params]), np.concatenate([self.returns, returns])
+        n = all_returns.shape[0]
+        refit = self.fitted_at == 0 or n >= self.fitted_at * self.config.refit_growth
+        names, hyper, scale, fitted_at = self.hyper_names, self.hyper, self.context_scale, self.fitted_at
+        rng_state = self.rng.bit_generator.state
+        try:
+            if refit:
+                scale = self._fit_scale(all_contexts)
+            inputs = self._inputs(all_contexts, all_params, scale)
+            transform = self._chosen_transform(inputs, all_returns)
+            targets = self._targets(all_returns, None, transform)
+            if refit:
+                recent = slice(max(0, n - self.config.fit_points), n)
+                seed = int(self.rng.integers(_SEEDS))
+                names, hyper = self._fit(inputs[recent], targets[recent], seed)
+                fitted_at = n
+            model = self._model(inputs, targets, names, hyper)
+        except BaseException:
+            self.rng.bit_generator.state = rng_state  # a failed tell changes nothing
+            raise
+        self.contexts, self.params, self.returns = all_contexts, all_params, all_returns
+        self.hyper_names, self.hyper, self.context_scale, self.fitted_at = names, hyper, scale, fitted_at
+        self.model, self._transform = model, transform  # type: ignore[assignment]
+        self.log_hyper = self._log_hyper(model)
+        self._diagnostics = self._model_diagnostics(refit)
+
+    # -- ask -----------------------------------------------------------------------------------------------
+    def _propose(self, model: Any, context: Array) -> Array:
+        """The acquisition's maximiser over θ's unit box at a scaled context (z,), by ``optimize_acqf``."""
+        lib, p, z = self._lib, self.n_params, self.n_context_dims
+        seed = int(self.rng.integers(_SEEDS))
+        torch, fixed = lib["torch"], self._tensor(context[None, :])
+        with self._call(seed):
+            if self.config.acquisition == "ucb":
+                acquisition = lib["UpperConfidenceBound"](model.gp, beta=self.config.beta)
+            else:
+                thetas = torch.rand(self.config.candidates, p, dtype=torch.float64)
+                candidate_set = torch.cat([fixed.expand(self.config.candidates, z), thetas], dim=1)
+                acquisition = lib["qMaxValueEntropy"](
+                    model.gp, candidate_set, num_mv_samples=self.config.mes_samples
+                )
+            unit = self._maximise(acquisition, fixed, np.zeros(p), np.ones(p), seed)
+        return unit
+
+    def _maximise(self, acquisition: Any, fixed: Any, low: Array, high: Array, seed: int) -> Array:
+        """``optimize_acqf`` of ``acquisition`` over θ in [low, high] with the context columns fixed."""
+        lib, z = self._lib, self.n_context_dims
+        function = lib["FixedFeatureAcquisitionFunction"](
+            acquisition, d=z + self.n_params, columns=list(range(z)), values=fixed
+        )
+        bounds = self._tensor(np.stack([low, high]))
+        x, _ = lib["optimize_acqf"](
+            function,
+            bounds,
+            q=1,
+            num_restarts=self.config.starts,
+            raw_samples=self.config.candidates,
+            options={"seed": seed},
+        )
+        return np.clip(x.detach().numpy().astype(np.float64).reshape(self.n_params), low, high)
+
+    # -- recommend -----------------------------------------------------------------------------------------
+    def recommend(self, contexts: Any) -> Array:
+        """Eq. (R1) with BoTorch's posterior mean and optimiser (see the module docstring), or c-bo's Eq.
+        (R2) on it: shape (n, p). Deterministic (a fixed seed): a context gives the same θ alone or in any
+        batch."""
+        if self.model is None or self.config.recommend_over != "trust_region":
+            return super().recommend(contexts)
+        contexts = self._check_contexts(contexts, "contexts")
+        scaled = self._scaled_contexts(contexts)
+        return self._unscaled_params(np.array([self._mean_maximiser(row) for row in scaled]))
+
+    def _mean_maximiser(self, context: Array) -> Array:
+        """R1 at one scaled context (z,): the posterior mean's maximiser over B(s), or G(s)'s best θ."""
+        good, (low, high) = self.trust_region(context)
+        model = self.model
+        with self._call(RECOMMEND_SEED):
+            mean = self._lib["PosteriorMean"](model.gp)  # type: ignore[union-attr]
+            unit = self._maximise(mean, self._tensor(context[None, :]), low, high, RECOMMEND_SEED)
+        options = np.vstack([unit, good])
+        inputs = np.hstack([np.tile(context, (options.shape[0], 1)), options])
+        return options[int(np.argmax(model.predict(inputs)[0]))]  # type: ignore[union-attr]
+
+    # -- checkpoints ---------------------------------------------------------------------------------------
+    def _state(self) -> dict[str, Any]:
+        return {**super()._state(), "hyper_names": list(self.hyper_names), "hyper": self.hyper.copy()}
+
+    def _restore_data(self, state: Mapping[str, Any]) -> None:
+        data = read_gp_data(state, self.n_params, self.n_context_dims)
+        names, hyper = state["hyper_names"], np.asarray(state["hyper"])
+        if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
+            raise TypeError(f"state['hyper_names']: expected a list of strings, got {names!r}")
+        if hyper.dtype != np.float64 or hyper.ndim != 1 or not np.isfinite(hyper).all():
+            raise ValueError(
+                f"state['hyper']: expected a finite float64 vector, got {hyper.dtype} of shape {hyper.shape}"
+            )
+        self.contexts, self.params, self.returns = data.contexts, data.params, data.returns
+        self.log_hyper, self.context_scale, self.fitted_at = data.log_hyper, data.scale, data.fitted_at
+        self.hyper_names, self.hyper = names, hyper
+        if self.returns.shape[0] >= 1 and self.fitted_at > 0:
+            inputs = self._inputs(self.contexts, self.params)
+            self._transform = self._chosen_transform(inputs, self.returns)
+            self.model = self._model(inputs, self._targets(self.returns), names, hyper)  # type: ignore

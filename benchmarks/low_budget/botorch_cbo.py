@@ -134,7 +134,8 @@ class TorchGP:
         self.gp, self._torch = gp, torch
 
     def predict(self, x: Array) -> tuple[Array, Array]:
-        with self._torch.no_grad():
+        with self._torch.no_grad(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a context outside the told range is outside the unit cube
             posterior = self.gp.posterior(self._torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64)))
             mean, variance = posterior.mean.squeeze(-1), posterior.variance.squeeze(-1)
         return mean.numpy().astype(np.float64), variance.numpy().astype(np.float64)
@@ -142,7 +143,9 @@ class TorchGP:
     def condition(self, x: Array, y: float) -> TorchGP:
         torch = self._torch
         point, value = torch.from_numpy(np.asarray(x, np.float64)[None, :]), torch.tensor([[float(y)]])
-        return TorchGP(self.gp.condition_on_observations(point, value.double()), torch)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # as in predict
+            return TorchGP(self.gp.condition_on_observations(point, value.double()), torch)
 
 
 class BoTorchCBO(ContextualBO):

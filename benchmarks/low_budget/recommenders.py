@@ -40,7 +40,6 @@ from benchmarks.low_budget.study import (
     run_batch,
     task_by_name,
 )
-from creps_gym.optimizers import make_optimizer
 
 RULES = ("trust_region", "observed")
 RUNS = Path(__file__).resolve().parent / "runs"
@@ -66,7 +65,7 @@ def one_run(task_name: str, method_name: str, seed: int, budget: int) -> dict[st
     model = task.make_env(seed)
     mean, std = initial_distribution(task, model)
     options = {"initial_mean": mean, "initial_cov": std**2, **dict(method.options)}
-    optimizer = make_optimizer(method.optimizer, model.param_dim, model.context_dim, seed, **options)
+    optimizer = method.build(model.param_dim, model.context_dim, seed, **options)
     selector = make_run_selector(method, model)
     rng = np.random.default_rng([seed, 1])  # as the study's run
     test = evaluation_contexts(task, model)

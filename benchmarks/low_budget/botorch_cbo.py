@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from creps_gym.optimizers.cbo import RECOMMEND_SEED, ContextualBO
 from creps_gym.optimizers.cbo_config import CBOConfig, _bounded_int
-from creps_gym.optimizers.cbo_state import read_gp_data
+from creps_gym.optimizers.cbo_state import check_kernel_memory, read_gp_data
 
 __all__ = ["BoTorchCBO", "BoTorchConfig", "TorchGP"]
 
@@ -221,6 +221,7 @@ class BoTorchCBO(ContextualBO):
         all_contexts = np.vstack([self.contexts, contexts])
         all_params, all_returns = np.vstack([self.params, params]), np.concatenate([self.returns, returns])
         n = all_returns.shape[0]
+        check_kernel_memory(n, self.n_params, self.n_context_dims, "returns")
         refit = self.fitted_at == 0 or n >= self.fitted_at * self.config.refit_growth
         names, hyper, scale, fitted_at = self.hyper_names, self.hyper, self.context_scale, self.fitted_at
         rng_state = self.rng.bit_generator.state

@@ -62,6 +62,14 @@ FLOOR_TABLE = (
     ("C3r and C1s", "c3r-c1s.json"),
     ("C3r, `baseline_bandwidth=0.1` (C1″)", "c3r-bandwidth0.1.json"),
     ("C3r, `baseline_bandwidth=0.1, baseline_detrend=True` (C1d)", "c3r-c1d-bandwidth0.1.json"),
+    (
+        "`c-cma-es-surrogate`, C3r, C1d (h = 0.1), `max_condition=1e20`",
+        "surrogate-c3r-c1d-bandwidth0.1-condition1e20.json",
+    ),
+    (
+        "`c-cma-es-surrogate`, C3r, C1d (h = 0.3), `max_condition=1e20`",
+        "surrogate-c3r-c1d-bandwidth0.3-condition1e20.json",
+    ),
 )
 FLOOR_FOLDER = Path(__file__).resolve().parent / "results" / "floor"
 #: The restart tables of docs/algorithms.md (issue 45 item 3, C12 and C13): their functions and rows, read

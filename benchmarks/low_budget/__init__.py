@@ -2,7 +2,8 @@
 ``report.py``), ``compare.py`` (regret after a fixed episode budget), ``gp_backends.py`` (the GP's cost
 against scikit-learn's), ``active_contexts.py`` (active context choice against uniform draws) and
 ``reach.py`` (what the low-dimensional kicks can reach at all), ``strong_kicks.py`` (the v1 kicks'
-columns) and ``recommenders.py`` (c-bo's two recommendation rules on the same runs)."""
+columns), ``recommenders.py`` (c-bo's two recommendation rules on the same runs), ``acquisition_choices.py``
+(both acquisitions' choices from the same model) and ``botorch_cbo.py`` (the study's BoTorch column)."""
 
 from __future__ import annotations
 

@@ -8,10 +8,9 @@ import shutil
 from pathlib import Path
 
 import numpy as np
-from helpers import EXTRAS
+from helpers import EXTRAS, driven_cbo
 
 from benchmarks.low_budget import acquisition_choices, recommenders
-from creps_gym.optimizers import make_optimizer
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 
@@ -29,12 +28,7 @@ def test_a_replayed_run_is_the_study_run_and_records_both_choices():
 
 
 def test_proposals_leave_the_optimisers_configuration_and_generator_as_they_were():
-    optimizer = make_optimizer("c-bo", 2, 1, 0)
-    rng = np.random.default_rng(0)
-    for _ in range(4):
-        contexts = rng.uniform(size=(4, 1))
-        params = optimizer.ask(contexts)
-        optimizer.tell(contexts, params, -((params - contexts) ** 2).sum(axis=1))
+    optimizer = driven_cbo()
     config, state = optimizer.config, optimizer.rng.bit_generator.state
     chosen = acquisition_choices.proposals(optimizer, np.array([0.5]))
     assert optimizer.config is config and optimizer.rng.bit_generator.state == state

@@ -10,10 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import EXTRAS
+from helpers import EXTRAS, driven_cbo
 
 from benchmarks.low_budget import recommenders
-from creps_gym.optimizers import make_optimizer
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 
@@ -37,12 +36,7 @@ def test_a_run_needs_a_c_bo_column_and_leaves_the_optimisers_rule_as_it_was():
     with pytest.raises(ValueError, match=r"method: expected a c-bo column, got 'creps' \(creps\)"):
         recommenders.one_run("Rosenbrock-p2-z1", "creps", 0, 50)
     assert recommenders.check_against_study({"key": "Nothing-c-bo-s0-b50-n4"}) is None
-    optimizer = make_optimizer("c-bo", 2, 1, 0)
-    rng = np.random.default_rng(0)
-    for _ in range(4):
-        contexts = rng.uniform(size=(4, 1))
-        params = optimizer.ask(contexts)
-        optimizer.tell(contexts, params, -((params - contexts) ** 2).sum(axis=1))
+    optimizer = driven_cbo()
     config, test = optimizer.config, np.linspace(0, 1, 3)[:, None]
     default = optimizer.recommend(test)
     observed = recommenders.recommend_with(optimizer, "observed", test)

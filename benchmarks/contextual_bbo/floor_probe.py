@@ -70,6 +70,10 @@ FLOOR_TABLE = (
         "`c-cma-es-surrogate`, C3r, C1d (h = 0.3), `max_condition=1e20`",
         "surrogate-c3r-c1d-bandwidth0.3-condition1e20.json",
     ),
+    (
+        "`c-cma-es-surrogate`, C3r, C1d (h = 0.3), `max_condition=1e20`, `d_sigma=3`",
+        "surrogate-c3r-c1d-bandwidth0.3-condition1e20-dsigma3.json",
+    ),
 )
 FLOOR_FOLDER = Path(__file__).resolve().parent / "results" / "floor"
 #: The restart tables of docs/algorithms.md (issue 45 item 3, C12 and C13): their functions and rows, read

@@ -55,6 +55,10 @@ C1D = (
     ("baseline_detrend", True),
     ("max_condition", 1e20),
 )
+#: The same with a slower step-size adaptation (CSA's damping d_σ = 3 instead of 1.41 at p = 20, N = 50):
+#: on Different Powers the default damping lets σ shrink until the θ part of the returns is below the local
+#: baseline's error and the ranking stalls (docs/algorithms.md, the floor's third pass).
+C1D_DSIGMA3 = (*C1D, ("d_sigma", 3.0))
 #: The columns: (label, registry name, options). An empty label is the method with its defaults;
 #: ``c-cma-es-former-restarts`` is ``c-cma-es`` with its restart defaults before issue 33 (no kept best,
 #: squared restarts); the ``-c3r-`` columns shrink the mean fit's step rather than its coefficients (Eq. C3r,
@@ -68,6 +72,7 @@ COLUMNS: tuple[tuple[str, str, tuple[tuple[str, object], ...]], ...] = (
     ("c-cma-es-c3r-no-restarts", "c-cma-es", (("restarts", 0), ("ridge_centre", "old"))),
     ("c-cma-es-surrogate-c3r-no-restarts", "c-cma-es-surrogate", (("restarts", 0), ("ridge_centre", "old"))),
     ("c-cma-es-surrogate-c3r-c1d-no-restarts", "c-cma-es-surrogate", C1D),
+    ("c-cma-es-surrogate-c3r-c1d-dsigma3-no-restarts", "c-cma-es-surrogate", C1D_DSIGMA3),
 )
 #: Columns run on some functions only (column name -> functions): the surrogate on the Sphere and Rosenbrock,
 #: without restarts on Rosenbrock (where its default restarts replace the converged search; issue 33).

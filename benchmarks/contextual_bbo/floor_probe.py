@@ -103,11 +103,14 @@ RESTART_TABLES = (
 RESTART_FOLDER = FLOOR_FOLDER.parent / "restarts"
 
 
-def cell_rows(functions: Sequence[str], method: str, seeds: int, options: dict[str, Any]) -> list[dict]:
-    """One row per (function, seed): the run's protocol measure, final test regret and stop reason."""
+def cell_rows(
+    functions: Sequence[str], method: str, seeds: int, options: dict[str, Any], first_seed: int = 0
+) -> list[dict]:
+    """One row per (function, seed): the run's protocol measure, final test regret and stop reason, for
+    the seeds ``first_seed`` .. ``first_seed + seeds − 1`` (seeds from 20 on are outside the study's)."""
     rows = []
     for function in functions:
-        for seed in range(seeds):
+        for seed in range(first_seed, first_seed + seeds):
             spec = ProtocolSpec(function, method, seed, tuple(sorted(options.items())), "probe")
             document = run_protocol(spec)
             row = {
@@ -219,7 +222,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--functions", nargs="+", default=list(PROBLEMS), choices=list(PROBLEMS))
     parser.add_argument("--function", default="DifferentPowers", choices=list(PROBLEMS))
     parser.add_argument("--method", default="c-cma-es")
-    parser.add_argument("--seeds", type=int, default=3, help="cells: seeds 0 .. n-1")
+    parser.add_argument("--seeds", type=int, default=3, help="cells: n seeds, from --first-seed on")
+    parser.add_argument("--first-seed", type=int, default=0, help="cells: the first seed (default 0)")
     parser.add_argument("--seed", type=int, default=0, help="advantages: the run")
     parser.add_argument("--options", default="{}", help="the optimiser's options, a JSON object")
     parser.add_argument("--every", type=int, default=50, help="advantages: generations between rows")
@@ -230,7 +234,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not isinstance(options, dict):
         parser.error(f"--options: expected a JSON object, got {args.options!r}")
     if args.what == "cells":
-        rows = cell_rows(args.functions, args.method, args.seeds, options)
+        rows = cell_rows(args.functions, args.method, args.seeds, options, args.first_seed)
         for function in args.functions:
             values = [r["protocol_last"] for r in rows if r["function"] == function]
             print(

@@ -210,12 +210,16 @@ class BoTorchCBO(ContextualBO):
 
     def _log_hyper(self, model: TorchGP) -> Array:
         """c-bo's layout of the hyperparameters, for its diagnostics and ``stop``: log lengthscales, log
-        signal variance (1: the standardised outcomes' prior variance) and log noise variance (standardised
-        units)."""
-        gp = model.gp
-        lengthscales = gp.covar_module.lengthscale.detach().numpy().ravel()
-        noise = float(gp.likelihood.noise.detach().numpy().ravel()[0])
-        return np.concatenate([np.log(lengthscales), [0.0, np.log(noise)]]).astype(np.float64)
+        signal variance and log noise variance, in the standardised outcomes' units. The signal variance is
+        the kernel's ``outputscale`` where it has one (BoTorch before 0.12 scaled a Matérn kernel), else 1:
+        since 0.12 the default kernel is an unscaled RBF on standardised outcomes."""
+        covariance = model.gp.covar_module
+        kernel = getattr(covariance, "base_kernel", covariance)
+        lengthscales = kernel.lengthscale.detach().numpy().ravel()
+        scale = getattr(covariance, "outputscale", None)
+        signal = 0.0 if scale is None else float(np.log(scale.detach().numpy().ravel()[0]))
+        noise = float(model.gp.likelihood.noise.detach().numpy().ravel()[0])
+        return np.concatenate([np.log(lengthscales), [signal, np.log(noise)]]).astype(np.float64)
 
     def _update(self, contexts: Array, params: Array, returns: Array) -> None:
         all_contexts = np.vstack([self.contexts, contexts])

@@ -1,6 +1,6 @@
-"""The low-budget studies (issue 44): ``run.py`` (the 50–500 episode study of item 5: ``study.py``,
-``report.py``), ``compare.py`` (regret after a fixed episode budget), ``gp_backends.py`` (the GP's cost
-against scikit-learn's), ``active_contexts.py`` (active context choice against uniform draws) and
+"""The low-budget studies (issue 44): ``run.py`` (the 50–500 episode study of item 5: ``columns.py``,
+``study.py``, ``report.py``), ``compare.py`` (regret after a fixed episode budget), ``gp_backends.py`` (the
+GP's cost against scikit-learn's), ``active_contexts.py`` (active context choice against uniform draws),
 ``reach.py`` (what the low-dimensional kicks can reach at all), ``strong_kicks.py`` (the v1 kicks'
 columns), ``recommenders.py`` (c-bo's two recommendation rules on the same runs), ``acquisition_choices.py``
 (both acquisitions' choices from the same model) and ``botorch_cbo.py`` (the study's BoTorch column)."""

@@ -35,13 +35,13 @@ from typing import Any
 import numpy as np
 
 from benchmarks.low_budget import parse_runs_arguments, run_and_write
+from benchmarks.low_budget.columns import method_by_name
 from benchmarks.low_budget.recommenders import check_against_study
 from benchmarks.low_budget.study import (
     ROBOT_TASKS,
     LowBudgetSpec,
     evaluation_contexts,
     initial_distribution,
-    method_by_name,
     policy_metric,
     run_batch,
     task_by_name,

@@ -30,12 +30,12 @@ from typing import Any
 import numpy as np
 
 from benchmarks.low_budget import parse_runs_arguments, run_and_write
+from benchmarks.low_budget.columns import method_by_name
 from benchmarks.low_budget.study import (
     LowBudgetSpec,
     evaluation_contexts,
     initial_distribution,
     make_run_selector,
-    method_by_name,
     policy_evaluation,
     run_batch,
     task_by_name,

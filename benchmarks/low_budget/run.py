@@ -28,6 +28,7 @@ from typing import Any
 if not __package__:
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
+from benchmarks.low_budget.columns import METHODS
 from benchmarks.low_budget.report import (
     acquisition_table,
     anchors_text,
@@ -43,7 +44,6 @@ from benchmarks.low_budget.report import (
 from benchmarks.low_budget.study import (
     BUDGETS,
     FUNCTIONS,
-    METHODS,
     NON_QUADRATIC,
     QUADRATIC,
     ROBOT_TASKS,

@@ -9,13 +9,13 @@ distribution: on the contextual functions mean 0 and σ = 2 (the issue's setting
 box of ±3σ holds every context's optimum), on the low-dimensional robot ids their declared
 ``initial_distribution()``.
 
-Methods are rows of :data:`METHODS` (:class:`Method`: a registered optimiser, its options and an optional
-context selector), so a variant, e.g. c-bo with an active context selector, is one more entry.
+Methods are the rows of :data:`benchmarks.low_budget.columns.METHODS` (``columns.Method``: a registered
+optimiser, its options and an optional context selector), so a variant, e.g. c-bo with an active context
+selector, is one more entry.
 """
 
 from __future__ import annotations
 
-import importlib
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -25,21 +25,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 import creps_gym  # noqa: F401  (registers the ids)
+from benchmarks.low_budget.columns import Method, method_by_name
 from creps_gym.envs.evaluation import contextual_model, test_contexts
-from creps_gym.optimizers import make_optimizer, recommended_samples
+from creps_gym.optimizers import recommended_samples
 from creps_gym.selectors import make_selector
 from creps_gym.selectors.base import select_for
 
 __all__ = [
     "BUDGETS",
     "FUNCTIONS",
-    "METHODS",
     "NON_QUADRATIC",
     "ROBOT_TASKS",
     "LowBudgetSpec",
-    "Method",
     "Task",
-    "method_by_name",
     "one_run",
     "task_by_name",
 ]
@@ -56,67 +54,6 @@ FUNCTION_MEAN, FUNCTION_STD = 0.0, 2.0
 QUADRATIC = ("Sphere", "ShiftedRotatedElliptic")
 NON_QUADRATIC = ("Rosenbrock", "DifferentPowers", "Rastrigin")
 FUNCTIONS = NON_QUADRATIC + QUADRATIC
-
-
-@dataclass(frozen=True)
-class Method:
-    """One column of the study: a registered optimiser with options, and an optional context selector.
-
-    ``name`` is the column's label and part of every run's key (letters, digits, ``-``, ``+``, ``=``).
-    ``selector`` names a registered :mod:`creps_gym.selectors` selector (built with ``selector_options``)
-    that picks every batch's training contexts instead of the env's sampler; it is bound to the env's
-    context box and told each batch's returns and the optimiser's diagnostics, as the runner does. An
-    active selector for c-bo is one more entry, e.g. ``Method("c-bo+active", "c-bo", selector="active")``.
-    ``factory`` (``"module:Class"``) builds an optimiser outside the registry (BoTorch's c-bo, whose library
-    the package does not depend on) with ``make_optimizer``'s arguments; ``optimizer`` then names the
-    registered optimiser whose batch size it takes.
-    """
-
-    name: str
-    optimizer: str
-    options: tuple[tuple[str, Any], ...] = ()
-    selector: str | None = None
-    selector_options: tuple[tuple[str, Any], ...] = ()
-    note: str = ""
-    factory: str | None = None
-
-    def build(self, n_params: int, n_context_dims: int, seed: int, **options: Any) -> Any:
-        """The column's optimiser: ``make_optimizer`` of ``optimizer``, or ``factory``'s class."""
-        if self.factory is None:
-            return make_optimizer(self.optimizer, n_params, n_context_dims, seed, **options)
-        module, name = self.factory.split(":")
-        return getattr(importlib.import_module(module), name)(n_params, n_context_dims, seed=seed, **options)
-
-
-#: The study's methods (columns), in the order of the tables.
-METHODS = (
-    Method("c-bo", "c-bo", note="max-value entropy search (c-bo's default acquisition)"),
-    Method("c-bo-ucb", "c-bo", (("acquisition", "ucb"),), note="GP-UCB"),
-    Method("c-bo+active", "c-bo", selector="active", note="max-value entropy search, active contexts"),
-    Method(
-        "c-bo-ucb+active",
-        "c-bo",
-        (("acquisition", "ucb"),),
-        selector="active",
-        note="GP-UCB, active contexts",
-    ),
-    Method(
-        "c-bo+quadratic",
-        "c-bo",
-        (("trend", "quadratic"), ("transform", "auto")),
-        note="a quadratic prior mean (Eq. G4), the returns' transform chosen by Eq. (G5)",
-    ),
-    Method(
-        "c-bo-botorch",
-        "c-bo",
-        note="max-value entropy search on BoTorch's model and optimiser (botorch_cbo.py)",
-        factory="benchmarks.low_budget.botorch_cbo:BoTorchCBO",
-    ),
-    Method("creps", "creps", (("epsilon", 1.0),), note="ε = 1, as Fabisch (GECCO 2019)"),
-    Method("creps-cma-old", "creps-cma-old", note="the paper's CREPS-CMA"),
-    Method("c-cma-es", "c-cma-es"),
-    Method("c-cma-es-surrogate", "c-cma-es-surrogate"),
-)
 
 
 @dataclass(frozen=True)
@@ -181,14 +118,6 @@ def task_by_name(name: str) -> Task:
             f"task: expected one of {robots} or '<Function>-p<p>-z<z>' of {FUNCTIONS}, got {name!r}"
         )
     return function_task(function, int(dim), int(context_dim))
-
-
-def method_by_name(name: str) -> Method:
-    """The method (row of :data:`METHODS`) called ``name``."""
-    for method in METHODS:
-        if method.name == name:
-            return method
-    raise ValueError(f"method: expected one of {[m.name for m in METHODS]}, got {name!r}")
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from helpers import EXTRAS
 torch = pytest.importorskip("torch")
 pytest.importorskip("botorch")
 
-from benchmarks.low_budget import study  # noqa: E402
+from benchmarks.low_budget import columns, study  # noqa: E402
 from benchmarks.low_budget.botorch_cbo import BoTorchCBO  # noqa: E402
 
 pytestmark = EXTRAS
@@ -121,7 +121,7 @@ def test_options_of_c_bos_own_gp_and_bad_threads_are_rejected(options: dict, err
 
 def test_the_study_column_builds_it_and_records_its_factory(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(study, "evaluation_contexts", lambda task, model: np.array([[1.5], [2.5]]))
-    method = study.method_by_name("c-bo-botorch")
+    method = columns.method_by_name("c-bo-botorch")
     assert isinstance(method.build(2, 1, 0, initial_mean=0.0, initial_cov=1.0), BoTorchCBO)
     spec = study.LowBudgetSpec("Sphere-p2-z1", "c-bo-botorch", 0, 8)
     assert spec.samples == 4  # c-bo's batch

@@ -13,8 +13,8 @@ from helpers import EXTRAS
 
 pytest.importorskip("matplotlib")
 
+from benchmarks.low_budget import columns, study
 from benchmarks.low_budget import run as study_run
-from benchmarks.low_budget import study
 from benchmarks.low_budget.report import ANCHORS
 
 TINY = ["--functions", "Sphere", "--robots", "--methods", "creps", "c-bo", "--workers", "1"]
@@ -90,7 +90,7 @@ def test_every_method_starts_from_the_same_distribution(monkeypatch: pytest.Monk
         seen.append((name, options["initial_mean"].tolist(), options["initial_cov"].tolist()))
         raise RuntimeError("stop here")
 
-    monkeypatch.setattr(study, "make_optimizer", spy)
+    monkeypatch.setattr(columns, "make_optimizer", spy)
     for method in ("c-bo", "c-cma-es"):
         with pytest.raises(RuntimeError):
             study.one_run(study.LowBudgetSpec("Sphere-p4-z1", method, 0, 50))
@@ -98,8 +98,8 @@ def test_every_method_starts_from_the_same_distribution(monkeypatch: pytest.Monk
 
 
 def test_a_selector_variant_is_one_more_method_entry(monkeypatch: pytest.MonkeyPatch) -> None:
-    variant = study.Method("creps+arcsine", "creps", (("epsilon", 1.0),), selector="arcsine")
-    monkeypatch.setattr(study, "METHODS", (*study.METHODS, variant))
+    variant = columns.Method("creps+arcsine", "creps", (("epsilon", 1.0),), selector="arcsine")
+    monkeypatch.setattr(columns, "METHODS", (*columns.METHODS, variant))
     document = study.one_run(study.LowBudgetSpec("Sphere-p2-z1", "creps+arcsine", 0, 50))
     assert document["method"]["selector"] == "arcsine" and document["stop_reason"] == "budget"
     plain = study.one_run(study.LowBudgetSpec("Sphere-p2-z1", "creps", 0, 50))
@@ -119,7 +119,7 @@ def test_unknown_tasks_methods_and_bad_budgets_are_rejected() -> None:
 
 def test_the_full_study_computes_the_issues_target_cells_first() -> None:
     specs = study_run.study_specs(study_run.parse_args(["--full"]))
-    methods = len(study.METHODS)
+    methods = len(columns.METHODS)
     assert len(specs) == 35 * methods * 10 and len({s.key for s in specs}) == len(specs)
     first = [s.task for s in specs[: 5 * methods * 10 : methods * 10]]
     targets = ["Rosenbrock-p4-z1", "DifferentPowers-p4-z1", "Rastrigin-p4-z1", "KickPrecisionLowDim"]
@@ -198,7 +198,7 @@ def test_an_active_column_chooses_its_contexts_with_the_optimisers_model():
 def test_every_committed_run_records_its_columns_optimiser_options_and_selector():
     """A run's file name holds its column's name, not its options: a column whose options changed (as
     c-bo+quadratic's transform did) must not leave runs of the old options behind under the same name."""
-    methods = {method.name: method for method in study.METHODS}
+    methods = {method.name: method for method in columns.METHODS}
     runs = Path(__file__).resolve().parents[2] / "benchmarks/low_budget/runs"
     paths = sorted(runs.rglob("*.json"))
     assert len(paths) > 1000

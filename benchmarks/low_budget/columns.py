@@ -1,0 +1,81 @@
+"""The low-budget study's columns (issue 44, item 5): each a registered optimiser with options and an
+optional context selector, or an optimiser class outside the registry (:attr:`Method.factory`)."""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any
+
+from creps_gym.optimizers import make_optimizer
+
+__all__ = ["METHODS", "Method", "method_by_name"]
+
+
+@dataclass(frozen=True)
+class Method:
+    """One column of the study: a registered optimiser with options, and an optional context selector.
+
+    ``name`` is the column's label and part of every run's key (letters, digits, ``-``, ``+``, ``=``).
+    ``selector`` names a registered :mod:`creps_gym.selectors` selector (built with ``selector_options``)
+    that picks every batch's training contexts instead of the env's sampler; it is bound to the env's
+    context box and told each batch's returns and the optimiser's diagnostics, as the runner does. An
+    active selector for c-bo is one more entry, e.g. ``Method("c-bo+active", "c-bo", selector="active")``.
+    ``factory`` (``"module:Class"``) builds an optimiser outside the registry (BoTorch's c-bo, whose library
+    the package does not depend on) with ``make_optimizer``'s arguments; ``optimizer`` then names the
+    registered optimiser whose batch size it takes.
+    """
+
+    name: str
+    optimizer: str
+    options: tuple[tuple[str, Any], ...] = ()
+    selector: str | None = None
+    selector_options: tuple[tuple[str, Any], ...] = ()
+    note: str = ""
+    factory: str | None = None
+
+    def build(self, n_params: int, n_context_dims: int, seed: int, **options: Any) -> Any:
+        """The column's optimiser: ``make_optimizer`` of ``optimizer``, or ``factory``'s class."""
+        if self.factory is None:
+            return make_optimizer(self.optimizer, n_params, n_context_dims, seed, **options)
+        module, name = self.factory.split(":")
+        return getattr(importlib.import_module(module), name)(n_params, n_context_dims, seed=seed, **options)
+
+
+#: The study's methods (columns), in the order of the tables.
+METHODS = (
+    Method("c-bo", "c-bo", note="max-value entropy search (c-bo's default acquisition)"),
+    Method("c-bo-ucb", "c-bo", (("acquisition", "ucb"),), note="GP-UCB"),
+    Method("c-bo+active", "c-bo", selector="active", note="max-value entropy search, active contexts"),
+    Method(
+        "c-bo-ucb+active",
+        "c-bo",
+        (("acquisition", "ucb"),),
+        selector="active",
+        note="GP-UCB, active contexts",
+    ),
+    Method(
+        "c-bo+quadratic",
+        "c-bo",
+        (("trend", "quadratic"), ("transform", "auto")),
+        note="a quadratic prior mean (Eq. G4), the returns' transform chosen by Eq. (G5)",
+    ),
+    Method(
+        "c-bo-botorch",
+        "c-bo",
+        note="max-value entropy search on BoTorch's model and optimiser (botorch_cbo.py)",
+        factory="benchmarks.low_budget.botorch_cbo:BoTorchCBO",
+    ),
+    Method("creps", "creps", (("epsilon", 1.0),), note="ε = 1, as Fabisch (GECCO 2019)"),
+    Method("creps-cma-old", "creps-cma-old", note="the paper's CREPS-CMA"),
+    Method("c-cma-es", "c-cma-es"),
+    Method("c-cma-es-surrogate", "c-cma-es-surrogate"),
+)
+
+
+def method_by_name(name: str) -> Method:
+    """The method (row of :data:`METHODS`) called ``name``."""
+    for method in METHODS:
+        if method.name == name:
+            return method
+    raise ValueError(f"method: expected one of {[m.name for m in METHODS]}, got {name!r}")

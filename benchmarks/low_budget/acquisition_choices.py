@@ -35,17 +35,8 @@ from typing import Any
 import numpy as np
 
 from benchmarks.low_budget import parse_runs_arguments, run_and_write
-from benchmarks.low_budget.columns import method_by_name
 from benchmarks.low_budget.recommenders import check_against_study
-from benchmarks.low_budget.study import (
-    ROBOT_TASKS,
-    LowBudgetSpec,
-    evaluation_contexts,
-    initial_distribution,
-    policy_metric,
-    run_batch,
-    task_by_name,
-)
+from benchmarks.low_budget.study import ROBOT_TASKS, LowBudgetSpec, Run, policy_metric, run_until, start_run
 
 ACQUISITIONS = ("mes", "ucb")
 #: The probe contexts' stream (apart from the study's training and test contexts).
@@ -82,24 +73,21 @@ def _ask_record(optimizer: Any, context: np.ndarray, episodes: int) -> list[floa
 def one_run(task_name: str, seed: int, budget: int) -> dict[str, Any]:
     """The study's `c-bo` run on ``task_name`` with both acquisitions' proposals at a probe context before
     each batch after the initial design, and the study's metric at each budget."""
-    spec = LowBudgetSpec(task_name, "c-bo", seed, budget)
-    task, method = task_by_name(task_name), method_by_name("c-bo")
-    model = task.make_env(seed)
-    mean, std = initial_distribution(task, model)
-    optimizer = method.build(model.param_dim, model.context_dim, seed, initial_mean=mean, initial_cov=std**2)
-    rng, probes = np.random.default_rng([seed, 1]), np.random.default_rng([PROBE_SEED, seed])
-    test = evaluation_contexts(task, model)
-    state: dict[str, Any] = {"episodes": 0, "spent": 0.0, "spent_cpu": 0.0, "last": None, "last_cpu": None}
+    run = start_run(LowBudgetSpec(task_name, "c-bo", seed, budget))  # the study's run
+    probes = np.random.default_rng([PROBE_SEED, seed])
     asks, values = [], []
-    for target in spec.budgets:
-        while state["episodes"] + spec.samples <= target:
-            if optimizer.model is not None and optimizer.returns.shape[0] >= optimizer.config.n_initial:
-                context = model.sample_contexts(probes, 1)[0]
-                asks.append(_ask_record(optimizer, context, state["episodes"]))
-            run_batch(spec, model, optimizer, None, rng, state)
-        values.append(policy_metric(task, model, test, optimizer.recommend(test)))
-    run = {"task": task_name, "seed": seed, "key": spec.key, "budgets": list(spec.budgets)}
-    return {**run, "values": {"trust_region": values}, "asks": asks}
+
+    def probe(run: Run) -> None:
+        optimizer = run.optimizer
+        if optimizer.model is not None and optimizer.returns.shape[0] >= optimizer.config.n_initial:
+            context = run.model.sample_contexts(probes, 1)[0]
+            asks.append(_ask_record(optimizer, context, run.state["episodes"]))
+
+    for target in run.spec.budgets:
+        run_until(run, target, probe)
+        values.append(policy_metric(run.task, run.model, run.test, run.optimizer.recommend(run.test)))
+    document = {"task": task_name, "seed": seed, "key": run.spec.key, "budgets": list(run.spec.budgets)}
+    return {**document, "values": {"trust_region": values}, "asks": asks}
 
 
 def _window_cells(asks: np.ndarray) -> list[str]:

@@ -31,15 +31,7 @@ import numpy as np
 
 from benchmarks.low_budget import parse_runs_arguments, run_and_write
 from benchmarks.low_budget.columns import method_by_name
-from benchmarks.low_budget.study import (
-    LowBudgetSpec,
-    evaluation_contexts,
-    initial_distribution,
-    make_run_selector,
-    policy_evaluation,
-    run_batch,
-    task_by_name,
-)
+from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
 
 RULES = ("trust_region", "observed")
 RUNS = Path(__file__).resolve().parent / "runs"
@@ -58,30 +50,22 @@ def recommend_with(optimizer: Any, rule: str, contexts: np.ndarray) -> np.ndarra
 def one_run(task_name: str, method_name: str, seed: int, budget: int) -> dict[str, Any]:
     """The study's run of ``method_name`` (a c-bo column without a selector) on ``task_name``; at each of
     its budgets, each rule's metric and falls (None off the kicks) on the test contexts."""
-    spec = LowBudgetSpec(task_name, method_name, seed, budget)
-    task, method = task_by_name(task_name), method_by_name(method_name)
+    method = method_by_name(method_name)
     if method.optimizer != "c-bo":
         raise ValueError(f"method: expected a c-bo column, got {method_name!r} ({method.optimizer})")
-    model = task.make_env(seed)
-    mean, std = initial_distribution(task, model)
-    options = {"initial_mean": mean, "initial_cov": std**2, **dict(method.options)}
-    optimizer = method.build(model.param_dim, model.context_dim, seed, **options)
-    selector = make_run_selector(method, model)
-    rng = np.random.default_rng([seed, 1])  # as the study's run
-    test = evaluation_contexts(task, model)
-    state: dict[str, Any] = {"episodes": 0, "spent": 0.0, "spent_cpu": 0.0, "last": None, "last_cpu": None}
+    run = start_run(LowBudgetSpec(task_name, method_name, seed, budget))  # the study's run
     values: dict[str, list[float]] = {rule: [] for rule in RULES}
     falls: dict[str, list[int | None]] = {rule: [] for rule in RULES}
-    for target in spec.budgets:
-        while state["episodes"] + spec.samples <= target:
-            run_batch(spec, model, optimizer, selector, rng, state)
+    for target in run.spec.budgets:
+        run_until(run, target)
         for rule in RULES:
-            params = recommend_with(optimizer, rule, test)
-            value, info = policy_evaluation(task, model, test, params)  # one evaluation for both
+            params = recommend_with(run.optimizer, rule, run.test)
+            value, info = policy_evaluation(run.task, run.model, run.test, params)  # one evaluation for both
             values[rule].append(value)
             falls[rule].append(int(np.sum(info["fell"])) if "fell" in info else None)
-    run = {"task": task_name, "method": method_name, "seed": seed, "budgets": list(spec.budgets)}
-    return {**run, "key": spec.key, "values": values, "falls": falls, "test_contexts": len(test)}
+    spec = run.spec
+    document = {"task": task_name, "method": method_name, "seed": seed, "budgets": list(spec.budgets)}
+    return {**document, "key": spec.key, "values": values, "falls": falls, "test_contexts": len(run.test)}
 
 
 def check_against_study(run: dict[str, Any], runs: Path = RUNS) -> bool | None:

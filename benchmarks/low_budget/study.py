@@ -17,6 +17,7 @@ selector, is one more entry.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -37,8 +38,11 @@ __all__ = [
     "NON_QUADRATIC",
     "ROBOT_TASKS",
     "LowBudgetSpec",
+    "Run",
     "Task",
     "one_run",
+    "run_until",
+    "start_run",
     "task_by_name",
 ]
 
@@ -227,34 +231,65 @@ def make_run_selector(method: Method, model: Any) -> Any:
 CURVE_FIELDS = ("episodes", "values", "spent", "spent_cpu", "last", "last_cpu")
 
 
-def one_run(spec: LowBudgetSpec) -> dict[str, Any]:
-    """Run ``spec`` and return its result document (see the module docstring and :func:`_document`)."""
+@dataclass
+class Run:
+    """A run's parts (:func:`start_run`): its spec, task and method, the env, the optimiser, the context
+    selector (or None), the training contexts' Generator, the test contexts and ``state`` (the episodes told
+    and the optimiser's seconds, see :func:`run_batch`)."""
+
+    spec: LowBudgetSpec
+    task: Task
+    method: Method
+    model: Any
+    optimizer: Any
+    selector: Any
+    rng: np.random.Generator
+    test: Array
+    state: dict[str, Any]
+
+
+def start_run(spec: LowBudgetSpec) -> Run:
+    """``spec``'s run before its first batch: every method from :func:`initial_distribution`, the training
+    contexts from ``default_rng([seed, 1])`` (or the selector's stream)."""
     task, method = task_by_name(spec.task), method_by_name(spec.method)
-    start, start_cpu = time.perf_counter(), time.process_time()
     model = task.make_env(spec.seed)
     mean, std = initial_distribution(task, model)
     start_options = {"initial_mean": mean, "initial_cov": std**2, **dict(method.options)}
     optimizer = method.build(model.param_dim, model.context_dim, spec.seed, **start_options)
     selector = make_run_selector(method, model)
-    contexts_rng = np.random.default_rng([spec.seed, 1])  # training contexts (or the selector's stream)
+    rng = np.random.default_rng([spec.seed, 1])
     test = evaluation_contexts(task, model)
-    curve: dict[str, list[Any]] = {name: [] for name in CURVE_FIELDS}
     state: dict[str, Any] = {"episodes": 0, "spent": 0.0, "spent_cpu": 0.0, "last": None, "last_cpu": None}
-    pending = list(spec.budgets)
-    stop_reason = "budget"
+    return Run(spec, task, method, model, optimizer, selector, rng, test, state)
+
+
+def run_until(run: Run, budget: int, before_batch: Callable[[Run], None] | None = None) -> None:
+    """Whole batches while the next one stays within ``budget`` episodes; ``before_batch(run)`` before each
+    (a replay's measurement; it must leave the optimiser as it was)."""
+    while run.state["episodes"] + run.spec.samples <= budget:
+        if before_batch is not None:
+            before_batch(run)
+        run_batch(run.spec, run.model, run.optimizer, run.selector, run.rng, run.state)
+
+
+def one_run(spec: LowBudgetSpec) -> dict[str, Any]:
+    """Run ``spec`` and return its result document (see the module docstring and :func:`_document`)."""
+    start, start_cpu = time.perf_counter(), time.process_time()
+    run = start_run(spec)
+    curve: dict[str, list[Any]] = {name: [] for name in CURVE_FIELDS}
+    recorded, stop_reason = 0, "budget"
     try:
-        while pending:
-            if state["episodes"] + spec.samples > pending[0]:
-                _record(curve, state, policy_metric(task, model, test, optimizer.recommend(test)))
-                pending.pop(0)
-            else:
-                run_batch(spec, model, optimizer, selector, contexts_rng, state)
+        for budget in spec.budgets:
+            run_until(run, budget)
+            value = policy_metric(run.task, run.model, run.test, run.optimizer.recommend(run.test))
+            _record(curve, run.state, value)
+            recorded += 1
     except (ArithmeticError, ValueError, RuntimeError, np.linalg.LinAlgError) as error:
         stop_reason = f"error: {type(error).__name__}: {error}"  # the budgets left are recorded as None
-        for _ in pending:
-            _record(curve, {**state, "last": None, "last_cpu": None}, None)
+        for _ in spec.budgets[recorded:]:
+            _record(curve, {**run.state, "last": None, "last_cpu": None}, None)
     seconds = (time.perf_counter() - start, time.process_time() - start_cpu)
-    return _document(spec, task, method, curve, stop_reason, seconds, len(test))
+    return _document(spec, run.task, run.method, curve, stop_reason, seconds, len(run.test))
 
 
 def _record(curve: dict[str, list[Any]], state: dict[str, Any], value: float | None) -> None:

@@ -1,0 +1,246 @@
+r"""Measure a candidate default of ``c-cma-es`` on a study's committed runs, cell by cell (issue 45).
+
+A default changes every ``c-cma-es`` run of every study, so before it changes the candidate is run on each
+study's own specs and compared with the current default there, seed by seed. This script does that for the
+studies whose runs are :class:`~benchmarks.study_tools.RunSpec` runs through the runner (``functions``,
+``ccmaes``; the contextual BBO protocol has its own option columns):
+
+    python benchmarks/default_trial.py run --study functions --options '{"ridge_centre": "old"}'
+    python benchmarks/default_trial.py render --study functions --options '{"ridge_centre": "old"}'
+
+* ``run`` computes, for every committed document of the study's default column (method ``c-cma-es``, no
+  options, no divergence rule), the same spec with ``--options`` added, through the study's own worker and
+  into its own cache folder (so the study resumes, and its key records the options). It first brings the
+  default column itself to the current code where it can have changed (``--refresh``, see :func:`stale`).
+* ``render`` pairs each default document with its trial and writes ``docs/results/default_trial/
+  <study>-<label>.json`` (the cells, each run's provenance) and ``.md`` (the table, rendered from that
+  JSON; a test renders it again).
+
+**Which default documents the current code can change.** Issue 45's C12 gates a restart on the budget:
+a search that stops at E episodes restarts only if the B − E episodes left are at least the E_search it
+took. A run that hit its target at H ≤ B/2 restarted, if at all, at some E ≤ H ≤ B/2 with E_search ≤ E,
+so B − E ≥ E ≥ E_search: C12 allowed every one of its restarts and the run is the same, bit for bit. Only
+the runs that missed the target or hit it after B/2 can differ; ``--refresh`` recomputes those.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+if not __package__:  # run by path: the repository root first on sys.path (see benchmarks/__init__.py)
+    sys.path[0] = str(Path(__file__).resolve().parents[1])
+
+from benchmarks.study_tools import RunSpec, load_document, write_text
+
+__all__ = [
+    "METHOD",
+    "STUDIES",
+    "cells",
+    "default_documents",
+    "label_of",
+    "main",
+    "outcome",
+    "render_markdown",
+    "stale",
+    "trial_spec",
+]
+
+HERE = Path(__file__).resolve().parent
+OUT = HERE.parent / "docs" / "results" / "default_trial"
+METHOD = "c-cma-es"
+STUDIES = ("functions", "ccmaes")
+#: The spec fields that name a cell (every field but the seed).
+CELL_FIELDS = ("function", "dim", "context_dim", "budget", "samples", "eval_contexts", "initial")
+
+
+def default_documents(folder: Path) -> list[tuple[Path, dict[str, Any]]]:
+    """The documents of ``folder`` (not its subfolders) in the default ``c-cma-es`` column, sorted by name."""
+    found = []
+    for path in sorted(folder.glob("*.json")):
+        document = load_document(path) if not path.is_symlink() else None
+        spec = (document or {}).get("spec", {})
+        if spec.get("method") == METHOD and not spec.get("options") and spec.get("divergence") is None:
+            found.append((path, document))
+    return found
+
+
+def stale(document: dict[str, Any]) -> bool:
+    """Whether C12 can have changed the run (see the module docstring): it missed or hit after B/2."""
+    hit = document.get("hit")
+    return hit is None or hit > document["spec"]["budget"] / 2
+
+
+def trial_spec(spec: dict[str, Any], options: dict[str, Any]) -> RunSpec:
+    """The run of ``spec`` (a document's) with ``options`` added to its optimiser options."""
+    fields = {name: value for name, value in spec.items() if name != "options"}
+    return RunSpec(**fields, options=tuple(sorted(options.items())))
+
+
+def label_of(options: dict[str, Any]) -> str:
+    """The file label of a set of options, as the study's keys write them (``name=value`` joined by ``-``)."""
+    if not options:
+        raise ValueError("options: expected at least one option for a trial, got {}")
+    return "-".join(f"{name}={value}" for name, value in sorted(options.items()))
+
+
+def outcome(document: dict[str, Any]) -> tuple[float, float]:
+    """A run's rank key, smaller better: the episodes to the target (inf for a miss), then the final value."""
+    hit = document.get("hit")
+    return (math.inf if hit is None else float(hit), float(document["final"]))
+
+
+def _median(values: list[float]) -> float:
+    ordered = sorted(values)
+    middle = len(ordered) // 2
+    return ordered[middle] if len(ordered) % 2 else (ordered[middle - 1] + ordered[middle]) / 2
+
+
+def _finite(value: float) -> float | None:
+    return value if math.isfinite(value) else None  # a median run that missed: JSON's null
+
+
+def _cell(pairs: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict[str, Any]:
+    base = [outcome(b) for b, _ in pairs]
+    trial = [outcome(t) for _, t in pairs]
+    both = [(b[0], t[0]) for b, t in zip(base, trial, strict=True) if math.isfinite(b[0] + t[0])]
+    return {
+        "runs": len(pairs),
+        "hits": [sum(math.isfinite(o[0]) for o in base), sum(math.isfinite(o[0]) for o in trial)],
+        "median_episodes": [_finite(_median([o[0] for o in base])), _finite(_median([o[0] for o in trial]))],
+        "median_final": [_median([o[1] for o in base]), _median([o[1] for o in trial])],
+        "better": sum(t < b for b, t in zip(base, trial, strict=True)),
+        "worse": sum(t > b for b, t in zip(base, trial, strict=True)),
+        "log_ratio_sum": sum(math.log(t / b) for b, t in both),
+        "both_hit": len(both),
+    }
+
+
+def cells(folder: Path, options: dict[str, Any]) -> tuple[list[dict[str, Any]], list[Any]]:
+    """The cells of the study in ``folder``: each default run paired with its trial (runs without a trial
+    yet are left out), and the distinct provenance records of the documents used."""
+    grouped: dict[tuple[Any, ...], list[tuple[dict[str, Any], dict[str, Any]]]] = {}
+    provenance: list[Any] = []
+    for _, document in default_documents(folder):
+        trial = load_document(folder / f"{trial_spec(document['spec'], options).key}.json")
+        if trial is None:
+            continue
+        key = tuple(document["spec"][name] for name in CELL_FIELDS)
+        grouped.setdefault(key, []).append((document, trial))
+        for record in (document.get("provenance"), trial.get("provenance")):
+            if record not in provenance:
+                provenance.append(record)
+    rows = [
+        dict(zip(CELL_FIELDS, key, strict=True), **_cell(pairs)) for key, pairs in sorted(grouped.items())
+    ]
+    return rows, provenance
+
+
+def _episodes(value: float | None, budget: int) -> str:
+    return f"> {budget:,}" if value is None else f"{value:,.0f}"
+
+
+def render_markdown(summary: dict[str, Any]) -> str:
+    """The table of a trial's summary (the JSON ``render`` writes)."""
+    rows = summary["cells"]
+    lines = [
+        f"# `{METHOD}` with `{summary['label']}` against the default: the {summary['study']} study",
+        "",
+        f"Rendered by `benchmarks/default_trial.py render --study {summary['study']} --options "
+        f"'{json.dumps(summary['options'], sort_keys=True)}'` from the study's runs (`benchmarks/"
+        f"{summary['study']}/runs/`). Per cell (the study's spec but the seed): the runs paired by seed, "
+        "how many hit the target, the median episodes to it (a miss counts as more than the budget), the "
+        "median final value (regret, or f for the unbounded functions), and in how many seeds the trial "
+        "ranks better or worse (fewer episodes to the target, then a smaller final value).",
+        "",
+        "| function | p | z | N | budget | initial | runs | hits (default, trial) "
+        "| median episodes (default) | median episodes (trial) | median final (default) "
+        "| median final (trial) | better | worse |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for row in rows:
+        base, trial = row["median_episodes"]
+        final = row["median_final"]
+        lines.append(
+            f"| {row['function']} | {row['dim']} | {row['context_dim']} | {row['samples']} "
+            f"| {row['budget']:,} | {row['initial']} | {row['runs']} | {row['hits'][0]}, {row['hits'][1]} "
+            f"| {_episodes(base, row['budget'])} | {_episodes(trial, row['budget'])} "
+            f"| {final[0]:.2e} | {final[1]:.2e} | {row['better']} | {row['worse']} |"
+        )
+    both = sum(row["both_hit"] for row in rows)
+    ratio = math.exp(sum(row["log_ratio_sum"] for row in rows) / both) if both else math.nan
+    lines += [
+        "",
+        f"In all: {sum(row['runs'] for row in rows)} pairs in {len(rows)} cells; the trial ranks better in "
+        f"{sum(row['better'] for row in rows)} and worse in {sum(row['worse'] for row in rows)}; it hits the "
+        f"target in {sum(row['hits'][1] for row in rows)} runs against the default's "
+        f"{sum(row['hits'][0] for row in rows)}; over the {both} pairs where both hit, the geometric mean of "
+        f"the trial's episodes to the target over the default's is {ratio:.3f}.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _run(study: str, options: dict[str, Any], workers: int, refresh: bool) -> None:
+    from benchmarks.study_runner import run_all
+
+    folder = HERE / study / "runs"
+    documents = default_documents(folder)
+    if refresh:
+        old = [RunSpec(**document["spec"]) for _, document in documents if stale(document)]
+        print(f"refreshing {len(old)} default documents that C12 can have changed")
+        before = {spec.key: load_document(folder / f"{spec.key}.json") for spec in old}
+        after = run_all(old, folder, workers=workers, recompute=True)
+        changed = sum(before[s.key]["values"] != a["values"] for s, a in zip(old, after, strict=True))
+        print(f"{changed} of them changed")
+    specs = [trial_spec(document["spec"], options) for _, document in documents]
+    run_all(specs, folder, workers=workers)
+
+
+def _render(study: str, options: dict[str, Any], out: Path) -> Path:
+    rows, provenance = cells(HERE / study / "runs", options)
+    label = label_of(options)
+    summary = {"study": study, "options": options, "label": label, "cells": rows, "provenance": provenance}
+    out.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(summary, indent=1, sort_keys=True, allow_nan=False)
+    write_text(out / f"{study}-{label}.json", text + "\n")
+    write_text(out / f"{study}-{label}.md", render_markdown(summary))
+    return out / f"{study}-{label}.md"
+
+
+def _options(text: str) -> dict[str, Any]:
+    try:
+        options = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r} ({error})") from None
+    if not isinstance(options, dict) or not options:
+        raise argparse.ArgumentTypeError(f"expected a non-empty JSON object, got {text!r}")
+    return options
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run or render a trial of a candidate default."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("action", choices=("run", "render"))
+    parser.add_argument("--study", required=True, choices=STUDIES)
+    parser.add_argument("--options", required=True, type=_options, help="the candidate's options (JSON)")
+    parser.add_argument("--workers", type=int, default=1, help="run: processes (default 1)")
+    parser.add_argument(
+        "--no-refresh", dest="refresh", action="store_false", help="run: leave the default column as it is"
+    )
+    parser.add_argument("--out", type=Path, default=OUT, help=f"render: folder (default {OUT})")
+    args = parser.parse_args(argv)
+    if args.action == "run":
+        _run(args.study, args.options, args.workers, args.refresh)
+    else:
+        print(f"wrote {_render(args.study, args.options, args.out)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -36,7 +36,7 @@ from typing import Any
 if not __package__:  # run by path: the repository root first on sys.path (see benchmarks/__init__.py)
     sys.path[0] = str(Path(__file__).resolve().parents[1])
 
-from benchmarks.study_tools import RunSpec, load_document, write_text
+from benchmarks.study_tools import RunSpec, load_document, store_document, write_text
 
 __all__ = [
     "METHOD",
@@ -47,6 +47,7 @@ __all__ = [
     "main",
     "outcome",
     "render_markdown",
+    "run_trial",
     "stale",
     "trial_spec",
 ]
@@ -186,20 +187,28 @@ def render_markdown(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _run(study: str, options: dict[str, Any], workers: int, refresh: bool) -> None:
+def run_trial(folder: Path, options: dict[str, Any], workers: int = 1, refresh: bool = True) -> int:
+    """Compute the trial of every default document in ``folder`` (cached ones are kept); with ``refresh``
+    first compute the :func:`stale` default documents again, keeping each one's file where its values and
+    final value come out the same (so only a changed run changes its file). Returns how many changed."""
     from benchmarks.study_runner import run_all
 
-    folder = HERE / study / "runs"
     documents = default_documents(folder)
+    changed = 0
     if refresh:
-        old = [RunSpec(**document["spec"]) for _, document in documents if stale(document)]
+        old = {
+            RunSpec(**document["spec"]): (path, document) for path, document in documents if stale(document)
+        }
         print(f"refreshing {len(old)} default documents that C12 can have changed")
-        before = {spec.key: load_document(folder / f"{spec.key}.json") for spec in old}
-        after = run_all(old, folder, workers=workers, recompute=True)
-        changed = sum(before[s.key]["values"] != a["values"] for s, a in zip(old, after, strict=True))
+        after = run_all(list(old), folder, workers=workers, recompute=True)
+        for (path, document), new in zip(old.values(), after, strict=True):
+            if (new["values"], new["final"]) == (document["values"], document["final"]):
+                store_document(path, document)  # the same run: keep its file (and provenance) as committed
+            else:
+                changed += 1
         print(f"{changed} of them changed")
-    specs = [trial_spec(document["spec"], options) for _, document in documents]
-    run_all(specs, folder, workers=workers)
+    run_all([trial_spec(document["spec"], options) for _, document in documents], folder, workers=workers)
+    return changed
 
 
 def _render(study: str, options: dict[str, Any], out: Path) -> Path:
@@ -236,7 +245,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=OUT, help=f"render: folder (default {OUT})")
     args = parser.parse_args(argv)
     if args.action == "run":
-        _run(args.study, args.options, args.workers, args.refresh)
+        run_trial(HERE / args.study / "runs", args.options, args.workers, args.refresh)
     else:
         print(f"wrote {_render(args.study, args.options, args.out)}")
     return 0

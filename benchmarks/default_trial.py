@@ -3,15 +3,19 @@ r"""Measure a candidate default of ``c-cma-es`` on a study's committed runs, cel
 A default changes every ``c-cma-es`` run of every study, so before it changes the candidate is run on each
 study's own specs and compared with the current default there, seed by seed. This script does that for the
 studies whose runs are :class:`~benchmarks.study_tools.RunSpec` runs through the runner (``functions``,
-``ccmaes``; the contextual BBO protocol has its own option columns):
+``ccmaes``, ``scaling``; the contextual BBO protocol has its own option columns):
 
     python benchmarks/default_trial.py run --study functions --options '{"ridge_centre": "old"}'
     python benchmarks/default_trial.py render --study functions --options '{"ridge_centre": "old"}'
+    python benchmarks/default_trial.py run --study scaling --options '{"ridge_centre": "old"}' \
+        --base-options '{"keep_best": false, "restart_baseline_loss": "squared"}'
 
 * ``run`` computes, for every committed document of the study's default column (method ``c-cma-es``, no
-  options, no divergence rule), the same spec with ``--options`` added, through the study's own worker and
-  into its own cache folder (so the study resumes, and its key records the options). It first brings the
-  default column itself to the current code where it can have changed (``--refresh``, see :func:`stale`).
+  options, no divergence rule; or the column whose options are ``--base-options``, as the scaling study's
+  ``c-cma-es`` pinned to the restarts before issue 33), the same spec with ``--options`` added, through the
+  study's own worker and into its own cache folder (so the study resumes, and its key records the options).
+  It first brings that column itself to the current code where it can have changed (see :func:`stale`;
+  ``--no-refresh`` leaves it).
 * ``render`` pairs each default document with its trial and writes ``docs/results/default_trial/
   <study>-<label>.json`` (the cells, each run's provenance) and ``.md`` (the table, rendered from that
   JSON; a test renders it again).
@@ -55,19 +59,26 @@ __all__ = [
 HERE = Path(__file__).resolve().parent
 OUT = HERE.parent / "docs" / "results" / "default_trial"
 METHOD = "c-cma-es"
-STUDIES = ("functions", "ccmaes")
+STUDIES = ("functions", "ccmaes", "scaling")
 #: The spec fields that name a cell (every field but the seed).
 CELL_FIELDS = ("function", "dim", "context_dim", "budget", "samples", "eval_contexts", "initial")
 
 
-def default_documents(folder: Path) -> list[tuple[Path, dict[str, Any]]]:
-    """The documents of ``folder`` (not its subfolders) in the default ``c-cma-es`` column, sorted by name."""
+def _options_of(spec: dict[str, Any]) -> dict[str, Any]:
+    options = spec.get("options") or ()
+    return dict(options) if isinstance(options, dict) else {name: value for name, value in options}
+
+
+def default_documents(folder: Path, base: dict[str, Any] | None = None) -> list[tuple[Path, dict[str, Any]]]:
+    """The documents of ``folder`` (not its subfolders) in the ``c-cma-es`` column whose options are ``base``
+    (None or {}: the default column), without a divergence rule, sorted by name."""
     found = []
     for path in sorted(folder.glob("*.json")):
         document = load_document(path) if not path.is_symlink() else None
         spec = (document or {}).get("spec", {})
-        if spec.get("method") == METHOD and not spec.get("options") and spec.get("divergence") is None:
-            found.append((path, document))
+        if spec.get("method") == METHOD and spec.get("divergence") is None:
+            if _options_of(spec) == (base or {}):
+                found.append((path, document))
     return found
 
 
@@ -80,7 +91,7 @@ def stale(document: dict[str, Any]) -> bool:
 def trial_spec(spec: dict[str, Any], options: dict[str, Any]) -> RunSpec:
     """The run of ``spec`` (a document's) with ``options`` added to its optimiser options."""
     fields = {name: value for name, value in spec.items() if name != "options"}
-    return RunSpec(**fields, options=tuple(sorted(options.items())))
+    return RunSpec(**fields, options=tuple(sorted({**_options_of(spec), **options}.items())))
 
 
 def label_of(options: dict[str, Any]) -> str:
@@ -122,12 +133,14 @@ def _cell(pairs: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict[str, Any]:
     }
 
 
-def cells(folder: Path, options: dict[str, Any]) -> tuple[list[dict[str, Any]], list[Any]]:
+def cells(
+    folder: Path, options: dict[str, Any], base: dict[str, Any] | None = None
+) -> tuple[list[dict[str, Any]], list[Any]]:
     """The cells of the study in ``folder``: each default run paired with its trial (runs without a trial
     yet are left out), and the distinct provenance records of the documents used."""
     grouped: dict[tuple[Any, ...], list[tuple[dict[str, Any], dict[str, Any]]]] = {}
     provenance: list[Any] = []
-    for _, document in default_documents(folder):
+    for _, document in default_documents(folder, base):
         trial = load_document(folder / f"{trial_spec(document['spec'], options).key}.json")
         if trial is None:
             continue
@@ -149,11 +162,14 @@ def _episodes(value: float | None, budget: int) -> str:
 def render_markdown(summary: dict[str, Any]) -> str:
     """The table of a trial's summary (the JSON ``render`` writes)."""
     rows = summary["cells"]
+    base = summary.get("base") or {}
+    column = f"the column `{label_of(base)}`" if base else "the default"
+    command = f"--study {summary['study']} --options '{json.dumps(summary['options'], sort_keys=True)}'"
+    command += f" --base-options '{json.dumps(base, sort_keys=True)}'" if base else ""
     lines = [
-        f"# `{METHOD}` with `{summary['label']}` against the default: the {summary['study']} study",
+        f"# `{METHOD}` with `{label_of(summary['options'])}` against {column}: the {summary['study']} study",
         "",
-        f"Rendered by `benchmarks/default_trial.py render --study {summary['study']} --options "
-        f"'{json.dumps(summary['options'], sort_keys=True)}'` from the study's runs (`benchmarks/"
+        f"Rendered by `benchmarks/default_trial.py render {command}` from the study's runs (`benchmarks/"
         f"{summary['study']}/runs/`). Per cell (the study's spec but the seed): the runs paired by seed, "
         "how many hit the target, the median episodes to it (a miss counts as more than the budget), the "
         "median final value (regret, or f for the unbounded functions), and in how many seeds the trial "
@@ -187,13 +203,19 @@ def render_markdown(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def run_trial(folder: Path, options: dict[str, Any], workers: int = 1, refresh: bool = True) -> int:
+def run_trial(
+    folder: Path,
+    options: dict[str, Any],
+    workers: int = 1,
+    refresh: bool = True,
+    base: dict[str, Any] | None = None,
+) -> int:
     """Compute the trial of every default document in ``folder`` (cached ones are kept); with ``refresh``
     first compute the :func:`stale` default documents again, keeping each one's file where its values and
     final value come out the same (so only a changed run changes its file). Returns how many changed."""
     from benchmarks.study_runner import run_all
 
-    documents = default_documents(folder)
+    documents = default_documents(folder, base)
     changed = 0
     if refresh:
         old = {
@@ -211,10 +233,11 @@ def run_trial(folder: Path, options: dict[str, Any], workers: int = 1, refresh: 
     return changed
 
 
-def _render(study: str, options: dict[str, Any], out: Path) -> Path:
-    rows, provenance = cells(HERE / study / "runs", options)
-    label = label_of(options)
-    summary = {"study": study, "options": options, "label": label, "cells": rows, "provenance": provenance}
+def _render(study: str, options: dict[str, Any], base: dict[str, Any], out: Path) -> Path:
+    rows, provenance = cells(HERE / study / "runs", options, base)
+    label = label_of(options) if not base else f"{label_of(base)}-{label_of(options)}"
+    summary = {"study": study, "options": options, "base": base, "label": label, "cells": rows}
+    summary["provenance"] = provenance
     out.mkdir(parents=True, exist_ok=True)
     text = json.dumps(summary, indent=1, sort_keys=True, allow_nan=False)
     write_text(out / f"{study}-{label}.json", text + "\n")
@@ -227,8 +250,8 @@ def _options(text: str) -> dict[str, Any]:
         options = json.loads(text)
     except json.JSONDecodeError as error:
         raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r} ({error})") from None
-    if not isinstance(options, dict) or not options:
-        raise argparse.ArgumentTypeError(f"expected a non-empty JSON object, got {text!r}")
+    if not isinstance(options, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}")
     return options
 
 
@@ -238,16 +261,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("action", choices=("run", "render"))
     parser.add_argument("--study", required=True, choices=STUDIES)
     parser.add_argument("--options", required=True, type=_options, help="the candidate's options (JSON)")
+    parser.add_argument(
+        "--base-options",
+        type=_options,
+        default={},
+        help="the column the trial is measured against, by its options (JSON; {}: the default column)",
+    )
     parser.add_argument("--workers", type=int, default=1, help="run: processes (default 1)")
     parser.add_argument(
         "--no-refresh", dest="refresh", action="store_false", help="run: leave the default column as it is"
     )
     parser.add_argument("--out", type=Path, default=OUT, help=f"render: folder (default {OUT})")
     args = parser.parse_args(argv)
+    if not args.options:
+        parser.error("--options: expected at least one option for a trial, got {}")
     if args.action == "run":
-        run_trial(HERE / args.study / "runs", args.options, args.workers, args.refresh)
+        run_trial(HERE / args.study / "runs", args.options, args.workers, args.refresh, args.base_options)
     else:
-        print(f"wrote {_render(args.study, args.options, args.out)}")
+        print(f"wrote {_render(args.study, args.options, args.base_options, args.out)}")
     return 0
 
 

@@ -87,3 +87,21 @@ def test_the_committed_comparisons_are_rendered_from_the_committed_runs(path):
     rows, provenance = default_trial.cells(default_trial.HERE / summary["study"] / "runs", summary["options"])
     assert rows == summary["cells"] and provenance == summary["provenance"]
     assert path.with_suffix(".md").read_text(encoding="utf-8") == default_trial.render_markdown(summary)
+
+
+def test_a_base_column_is_chosen_by_its_options_and_the_trial_keeps_them(tmp_path):
+    base = {"keep_best": False}
+    spec = RunSpec("Sphere", 3, 1, "c-cma-es", 0, 1000, options=tuple(base.items()))
+    _stored(tmp_path, RunSpec("Sphere", 3, 1, "c-cma-es", 0, 1000), 10, 1e-6)  # the default column
+    _stored(tmp_path, spec, 20, 1e-6)
+    trial = default_trial.trial_spec(
+        {**spec.__dict__, "options": [["keep_best", False]]}, {"ridge_centre": "old"}
+    )
+    assert trial.options == (("keep_best", False), ("ridge_centre", "old"))
+    _stored(tmp_path, trial, 10, 1e-6)
+    assert [path.name for path, _ in default_trial.default_documents(tmp_path, base)] == [f"{spec.key}.json"]
+    (row,), _ = default_trial.cells(tmp_path, {"ridge_centre": "old"}, base)
+    assert (row["median_episodes"], row["better"]) == ([20.0, 10.0], 1)
+    assert default_trial.cells(tmp_path, {"ridge_centre": "old"}) == ([], [])  # the default has no trial
+    with pytest.raises(SystemExit):
+        default_trial.main(["render", "--study", "functions", "--options", "{}"])

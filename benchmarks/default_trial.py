@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -69,11 +70,16 @@ def _options_of(spec: dict[str, Any]) -> dict[str, Any]:
     return dict(options) if isinstance(options, dict) else {name: value for name, value in options}
 
 
-def default_documents(folder: Path, base: dict[str, Any] | None = None) -> list[tuple[Path, dict[str, Any]]]:
+def default_documents(
+    folder: Path, base: dict[str, Any] | None = None, match: str = ""
+) -> list[tuple[Path, dict[str, Any]]]:
     """The documents of ``folder`` (not its subfolders) in the ``c-cma-es`` column whose options are ``base``
-    (None or {}: the default column), without a divergence rule, sorted by name."""
+    (None or {}: the default column), without a divergence rule, whose file name the regular expression
+    ``match`` finds, sorted by name."""
     found = []
     for path in sorted(folder.glob("*.json")):
+        if not re.search(match, path.name):
+            continue
         document = load_document(path) if not path.is_symlink() else None
         spec = (document or {}).get("spec", {})
         if spec.get("method") == METHOD and spec.get("divergence") is None:
@@ -209,13 +215,14 @@ def run_trial(
     workers: int = 1,
     refresh: bool = True,
     base: dict[str, Any] | None = None,
+    match: str = "",
 ) -> int:
     """Compute the trial of every default document in ``folder`` (cached ones are kept); with ``refresh``
     first compute the :func:`stale` default documents again, keeping each one's file where its values and
     final value come out the same (so only a changed run changes its file). Returns how many changed."""
     from benchmarks.study_runner import run_all
 
-    documents = default_documents(folder, base)
+    documents = default_documents(folder, base, match)
     changed = 0
     if refresh:
         old = {
@@ -267,6 +274,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         default={},
         help="the column the trial is measured against, by its options (JSON; {}: the default column)",
     )
+    parser.add_argument("--match", default="", help="run: only the runs whose file name this regex finds")
     parser.add_argument("--workers", type=int, default=1, help="run: processes (default 1)")
     parser.add_argument(
         "--no-refresh", dest="refresh", action="store_false", help="run: leave the default column as it is"
@@ -276,7 +284,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args.options:
         parser.error("--options: expected at least one option for a trial, got {}")
     if args.action == "run":
-        run_trial(HERE / args.study / "runs", args.options, args.workers, args.refresh, args.base_options)
+        folder = HERE / args.study / "runs"
+        run_trial(folder, args.options, args.workers, args.refresh, args.base_options, args.match)
     else:
         print(f"wrote {_render(args.study, args.options, args.base_options, args.out)}")
     return 0

@@ -100,6 +100,7 @@ def test_a_base_column_is_chosen_by_its_options_and_the_trial_keeps_them(tmp_pat
     assert trial.options == (("keep_best", False), ("ridge_centre", "old"))
     _stored(tmp_path, trial, 10, 1e-6)
     assert [path.name for path, _ in default_trial.default_documents(tmp_path, base)] == [f"{spec.key}.json"]
+    assert default_trial.default_documents(tmp_path, base, match="^Rosenbrock-") == []
     (row,), _ = default_trial.cells(tmp_path, {"ridge_centre": "old"}, base)
     assert (row["median_episodes"], row["better"]) == ([20.0, 10.0], 1)
     assert default_trial.cells(tmp_path, {"ridge_centre": "old"}) == ([], [])  # the default has no trial

@@ -43,11 +43,11 @@ SELECTORS = ("uniform", "arcsine", "bandit", "progress")
 #: The study's optimisers: label -> (registry name, options). ``c-cma-es-cm0.5`` moves C-CMA-ES's mean half
 #: way to each new fit (Eq. C3'): under a selector's moving draws a full step chases the batch's contexts
 #: and the step size grows (docs/contexts.md, "A selector can break an optimiser"). ``c-cma-es-c3r`` is the
-#: candidate default of issue 45 (C3r and C1s, docs/algorithms.md), measured here before any default changes.
+#: candidate default of issue 45 (C3r, docs/algorithms.md), measured here before the default changed.
 OPTIMIZERS: dict[str, tuple[str, dict[str, Any]]] = {
     "c-cma-es": ("c-cma-es", {}),
     "c-cma-es-cm0.5": ("c-cma-es", {"c_m": 0.5}),
-    "c-cma-es-c3r": ("c-cma-es", {"baseline_ridge_scale": "unexplained", "ridge_centre": "old"}),
+    "c-cma-es-c3r": ("c-cma-es", {"ridge_centre": "old"}),
     "creps-cma-old": ("creps-cma-old", {}),
 }
 #: Per mode: trials, and per task (iterations, samples or None for the optimiser's recommended batch,

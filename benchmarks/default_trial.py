@@ -6,9 +6,17 @@ studies whose runs are :class:`~benchmarks.study_tools.RunSpec` runs through the
 ``ccmaes``, ``scaling``; the contextual BBO protocol has its own option columns):
 
     python benchmarks/default_trial.py run --study functions --options '{"ridge_centre": "old"}'
-    python benchmarks/default_trial.py render --study functions --options '{"ridge_centre": "old"}'
     python benchmarks/default_trial.py run --study scaling --options '{"ridge_centre": "old"}' \
         --base-options '{"keep_best": false, "restart_baseline_loss": "squared"}'
+
+Issue 45 measured C3r (``ridge_centre="old"``) so, then made it the default and pinned the committed runs
+to C3 (``benchmarks/pin_defaults.py``): its comparisons are rendered against the pinned columns,
+
+    python benchmarks/default_trial.py render --study functions --options '{"ridge_centre": "old"}' \
+        --base-options '{"ridge_centre": "zero"}'
+
+(the scaling study's base: ``{"keep_best": false, "restart_baseline_loss": "squared", "ridge_centre":
+"zero"}``).
 
 * ``run`` computes, for every committed document of the study's default column (method ``c-cma-es``, no
   options, no divergence rule; or the column whose options are ``--base-options``, as the scaling study's
@@ -169,7 +177,7 @@ def render_markdown(summary: dict[str, Any]) -> str:
     """The table of a trial's summary (the JSON ``render`` writes)."""
     rows = summary["cells"]
     base = summary.get("base") or {}
-    column = f"the column `{label_of(base)}`" if base else "the default"
+    column = f"the column `{label_of(base)}`" if base else "the default column"
     command = f"--study {summary['study']} --options '{json.dumps(summary['options'], sort_keys=True)}'"
     command += f" --base-options '{json.dumps(base, sort_keys=True)}'" if base else ""
     lines = [
@@ -181,8 +189,8 @@ def render_markdown(summary: dict[str, Any]) -> str:
         "median final value (regret, or f for the unbounded functions), and in how many seeds the trial "
         "ranks better or worse (fewer episodes to the target, then a smaller final value).",
         "",
-        "| function | p | z | N | budget | initial | runs | hits (default, trial) "
-        "| median episodes (default) | median episodes (trial) | median final (default) "
+        "| function | p | z | N | budget | initial | runs | hits (base, trial) "
+        "| median episodes (base) | median episodes (trial) | median final (base) "
         "| median final (trial) | better | worse |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
@@ -196,14 +204,22 @@ def render_markdown(summary: dict[str, Any]) -> str:
             f"| {final[0]:.2e} | {final[1]:.2e} | {row['better']} | {row['worse']} |"
         )
     both = sum(row["both_hit"] for row in rows)
-    ratio = math.exp(sum(row["log_ratio_sum"] for row in rows) / both) if both else math.nan
+    ratio = math.exp(sum(row["log_ratio_sum"] for row in rows) / both) if both else 1.0
+    pairs = sum(row["runs"] for row in rows)
+    partial = summary.get("base_runs", pairs) - pairs
+    if partial:
+        lines += [
+            "",
+            f"**Partial: {partial} of the column's {summary['base_runs']} runs have no trial yet.**",
+        ]
+    mean = f"{ratio:.3f}" if both else "—"
     lines += [
         "",
-        f"In all: {sum(row['runs'] for row in rows)} pairs in {len(rows)} cells; the trial ranks better in "
+        f"In all: {pairs} pairs in {len(rows)} cells; the trial ranks better in "
         f"{sum(row['better'] for row in rows)} and worse in {sum(row['worse'] for row in rows)}; it hits the "
-        f"target in {sum(row['hits'][1] for row in rows)} runs against the default's "
+        f"target in {sum(row['hits'][1] for row in rows)} runs against the base column's "
         f"{sum(row['hits'][0] for row in rows)}; over the {both} pairs where both hit, the geometric mean of "
-        f"the trial's episodes to the target over the default's is {ratio:.3f}.",
+        f"the trial's episodes to the target over the base column's is {mean}.",
         "",
     ]
     return "\n".join(lines)
@@ -242,8 +258,9 @@ def run_trial(
 
 def _render(study: str, options: dict[str, Any], base: dict[str, Any], out: Path) -> Path:
     rows, provenance = cells(HERE / study / "runs", options, base)
-    label = label_of(options) if not base else f"{label_of(base)}-{label_of(options)}"
+    label = label_of(options) if not base else f"{label_of(options)}-vs-{label_of(base)}"
     summary = {"study": study, "options": options, "base": base, "label": label, "cells": rows}
+    summary["base_runs"] = len(default_documents(HERE / study / "runs", base))
     summary["provenance"] = provenance
     out.mkdir(parents=True, exist_ok=True)
     text = json.dumps(summary, indent=1, sort_keys=True, allow_nan=False)

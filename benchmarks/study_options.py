@@ -13,10 +13,25 @@ from typing import Any
 from creps_gym.optimizers import optimizer_names
 from creps_gym.optimizers.registry import optimizer_class
 
-__all__ = ["OWN_OPTIONS", "canonical_options", "config_fields"]
+__all__ = ["C3_METHODS", "C3_PIN", "OWN_OPTIONS", "canonical_options", "config_fields", "pin_c3"]
 
 #: Options a :class:`RunSpec` sets through its own fields, the runner or the study, not through ``options``.
 OWN_OPTIONS = ("max_interpolation", "divide_by_z", "max_std_growth", "seed", "initial_mean", "initial_cov")
+#: The committed ``c-cma-es`` runs were computed with C3, the mean fit's ridge towards 0, the default until
+#: issue 45 (now C3r, ``ridge_centre="old"``): the studies pin their columns to it, so those runs stay the
+#: runs of their specs (``benchmarks/pin_defaults.py`` wrote the pin into them; docs/algorithms.md, C3r).
+C3_PIN = (("ridge_centre", "zero"),)
+#: The registered optimisers that take the pin (``c-cma-es-surrogate`` shares C-CMA-ES's config).
+C3_METHODS = ("c-cma-es", "c-cma-es-surrogate")
+
+
+def pin_c3(method: str, options: Any = ()) -> tuple[tuple[str, Any], ...]:
+    """``options`` (pairs or a mapping) as sorted pairs, with :data:`C3_PIN` added for a method of
+    :data:`C3_METHODS` that does not set ``ridge_centre`` itself."""
+    pairs = dict(options.items() if isinstance(options, Mapping) else (tuple(p) for p in options))
+    if method in C3_METHODS:
+        pairs = {**dict(C3_PIN), **pairs}
+    return tuple(sorted(pairs.items()))
 
 
 def canonical_options(method: str, options: Any) -> tuple[tuple[str, Any], ...]:

@@ -54,6 +54,7 @@ from benchmarks.ccmaes.report import (
     sweep_table,
 )
 from benchmarks.ccmaes.surrogate_table import SURROGATE_COLUMNS, surrogate_table
+from benchmarks.study_options import pin_c3
 from benchmarks.study_runner import (
     add_mode_options,
     add_output_options,
@@ -169,7 +170,7 @@ def make_spec(column: Column, function: str, dim: int, z: int, seed: int, budget
         samples,
         eval_contexts=EVAL_CONTEXTS,
         initial=INITIAL,
-        options=column.options,
+        options=pin_c3(column.method, column.options),  # the committed runs' C3 (benchmarks/study_options.py)
     )
 
 

@@ -31,6 +31,7 @@ if not __package__:  # run by path: the repository root first on sys.path (see b
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
 from benchmarks.contexts.run import EVAL_CONTEXTS, MODES, RESULTS, machine, make_task, save
+from benchmarks.study_options import pin_c3
 from creps_gym.selectors import cell_index
 
 OPTIMIZERS = ("c-cma-es", "creps-cma-old")
@@ -96,6 +97,7 @@ def one_probe(task: str, optimizer: str, trial: int) -> dict[str, Any]:
             run_dir=folder,
             eval_every=every,
             eval_contexts=EVAL_CONTEXTS,
+            optimizer_options=dict(pin_c3(optimizer)),  # C3, with which difficulty.json was computed
             **options,
         )
         policy = load_policy(folder, "final")

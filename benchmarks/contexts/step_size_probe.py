@@ -19,6 +19,7 @@ if not __package__:  # run by path: the repository root first on sys.path (see b
 
 from benchmarks.contexts.run import EVAL_CONTEXTS, MODES
 from benchmarks.contexts.tasks import SteepFunction
+from benchmarks.study_options import C3_PIN
 from creps_gym.runner import run
 
 CHECKPOINTS = (1, 50, 100, 150)
@@ -39,6 +40,7 @@ def main() -> int:
                 eval_contexts=EVAL_CONTEXTS,
                 context_selector=selector,
                 context_selector_options=options,
+                optimizer_options=dict(C3_PIN),  # C3, the default of docs/contexts.md's measurements
             )
             steps = {r.iteration: r.diagnostics["step_size"] for r in history.records}
             shown = ", ".join(f"{i}: {steps[i]:.3g}" for i in CHECKPOINTS if i in steps)

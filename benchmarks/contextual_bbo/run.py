@@ -31,6 +31,7 @@ from benchmarks.contextual_bbo.problems import PROBLEMS
 from benchmarks.contextual_bbo.protocol import ProtocolSpec, run_protocol
 from benchmarks.contextual_bbo.report import load_published, plot_curves, render
 from benchmarks.restart_defaults import FORMER
+from benchmarks.study_options import C3_PIN, pin_c3
 from benchmarks.study_runner import (
     add_mode_options,
     add_output_options,
@@ -59,16 +60,18 @@ C1D = (
 #: on Different Powers the default damping lets σ shrink until the θ part of the returns is below the local
 #: baseline's error and the ranking stalls (docs/algorithms.md, the floor's third pass).
 C1D_DSIGMA3 = (*C1D, ("d_sigma", 3.0))
-#: The columns: (label, registry name, options). An empty label is the method with its defaults;
+#: The columns: (label, registry name, options). ``c-cma-es`` and ``c-cma-es-surrogate`` are the methods with
+#: the defaults before issue 45, i.e. with the mean fit's ridge towards 0 (C3, ``ridge_centre="zero"``, as
+#: every column without ``-c3r-``: the runs were computed with it; benchmarks/study_options.py);
 #: ``c-cma-es-former-restarts`` is ``c-cma-es`` with its restart defaults before issue 33 (no kept best,
 #: squared restarts); the ``-c3r-`` columns shrink the mean fit's step rather than its coefficients (Eq. C3r,
-#: ``ridge_centre="old"``; issue 45).
+#: ``ridge_centre="old"``, the default since issue 45).
 COLUMNS: tuple[tuple[str, str, tuple[tuple[str, object], ...]], ...] = (
-    ("", "c-cma-es", ()),
-    ("c-cma-es-former-restarts", "c-cma-es", FORMER),
-    ("c-cma-es-no-restarts", "c-cma-es", (("restarts", 0),)),
-    ("", "c-cma-es-surrogate", ()),
-    ("c-cma-es-surrogate-no-restarts", "c-cma-es-surrogate", (("restarts", 0),)),
+    ("c-cma-es", "c-cma-es", C3_PIN),
+    ("c-cma-es-former-restarts", "c-cma-es", pin_c3("c-cma-es", FORMER)),
+    ("c-cma-es-no-restarts", "c-cma-es", (("restarts", 0), *C3_PIN)),
+    ("c-cma-es-surrogate", "c-cma-es-surrogate", C3_PIN),
+    ("c-cma-es-surrogate-no-restarts", "c-cma-es-surrogate", (("restarts", 0), *C3_PIN)),
     ("c-cma-es-c3r-no-restarts", "c-cma-es", (("restarts", 0), ("ridge_centre", "old"))),
     ("c-cma-es-surrogate-c3r-no-restarts", "c-cma-es-surrogate", (("restarts", 0), ("ridge_centre", "old"))),
     ("c-cma-es-surrogate-c3r-c1d-no-restarts", "c-cma-es-surrogate", C1D),

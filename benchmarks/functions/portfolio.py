@@ -33,6 +33,7 @@ import numpy as np
 
 from benchmarks.provenance import provenance_text
 from benchmarks.restart_defaults import FORMER
+from benchmarks.study_options import pin_c3
 from benchmarks.study_runner import run_all, update_block
 from benchmarks.study_tools import RunSpec
 
@@ -80,6 +81,7 @@ def make_specs() -> list[RunSpec]:
 
 def _spec(function: str, z: int, seed: int, options: Any, divergence: float | None) -> RunSpec:
     """The run of a cell, seed and variant (its options and the runner's divergence factor)."""
+    options = pin_c3("c-cma-es", options)  # the committed runs' C3 (benchmarks/study_options.py)
     return RunSpec(
         function, DIM, z, "c-cma-es", seed, BUDGET, SAMPLES, options=options, divergence=divergence
     )

@@ -30,6 +30,7 @@ matplotlib.use("Agg")
 
 from benchmarks.baselines import BASELINES
 from benchmarks.functions.report import METHODS, claims, plot_function, results_table
+from benchmarks.study_options import pin_c3
 from benchmarks.study_runner import (
     add_mode_options,
     add_output_options,
@@ -89,7 +90,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 def make_specs(args: argparse.Namespace) -> list[RunSpec]:
     """Every run of the study, cheapest first within each function (the pool balances better)."""
     return [
-        RunSpec(name, args.dim, z, method, seed, args.budget, args.samples)
+        RunSpec(name, args.dim, z, method, seed, args.budget, args.samples, options=pin_c3(method))
         for name in args.functions
         for z in args.context_dims
         for seed in range(args.seeds)

@@ -7,6 +7,7 @@ import importlib
 from dataclasses import dataclass
 from typing import Any
 
+from benchmarks.study_options import C3_PIN
 from creps_gym.optimizers import make_optimizer
 
 __all__ = ["METHODS", "Method", "method_by_name"]
@@ -68,8 +69,9 @@ METHODS = (
     ),
     Method("creps", "creps", (("epsilon", 1.0),), note="ε = 1, as Fabisch (GECCO 2019)"),
     Method("creps-cma-old", "creps-cma-old", note="the paper's CREPS-CMA"),
-    Method("c-cma-es", "c-cma-es"),
-    Method("c-cma-es-surrogate", "c-cma-es-surrogate"),
+    # The committed runs of these two were computed with C3, the default before issue 45 (study_options.py).
+    Method("c-cma-es", "c-cma-es", options=C3_PIN),
+    Method("c-cma-es-surrogate", "c-cma-es-surrogate", options=C3_PIN),
 )
 
 

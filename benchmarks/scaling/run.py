@@ -44,6 +44,7 @@ from benchmarks.scaling.report import (  # noqa: E402
     plot_baselines,
     plot_heatmaps,
 )
+from benchmarks.study_options import pin_c3  # noqa: E402
 from benchmarks.study_runner import (  # noqa: E402
     add_mode_options,
     add_output_options,
@@ -182,8 +183,9 @@ def make_specs(args: argparse.Namespace) -> list[RunSpec]:
 
 #: Options pinned per extra method: ``c-cma-es`` keeps the restart defaults from before issue 33 (no kept
 #: best, squared restarts; ``benchmarks/restart_defaults.py``), with which its 440 committed runs were
-#: computed (see the README's "C-CMA-ES's restart options").
-PINNED = {"c-cma-es": FORMER}
+#: computed (see the README's "C-CMA-ES's restart options"), and the mean fit's ridge towards 0 (C3, the
+#: default until issue 45; benchmarks/study_options.py).
+PINNED = {"c-cma-es": pin_c3("c-cma-es", FORMER)}
 
 
 def _options(args: argparse.Namespace, method: str) -> tuple[float, bool]:
@@ -215,7 +217,11 @@ def write_report(args: argparse.Namespace, documents: list[dict], timing: dict[s
     lines += grid_lines(documents, args)
     for method in args.extra_methods:
         pinned = ", ".join(f"{name}={value!r}" for name, value in PINNED.get(method, ()))
-        note = f"; `{pinned}`: its restart defaults before issue 33" if pinned else ""
+        note = (
+            f"; `{pinned}`: its restart defaults before issue 33 and its ridge before issue 45"
+            if pinned
+            else ""
+        )
         lines += [f"## {EXTRA_LABELS[method]} (`{method}`{note})", "", *grid_lines(documents, args, method)]
     lines += baseline_lines(documents, args)
     lines += [f"![heatmaps]({figure})", ""]

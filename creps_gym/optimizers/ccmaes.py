@@ -47,7 +47,7 @@ from scipy import linalg
 
 from creps_gym._validation import as_float_array, check_count, check_generator_state, check_positive_int
 from creps_gym.optimizers.base import ContextualOptimizer
-from creps_gym.optimizers.ccmaes_config import CCMAESConfig, options_doc, options_signature
+from creps_gym.optimizers.ccmaes_config import FORMER_ABSENT, CCMAESConfig, options_doc, options_signature
 from creps_gym.optimizers.ccmaes_restarts import Restarts
 from creps_gym.optimizers.cma_rules import (
     CMAConstants,
@@ -308,7 +308,7 @@ class CCMAES(Restarts, PolicyAccess, ContextualOptimizer):
         config = cls.config_class(
             initial_mean=np.asarray(state["initial_mean"]),
             initial_cov=np.asarray(state["initial_cov"]),
-            **dict(state["config"]),
+            **{**FORMER_ABSENT, **dict(state["config"])},
         )
         optimizer = cls.__new__(cls)
         optimizer._init_from_config(config)

@@ -18,6 +18,7 @@ from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.policies import initial_coefficients, initial_covariance, split_step_size
 
 __all__ = [
+    "FORMER_ABSENT",
     "OTHER_LOSS",
     "RESTART_LOSSES",
     "RIDGE_CENTRES",
@@ -43,6 +44,9 @@ UNUSED_BY_DETRENDED_BASELINE = ("standardise_advantages", "baseline_loss")
 SIGNALS = ("coefficients", "mean")
 #: What the mean fit's ridge shrinks towards: 0 (C3, the classic ridge) or the old coefficients (C3r).
 RIDGE_CENTRES = ("zero", "old")
+#: The values of options whose default changed after they were added, for a stored config written before
+#: they existed (it has no such field, and ran with the value here): ``ridge_centre`` was C3 until issue 45.
+FORMER_ABSENT = {"ridge_centre": "zero"}
 #: ``restart_baseline_loss``'s default: after a restart, the loss of ``LOSSES`` the first search did not use.
 OTHER_LOSS = "other"
 RESTART_LOSSES = (None, *LOSSES, OTHER_LOSS)
@@ -75,10 +79,11 @@ class CCMAESConfig:
     baseline_ridge_scale : str      ``"fixed"`` (C1) or ``"unexplained"`` (C1s: the baseline's ridge times the
         fraction of the returns' variance a first fit leaves unexplained, so its bias, ``baseline_ridge``
         times the context's effect on the returns, shrinks with the part θ decides).
-    ridge_centre : str              what the mean fit's ridge shrinks towards: ``"zero"`` (C3: the slopes
-        towards 0, a bias of ``ridge`` times the slopes that does not shrink with σ and floors the regret on
-        ill-conditioned functions) or ``"old"`` (C3r: the step towards 0, i.e. the slopes towards the old
-        ones, a bias of ``ridge`` times the step, which shrinks with σ).
+    ridge_centre : str              what the mean fit's ridge shrinks towards: ``"old"`` (C3r, the default
+        since issue 45: the step towards 0, i.e. the slopes towards the old ones, a bias of ``ridge`` times
+        the step, which shrinks with σ) or ``"zero"`` (C3, the default before: the slopes towards 0, a bias
+        of ``ridge`` times the slopes that does not shrink with σ and floors the regret on ill-conditioned
+        functions). A stored config without the field (written before it existed) loads as ``"zero"``.
     c_sigma, d_sigma, c_c, c_1, c_mu : float or None   learning rates; None = the tutorial's defaults.
     c_m : float                     the mean's learning rate in (0, 1] (C3'): A ← A + c_m (A_fit − A);
         below 1 it averages the regression's noise over about (2 − c_m)/c_m batches.
@@ -129,7 +134,7 @@ class CCMAESConfig:
     ridge: float = 1e-8
     baseline_ridge: float = 1e-10
     baseline_ridge_scale: str = "fixed"
-    ridge_centre: str = "zero"
+    ridge_centre: str = "old"
     c_sigma: float | None = None
     d_sigma: float | None = None
     c_c: float | None = None

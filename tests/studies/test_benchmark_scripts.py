@@ -569,6 +569,7 @@ def test_issue_12_optimisers_fill_their_columns_once_registered(tmp_path: Path, 
         alias = registry.OptimizerEntry(name, "stand-in", "creps_gym.optimizers.creps_cma:CREPSCMA")
         monkeypatch.setitem(registry._REGISTRY, name, alias)
     monkeypatch.setattr(scaling, "PINNED", {})  # the stand-ins have no restart options to pin
+    monkeypatch.setattr(functions, "pin_c3", lambda method, options=(): tuple(options))  # nor a ridge
     common = ["--context-dims", "1", "--seeds", "1", "--budget", "1000", "--workers", "1"]
     out = tmp_path / "functions"
     args = ["--functions", "Sphere", "--dim", "3", "--methods", "creps-cma-old", "c-cma-es", "creps-cma-csa"]
@@ -656,8 +657,8 @@ def test_ccmaes_study_sweeps_the_batch_size_on_the_sphere_at_z_1(tmp_path: Path)
     # The sweep runs on the Sphere at z = 1 only; pycma on every function and z.
     sweep = sorted(k for k in _documents(cache) if "c-cma-es" in k)
     assert sweep == [
-        "Sphere-p4-z1-c-cma-es-e100-uniform5-s0-b3000-n12",
-        "Sphere-p4-z1-c-cma-es-e100-uniform5-s0-b3000-n16",
+        "Sphere-p4-z1-c-cma-es-e100-uniform5-ridge_centre=zero-s0-b3000-n12",  # C3: study_options.pin_c3
+        "Sphere-p4-z1-c-cma-es-e100-uniform5-ridge_centre=zero-s0-b3000-n16",
     ]
     assert "to compute" in log
     section = (out / "results.md").read_text().split("## Sphere, z = 1: C-CMA-ES's batch size (1 seed(s))")[1]
@@ -687,8 +688,11 @@ def test_ccmaes_study_renders_the_remedies_from_the_cached_runs(tmp_path: Path) 
     log = study_in_process("ccmaes", *args)
     assert "0 runs cached" in log and "7 to compute" in log
     documents = _documents(cache)
-    suffixes = ["-baseline_batches=1-restarts=0", "-restarts=0", "-baseline_batches=1", ""]
-    suffixes += ["-standardise_advantages=True", "-active=False", "-baseline_degree=3"]
+    # each with the committed runs' C3 (study_options.pin_c3), sorted by name into the key
+    suffixes = ["-baseline_batches=1-restarts=0-ridge_centre=zero", "-restarts=0-ridge_centre=zero"]
+    suffixes += ["-baseline_batches=1-ridge_centre=zero", "-ridge_centre=zero"]
+    suffixes += ["-ridge_centre=zero-standardise_advantages=True", "-active=False-ridge_centre=zero"]
+    suffixes += ["-baseline_degree=3-ridge_centre=zero"]
     assert sorted(documents) == sorted(
         f"Rosenbrock-p4-z1-c-cma-es-e100-uniform5{s}-s0-b1000-n50" for s in suffixes
     )

@@ -91,7 +91,8 @@ def test_a_committed_quick_run_is_what_the_code_computes(key):
 
 
 def test_the_damped_c_cma_es_is_c_cma_es_with_c_m_one_half():
-    assert run.OPTIMIZERS["c-cma-es-cm0.5"] == ("c-cma-es", {"c_m": 0.5})
+    assert run.OPTIMIZERS["c-cma-es-cm0.5"] == ("c-cma-es", {"c_m": 0.5, "ridge_centre": "zero"})
+    assert run.OPTIMIZERS["c-cma-es"] == ("c-cma-es", {"ridge_centre": "zero"})  # C3, as computed
     runs = json.loads((RESULTS / "quick.json").read_text())["runs"]
     for key in ("steep-rosenbrock/{}/bandit/0", "steep-sphere/{}/uniform/1"):  # same seed, other c_m
         assert runs[key.format("c-cma-es-cm0.5")]["loss"] != runs[key.format("c-cma-es")]["loss"]

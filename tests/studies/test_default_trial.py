@@ -65,19 +65,20 @@ def test_cells_pair_each_default_run_with_its_trial_and_rank_hits_before_final_v
 
 @pytest.mark.slow
 def test_a_trial_of_the_defaults_own_value_is_the_default_run_and_a_same_run_keeps_its_file(tmp_path):
-    """Twin check of the machinery: the trial of ``ridge_centre="zero"`` (the default) computes the default
-    column's run again, bit for bit; a refreshed run that comes out the same keeps its committed file."""
+    """Twin check of the machinery: the trial of ``ridge_centre="old"`` (the default since issue 45) computes
+    the default column's run again, bit for bit; a refreshed run that comes out the same keeps its committed
+    file."""
     spec = RunSpec("Sphere", 3, 1, "c-cma-es", 0, 400)
     (default,) = run_all([spec], tmp_path, workers=1, log=lambda line: None)
     committed = json.loads((tmp_path / f"{spec.key}.json").read_text())
     committed["provenance"] = {"marker": "as committed"}
     store_document(tmp_path / f"{spec.key}.json", committed)
     assert default_trial.stale(default)  # 400 episodes never reach the target: refreshed
-    assert default_trial.run_trial(tmp_path, {"ridge_centre": "zero"}) == 0
+    assert default_trial.run_trial(tmp_path, {"ridge_centre": "old"}) == 0
     assert json.loads((tmp_path / f"{spec.key}.json").read_text())["provenance"] == {"marker": "as committed"}
-    trial = json.loads((tmp_path / "Sphere-p3-z1-c-cma-es-ridge_centre=zero-s0-b400-n50.json").read_text())
+    trial = json.loads((tmp_path / "Sphere-p3-z1-c-cma-es-ridge_centre=old-s0-b400-n50.json").read_text())
     assert (trial["values"], trial["final"]) == (default["values"], default["final"])
-    (row,), _ = default_trial.cells(tmp_path, {"ridge_centre": "zero"})
+    (row,), _ = default_trial.cells(tmp_path, {"ridge_centre": "old"})
     assert (row["better"], row["worse"]) == (0, 0)
 
 

@@ -121,7 +121,7 @@ def test_features_choose_the_mean_map_and_the_results_folder(precision_env, tmp_
     args = run.parse_args(argv)
     ((spec_full, trials),) = run.run_specs(args)
     assert (spec_full.features, spec_full.iterations, trials) == ("quadratic", 700, 3)
-    assert spec_full.options == run.FULL_BUDGET  # only the features change
+    assert spec_full.options == {**run.FULL_BUDGET, "ridge_centre": "zero"}  # only the features change
     assert args.out == run.RESULTS / "full-features-quadratic"
     assert (
         run.parse_args([*argv, "--contexts", "bandit"]).out == run.RESULTS / "full-bandit-features-quadratic"

@@ -11,6 +11,7 @@ import pytest
 
 from benchmarks import restart_defaults
 from benchmarks.contextual_bbo.protocol import ProtocolSpec
+from benchmarks.study_options import pin_c3
 from benchmarks.study_runner import run_all
 from benchmarks.study_tools import RunSpec
 
@@ -74,10 +75,11 @@ def test_the_committed_pinned_document_is_its_run_and_the_new_defaults_change_it
     """The check behind ``pin`` on a scaling run that restarts: its committed document, pinned to the
     former defaults, is what the pinned spec computes (the former None restart loss is the squared one:
     ``tests/optimizers/test_ccmaes_restarts.py``); with the new defaults the run differs."""
-    former = RunSpec("Rosenbrock", 2, 5, "c-cma-es", 0, 100_000, options=restart_defaults.FORMER)
+    former_options = pin_c3("c-cma-es", restart_defaults.FORMER)  # C3 too: the committed run's ridge
+    former = RunSpec("Rosenbrock", 2, 5, "c-cma-es", 0, 100_000, options=former_options)
     # The two part at the first restart (the evaluation at 2,700 episodes): a 4,000-episode run shows it,
     # for a tenth of the whole new-default run's time (that one stops at 32,100 episodes, after 6 s).
-    default = RunSpec("Rosenbrock", 2, 5, "c-cma-es", 0, 4_000)
+    default = RunSpec("Rosenbrock", 2, 5, "c-cma-es", 0, 4_000, options=pin_c3("c-cma-es"))
     pinned, new = run_all([former, default], tmp_path, workers=1, log=lambda line: None)
     path = restart_defaults.HERE / "scaling" / "runs" / f"{former.key}.json"
     committed = json.loads(path.read_text(encoding="utf-8"))

@@ -65,11 +65,12 @@ C1D_DSIGMA3 = (*C1D, ("d_sigma", 3.0))
 #: every column without ``-c3r-``: the runs were computed with it; benchmarks/study_options.py);
 #: ``c-cma-es-former-restarts`` is ``c-cma-es`` with its restart defaults before issue 33 (no kept best,
 #: squared restarts); the ``-c3r-`` columns shrink the mean fit's step rather than its coefficients (Eq. C3r,
-#: ``ridge_centre="old"``, the default since issue 45).
+#: ``ridge_centre="old"``, the default since issue 45; ``c-cma-es-c3r`` is that default, with its restarts).
 COLUMNS: tuple[tuple[str, str, tuple[tuple[str, object], ...]], ...] = (
     ("c-cma-es", "c-cma-es", C3_PIN),
     ("c-cma-es-former-restarts", "c-cma-es", pin_c3("c-cma-es", FORMER)),
     ("c-cma-es-no-restarts", "c-cma-es", (("restarts", 0), *C3_PIN)),
+    ("c-cma-es-c3r", "c-cma-es", (("ridge_centre", "old"),)),
     ("c-cma-es-surrogate", "c-cma-es-surrogate", C3_PIN),
     ("c-cma-es-surrogate-no-restarts", "c-cma-es-surrogate", (("restarts", 0), *C3_PIN)),
     ("c-cma-es-c3r-no-restarts", "c-cma-es", (("restarts", 0), ("ridge_centre", "old"))),

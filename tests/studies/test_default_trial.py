@@ -85,8 +85,10 @@ def test_a_trial_of_the_defaults_own_value_is_the_default_run_and_a_same_run_kee
 @pytest.mark.parametrize("path", COMMITTED, ids=lambda path: path.stem)
 def test_the_committed_comparisons_are_rendered_from_the_committed_runs(path):
     summary = json.loads(path.read_text(encoding="utf-8"))
-    rows, provenance = default_trial.cells(default_trial.HERE / summary["study"] / "runs", summary["options"])
+    folder, base = default_trial.HERE / summary["study"] / "runs", summary["base"]
+    rows, provenance = default_trial.cells(folder, summary["options"], base)
     assert rows == summary["cells"] and provenance == summary["provenance"]
+    assert summary["base_runs"] == len(default_trial.default_documents(folder, base))
     assert path.with_suffix(".md").read_text(encoding="utf-8") == default_trial.render_markdown(summary)
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from creps_gym.optimizers import CCMAES
+from creps_gym.optimizers.ccmaes_surrogate import CCMAESSurrogate
 from creps_gym.optimizers.contextual import contextual_mean
 from creps_gym.optimizers.features import make_features
 
@@ -139,3 +140,14 @@ def test_c3r_survives_a_checkpoint_bit_identically(tmp_path):
 def test_a_bad_ridge_centre_is_rejected_with_its_name(value, error):
     with pytest.raises(error, match=r"ridge_centre: expected one of \('zero', 'old'\), got"):
         CCMAES(3, 1, ridge_centre=value)
+
+
+def test_a_surrogate_checkpoint_without_the_field_loads_as_c3_too():
+    """The surrogate shares C-CMA-ES's config and its loading: an old state without ``ridge_centre`` is C3."""
+    rng = np.random.default_rng(4)
+    optimizer = _told(CCMAESSurrogate(4, 1, initial_mean=0.5, seed=3, ridge_centre="zero"), rng, 6)
+    state = optimizer.state_dict()
+    del state["config"]["ridge_centre"]
+    restored = CCMAESSurrogate.from_state_dict(state)
+    assert restored.config.ridge_centre == "zero" and CCMAESSurrogate(4, 1).config.ridge_centre == "old"
+    _twins_agree(optimizer, restored, rng)

@@ -5,7 +5,9 @@ that validates every option on construction. The algorithm and its references ar
 from __future__ import annotations
 
 import inspect
+from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, field, fields
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -46,7 +48,7 @@ SIGNALS = ("coefficients", "mean")
 RIDGE_CENTRES = ("zero", "old")
 #: The values of options whose default changed after they were added, for a stored config written before
 #: they existed (it has no such field, and ran with the value here): ``ridge_centre`` was C3 until issue 45.
-FORMER_ABSENT = {"ridge_centre": "zero"}
+FORMER_ABSENT: Mapping[str, Any] = MappingProxyType({"ridge_centre": "zero"})
 #: ``restart_baseline_loss``'s default: after a restart, the loss of ``LOSSES`` the first search did not use.
 OTHER_LOSS = "other"
 RESTART_LOSSES = (None, *LOSSES, OTHER_LOSS)

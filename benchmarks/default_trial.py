@@ -41,6 +41,7 @@ import argparse
 import json
 import math
 import re
+import statistics
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -49,6 +50,7 @@ from typing import Any
 if not __package__:  # run by path: the repository root first on sys.path (see benchmarks/__init__.py)
     sys.path[0] = str(Path(__file__).resolve().parents[1])
 
+from benchmarks.study_options import options_dict
 from benchmarks.study_tools import RunSpec, load_document, store_document, write_text
 
 __all__ = [
@@ -73,11 +75,6 @@ STUDIES = ("functions", "ccmaes", "scaling")
 CELL_FIELDS = ("function", "dim", "context_dim", "budget", "samples", "eval_contexts", "initial")
 
 
-def _options_of(spec: dict[str, Any]) -> dict[str, Any]:
-    options = spec.get("options") or ()
-    return dict(options) if isinstance(options, dict) else {name: value for name, value in options}
-
-
 def default_documents(
     folder: Path, base: dict[str, Any] | None = None, match: str = ""
 ) -> list[tuple[Path, dict[str, Any]]]:
@@ -91,7 +88,7 @@ def default_documents(
         document = load_document(path) if not path.is_symlink() else None
         spec = (document or {}).get("spec", {})
         if spec.get("method") == METHOD and spec.get("divergence") is None:
-            if _options_of(spec) == (base or {}):
+            if options_dict(spec.get("options")) == (base or {}):
                 found.append((path, document))
     return found
 
@@ -105,7 +102,7 @@ def stale(document: dict[str, Any]) -> bool:
 def trial_spec(spec: dict[str, Any], options: dict[str, Any]) -> RunSpec:
     """The run of ``spec`` (a document's) with ``options`` added to its optimiser options."""
     fields = {name: value for name, value in spec.items() if name != "options"}
-    return RunSpec(**fields, options=tuple(sorted({**_options_of(spec), **options}.items())))
+    return RunSpec(**fields, options=tuple(sorted({**options_dict(spec.get("options")), **options}.items())))
 
 
 def label_of(options: dict[str, Any]) -> str:
@@ -121,12 +118,6 @@ def outcome(document: dict[str, Any]) -> tuple[float, float]:
     return (math.inf if hit is None else float(hit), float(document["final"]))
 
 
-def _median(values: list[float]) -> float:
-    ordered = sorted(values)
-    middle = len(ordered) // 2
-    return ordered[middle] if len(ordered) % 2 else (ordered[middle - 1] + ordered[middle]) / 2
-
-
 def _finite(value: float) -> float | None:
     return value if math.isfinite(value) else None  # a median run that missed: JSON's null
 
@@ -138,8 +129,8 @@ def _cell(pairs: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict[str, Any]:
     return {
         "runs": len(pairs),
         "hits": [sum(math.isfinite(o[0]) for o in base), sum(math.isfinite(o[0]) for o in trial)],
-        "median_episodes": [_finite(_median([o[0] for o in base])), _finite(_median([o[0] for o in trial]))],
-        "median_final": [_median([o[1] for o in base]), _median([o[1] for o in trial])],
+        "median_episodes": [_finite(statistics.median(o[0] for o in runs)) for runs in (base, trial)],
+        "median_final": [statistics.median(o[1] for o in runs) for runs in (base, trial)],
         "better": sum(t < b for b, t in zip(base, trial, strict=True)),
         "worse": sum(t > b for b, t in zip(base, trial, strict=True)),
         "log_ratio_sum": sum(math.log(t / b) for b, t in both),

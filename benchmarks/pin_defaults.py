@@ -33,8 +33,7 @@ from typing import Any
 if not __package__:  # run by path: the repository root first on sys.path (see benchmarks/__init__.py)
     sys.path[0] = str(Path(__file__).resolve().parents[1])
 
-from benchmarks.study_options import C3_METHODS as METHODS
-from benchmarks.study_options import pin_c3 as pin_options
+from benchmarks.study_options import C3_METHODS, options_dict, pin_c3
 from benchmarks.study_tools import RunSpec, load_document, store_document
 
 __all__ = ["main", "pinned", "plan"]
@@ -54,9 +53,8 @@ def pinned(study: str, path: Path, document: dict[str, Any]) -> tuple[Path, dict
     none."""
     if study in KEYED_BY_OPTIONS or study == "contextual_bbo":
         spec = document.get("spec", {})
-        options = spec.get("options") or ()
-        old = dict(options) if isinstance(options, dict) else dict(tuple(p) for p in options)
-        new = dict(pin_options(spec.get("method", ""), old))
+        old = options_dict(spec.get("options"))
+        new = dict(pin_c3(spec.get("method", ""), old))
         if new == old:
             return None
         if study == "contextual_bbo":
@@ -67,16 +65,16 @@ def pinned(study: str, path: Path, document: dict[str, Any]) -> tuple[Path, dict
         return path.with_name(f"{key}.json"), {**document, "spec": new_spec}
     if study == "low_budget":
         method = document.get("method", {})
-        if method.get("optimizer") not in METHODS or "ridge_centre" in method.get("options", {}):
+        if method.get("optimizer") not in C3_METHODS or "ridge_centre" in method.get("options", {}):
             return None
-        options = dict(pin_options(method["optimizer"], method["options"]))
+        options = dict(pin_c3(method["optimizer"], method["options"]))
         return path, {**document, "method": {**method, "options": options}}
     if study == "kick":
         name = document.get("name") or path.name.split("-trial")[0]
         setting = document.get("setting", {})
-        if name not in METHODS or "options" not in setting or "ridge_centre" in setting["options"]:
+        if name not in C3_METHODS or "options" not in setting or "ridge_centre" in setting["options"]:
             return None  # another method, a selector's state (no setting), or a C3r run
-        options = dict(pin_options(name, setting["options"]))
+        options = dict(pin_c3(name, setting["options"]))
         new = {**document, "setting": {**setting, "options": options}}
         if "options" in document:
             new["options"] = options

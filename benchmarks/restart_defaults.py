@@ -39,6 +39,7 @@ from typing import Any
 if not __package__:  # run by path: the repository root first on sys.path (see benchmarks/__init__.py)
     sys.path[0] = str(Path(__file__).resolve().parents[1])
 
+from benchmarks.study_options import options_dict
 from benchmarks.study_tools import RunSpec, load_document, store_document
 
 __all__ = [
@@ -64,16 +65,11 @@ STUDIES = ("functions", "ccmaes", "scaling", "contextual_bbo")
 FORMER_LABEL = "former-restarts"
 
 
-def _options(spec: dict[str, Any]) -> dict[str, Any]:
-    options = spec.get("options", ())
-    return dict(options) if isinstance(options, dict) else {name: value for name, value in options}
-
-
 def affected(document: dict[str, Any], recorded: bool = True) -> bool:
     """Whether the new restart defaults can change ``document`` (see the module docstring); with
     ``recorded=False`` also when it records that it never restarted (every run of the former defaults)."""
     spec = document.get("spec", {})
-    options = _options(spec)
+    options = options_dict(spec.get("options"))
     if spec.get("method") not in METHODS or options.get("restarts") == 0:
         return False
     if {name for name, _ in FORMER} <= set(options):
@@ -100,7 +96,7 @@ def documents(study: str, match: str = "", recorded: bool = True) -> list[Path]:
 def _protocol_spec(spec: dict[str, Any]) -> Any:
     from benchmarks.contextual_bbo.protocol import ProtocolSpec
 
-    fields = dict(spec, options=tuple(sorted(_options(spec).items())))
+    fields = dict(spec, options=tuple(sorted(options_dict(spec.get("options")).items())))
     return ProtocolSpec(**{name: fields[name] for name in ("function", "method", "seed", "options", "label")})
 
 
@@ -113,7 +109,7 @@ def _spec_of(study: str, document: dict[str, Any]) -> Any:
 def pinned(study: str, document: dict[str, Any]) -> tuple[str, dict[str, Any]]:
     """The key and document of ``document`` under its spec with the former defaults as options."""
     spec = document["spec"]
-    options = dict(sorted({**_options(spec), **dict(FORMER)}.items()))
+    options = dict(sorted({**options_dict(spec.get("options")), **dict(FORMER)}.items()))
     if study == "contextual_bbo":
         label = f"{spec['label'] or spec['method']}-{FORMER_LABEL}"
         new_spec = dict(spec, options=options, label=label)

@@ -13,7 +13,15 @@ from typing import Any
 from creps_gym.optimizers import optimizer_names
 from creps_gym.optimizers.registry import optimizer_class
 
-__all__ = ["C3_METHODS", "C3_PIN", "OWN_OPTIONS", "canonical_options", "config_fields", "pin_c3"]
+__all__ = [
+    "C3_METHODS",
+    "C3_PIN",
+    "OWN_OPTIONS",
+    "canonical_options",
+    "config_fields",
+    "options_dict",
+    "pin_c3",
+]
 
 #: Options a :class:`RunSpec` sets through its own fields, the runner or the study, not through ``options``.
 OWN_OPTIONS = ("max_interpolation", "divide_by_z", "max_std_growth", "seed", "initial_mean", "initial_cov")
@@ -25,10 +33,18 @@ C3_PIN = (("ridge_centre", "zero"),)
 C3_METHODS = ("c-cma-es", "c-cma-es-surrogate")
 
 
+def options_dict(options: Any) -> dict[str, Any]:
+    """Optimiser options given as (name, value) pairs (a stored document's lists too) or a mapping, as a
+    dict; None or empty: {}."""
+    if not options:
+        return {}
+    return dict(options.items()) if isinstance(options, Mapping) else {name: value for name, value in options}
+
+
 def pin_c3(method: str, options: Any = ()) -> tuple[tuple[str, Any], ...]:
     """``options`` (pairs or a mapping) as sorted pairs, with :data:`C3_PIN` added for a method of
     :data:`C3_METHODS` that does not set ``ridge_centre`` itself."""
-    pairs = dict(options.items() if isinstance(options, Mapping) else (tuple(p) for p in options))
+    pairs = options_dict(options)
     if method in C3_METHODS:
         pairs = {**dict(C3_PIN), **pairs}
     return tuple(sorted(pairs.items()))

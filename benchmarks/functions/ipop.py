@@ -32,6 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 from benchmarks.provenance import provenance, provenance_text
+from benchmarks.study_tools import write_text
 from creps_gym.envs.base import initial_distribution
 from creps_gym.envs.evaluation import contextual_model
 from creps_gym.optimizers import make_optimizer
@@ -134,9 +135,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     print(f"z={z} seed={seed} {label}: final {runs[-1]['final']:.3g}", flush=True)
         document = {"seeds": args.seeds, "context_dims": [1, 3], "runs": runs, "provenance": provenance()}
         args.out.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(document, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+        write_text(path, json.dumps(document, indent=1, allow_nan=False) + "\n")
     document = json.loads(path.read_text(encoding="utf-8"))
-    (args.out / "ipop.md").write_text(render(document), encoding="utf-8")
+    write_text(args.out / "ipop.md", render(document))
     print(f"wrote {args.out / 'ipop.md'}")
     return 0
 

@@ -1,15 +1,13 @@
 """c-bo built on BoTorch: the low-budget study's BoTorch column (issue 44, items 1 and 5).
 
-Issue 44 asks for a GP "from a well-kept library: scikit-learn's GaussianProcessRegressor or BoTorch. Measure
-both on this issue's study and choose". ``creps_gym``'s ``c-bo`` keeps its own GP (the optimisers import only
-numpy and scipy; ``gp_backends.py`` measures its speed against both libraries), so this module is the other
-side of that choice, measured on the same study: the same contextual BO with BoTorch's model and optimisers
-in place of c-bo's own, written as a BoTorch user would write it.
+The column ``c-bo-botorch``: the same contextual BO with BoTorch's model and optimisers in place of c-bo's
+own, written as a BoTorch user would write it. Why the study measures it is in
+:mod:`benchmarks.low_budget.library_gp`.
 
-:class:`BoTorchCBO` subclasses :class:`~creps_gym.optimizers.cbo.ContextualBO` and keeps everything that is
-not the model: the data, the scaling of s and θ to the unit box, the initial design, the returns' transform,
-the refit schedule (``refit_growth``, ``fit_points``), the kriging believer within a batch, Eq. (R2) and
-R1's trust region, the distilled policy and the checkpoints' data. What BoTorch does:
+:class:`BoTorchCBO` subclasses :class:`~benchmarks.low_budget.library_gp.LibraryGPCBO` and keeps everything
+that is not the model (the data, the scaling, the initial design, the transform, the refit schedule, the
+kriging believer, Eq. (R2) and R1's trust region, the distilled policy and the checkpoints' data).
+What BoTorch does:
 
 - **The model**: ``SingleTaskGP`` with BoTorch's defaults (an RBF kernel with one lengthscale per input and
   BoTorch's dimension-scaled log-normal prior, a learned constant mean, the outcomes standardised), its
@@ -35,7 +33,7 @@ build of torch).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -43,17 +41,14 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from creps_gym.optimizers.cbo import RECOMMEND_SEED, ContextualBO
+from benchmarks.low_budget.library_gp import SEEDS, LibraryGPCBO, LibraryGPConfig
+from creps_gym.optimizers.cbo import RECOMMEND_SEED
 from creps_gym.optimizers.cbo_config import CBOConfig, _bounded_int
-from creps_gym.optimizers.cbo_state import check_kernel_memory, read_gp_data
 
 __all__ = ["BoTorchCBO", "BoTorchConfig", "TorchGP"]
 
 Array = NDArray[np.float64]
-#: The options of c-bo's own GP that BoTorch's model has no use for, with the values they must keep.
-FIXED_OPTIONS = {"prior_mean": "min", "trend": "constant", "hyper_restarts": 1}
 MAX_THREADS = 64
-_SEEDS = 2**31 - 1
 
 
 def _libraries() -> dict[str, Any]:
@@ -98,26 +93,20 @@ def _torch_call(torch: Any, seed: int, threads: int) -> Iterator[None]:
 
 
 @dataclass(frozen=True, eq=False)
-class BoTorchConfig(CBOConfig):
-    """:class:`~creps_gym.optimizers.cbo_config.CBOConfig` for :class:`BoTorchCBO`, and ``threads``.
+class BoTorchConfig(LibraryGPConfig):
+    """:class:`~benchmarks.low_budget.library_gp.LibraryGPConfig` for :class:`BoTorchCBO`, and ``threads``.
 
     threads : int    torch's thread count during the optimiser's calls (default 1: one core, as
         ``OPENBLAS_NUM_THREADS=1`` gives the other methods of the study).
-
-    ``prior_mean``, ``trend`` and ``hyper_restarts`` must keep their defaults (:data:`FIXED_OPTIONS`).
     """
 
+    column: ClassVar[str] = "c-bo-botorch"
+    library: ClassVar[str] = "BoTorch"
     threads: int = 1
 
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "threads", _bounded_int(self.threads, "threads", 1, MAX_THREADS))
-        for name, default in FIXED_OPTIONS.items():
-            if getattr(self, name) != default:
-                raise ValueError(
-                    f"{name}: expected {default!r} (an option of c-bo's own GP; c-bo-botorch uses BoTorch's "
-                    f"model), got {getattr(self, name)!r}"
-                )
 
 
 class TorchGP:
@@ -148,7 +137,7 @@ class TorchGP:
             return TorchGP(self.gp.condition_on_observations(point, value.double()), torch)
 
 
-class BoTorchCBO(ContextualBO):
+class BoTorchCBO(LibraryGPCBO):
     """c-bo with BoTorch's model, acquisitions and optimiser (see the module docstring).
 
     Parameters
@@ -161,14 +150,10 @@ class BoTorchCBO(ContextualBO):
 
     kind: ClassVar[str] = "c-bo-botorch"
     config_class: ClassVar[type] = BoTorchConfig
-    #: The active selector's hook needs c-bo's own GP (its posterior covariances); none is offered.
-    context_utility = None  # type: ignore[assignment]
 
     def _init_from_config(self, config: CBOConfig) -> None:
         self._lib = _libraries()
         super()._init_from_config(config)
-        self.hyper_names: list[str] = []
-        self.hyper = np.zeros(0)
 
     def _call(self, seed: int) -> Any:
         return _torch_call(self._lib["torch"], seed, self.config.threads)
@@ -221,40 +206,11 @@ class BoTorchCBO(ContextualBO):
         noise = float(model.gp.likelihood.noise.detach().numpy().ravel()[0])
         return np.concatenate([np.log(lengthscales), [signal, np.log(noise)]]).astype(np.float64)
 
-    def _update(self, contexts: Array, params: Array, returns: Array) -> None:
-        all_contexts = np.vstack([self.contexts, contexts])
-        all_params, all_returns = np.vstack([self.params, params]), np.concatenate([self.returns, returns])
-        n = all_returns.shape[0]
-        check_kernel_memory(n, self.n_params, self.n_context_dims, "returns")
-        refit = self.fitted_at == 0 or n >= self.fitted_at * self.config.refit_growth
-        names, hyper, scale, fitted_at = self.hyper_names, self.hyper, self.context_scale, self.fitted_at
-        rng_state = self.rng.bit_generator.state
-        try:
-            if refit:
-                scale = self._fit_scale(all_contexts)
-            inputs = self._inputs(all_contexts, all_params, scale)
-            transform = self._chosen_transform(inputs, all_returns)
-            targets = self._targets(all_returns, None, transform)
-            if refit:
-                recent = slice(max(0, n - self.config.fit_points), n)
-                seed = int(self.rng.integers(_SEEDS))
-                names, hyper = self._fit(inputs[recent], targets[recent], seed)
-                fitted_at = n
-            model = self._model(inputs, targets, names, hyper)
-        except BaseException:
-            self.rng.bit_generator.state = rng_state  # a failed tell changes nothing
-            raise
-        self.contexts, self.params, self.returns = all_contexts, all_params, all_returns
-        self.hyper_names, self.hyper, self.context_scale, self.fitted_at = names, hyper, scale, fitted_at
-        self.model, self._transform = model, transform  # type: ignore[assignment]
-        self.log_hyper = self._log_hyper(model)
-        self._diagnostics = self._model_diagnostics(refit)
-
     # -- ask -----------------------------------------------------------------------------------------------
     def _propose(self, model: Any, context: Array) -> Array:
         """The acquisition's maximiser over θ's unit box at a scaled context (z,), by ``optimize_acqf``."""
         lib, p, z = self._lib, self.n_params, self.n_context_dims
-        seed = int(self.rng.integers(_SEEDS))
+        seed = int(self.rng.integers(SEEDS))
         torch, fixed = lib["torch"], self._tensor(context[None, :])
         with self._call(seed):
             if self.config.acquisition == "ucb":
@@ -306,24 +262,3 @@ class BoTorchCBO(ContextualBO):
         options = np.vstack([unit, good])
         inputs = np.hstack([np.tile(context, (options.shape[0], 1)), options])
         return options[int(np.argmax(model.predict(inputs)[0]))]  # type: ignore[union-attr]
-
-    # -- checkpoints ---------------------------------------------------------------------------------------
-    def _state(self) -> dict[str, Any]:
-        return {**super()._state(), "hyper_names": list(self.hyper_names), "hyper": self.hyper.copy()}
-
-    def _restore_data(self, state: Mapping[str, Any]) -> None:
-        data = read_gp_data(state, self.n_params, self.n_context_dims)
-        names, hyper = state["hyper_names"], np.asarray(state["hyper"])
-        if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
-            raise TypeError(f"state['hyper_names']: expected a list of strings, got {names!r}")
-        if hyper.dtype != np.float64 or hyper.ndim != 1 or not np.isfinite(hyper).all():
-            raise ValueError(
-                f"state['hyper']: expected a finite float64 vector, got {hyper.dtype} of shape {hyper.shape}"
-            )
-        self.contexts, self.params, self.returns = data.contexts, data.params, data.returns
-        self.log_hyper, self.context_scale, self.fitted_at = data.log_hyper, data.scale, data.fitted_at
-        self.hyper_names, self.hyper = names, hyper
-        if self.returns.shape[0] >= 1 and self.fitted_at > 0:
-            inputs = self._inputs(self.contexts, self.params)
-            self._transform = self._chosen_transform(inputs, self.returns)
-            self.model = self._model(inputs, self._targets(self.returns), names, hyper)  # type: ignore

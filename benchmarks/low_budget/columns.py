@@ -22,9 +22,9 @@ class Method:
     that picks every batch's training contexts instead of the env's sampler; it is bound to the env's
     context box and told each batch's returns and the optimiser's diagnostics, as the runner does. An
     active selector for c-bo is one more entry, e.g. ``Method("c-bo+active", "c-bo", selector="active")``.
-    ``factory`` (``"module:Class"``) builds an optimiser outside the registry (BoTorch's c-bo, whose library
-    the package does not depend on) with ``make_optimizer``'s arguments; ``optimizer`` then names the
-    registered optimiser whose batch size it takes.
+    ``factory`` (``"module:Class"``) builds an optimiser outside the registry (c-bo on BoTorch's or
+    scikit-learn's GP, libraries the package does not depend on) with ``make_optimizer``'s arguments;
+    ``optimizer`` then names the registered optimiser whose batch size it takes.
     """
 
     name: str
@@ -66,6 +66,12 @@ METHODS = (
         "c-bo",
         note="max-value entropy search on BoTorch's model and optimiser (botorch_cbo.py)",
         factory="benchmarks.low_budget.botorch_cbo:BoTorchCBO",
+    ),
+    Method(
+        "c-bo-sklearn",
+        "c-bo",
+        note="max-value entropy search on scikit-learn's GaussianProcessRegressor (sklearn_cbo.py)",
+        factory="benchmarks.low_budget.sklearn_cbo:SklearnCBO",
     ),
     Method("creps", "creps", (("epsilon", 1.0),), note="ε = 1, as Fabisch (GECCO 2019)"),
     Method("creps-cma-old", "creps-cma-old", note="the paper's CREPS-CMA"),

@@ -23,6 +23,20 @@ def make_or_skip(env_id: str, vector: bool = False, **kwargs: Any) -> Any:
         pytest.skip(f"{env_id}: optional dependency not installed ({exc})")
 
 
+def file_size_limited(n_bytes: int) -> dict[str, Any]:
+    """``subprocess.run`` keywords for a child under ``ulimit -f`` of ``n_bytes`` (the CLI ignores SIGXFSZ,
+    so a write past it fails with EFBIG). The child writes no bytecode: a ``.pyc`` it wrote would be cut at
+    the limit, and Python keeps a short write, so every later process importing that module would die on the
+    cut file (``marshal data too short``); it still reads the bytecode the others cached."""
+
+    def limit() -> None:
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_FSIZE, (n_bytes, n_bytes))
+
+    return {"preexec_fn": limit, "env": {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}}
+
+
 def python_blocks(path: Path) -> list[str]:
     """The ```python code blocks of a Markdown file, in order."""
     return re.findall(r"```python\n(.*?)```", Path(path).read_text(), flags=re.DOTALL)

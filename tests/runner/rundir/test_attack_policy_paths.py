@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import itertools
 import os
-import resource
 import shutil
 import subprocess
 import sys
@@ -18,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import EXTRAS, SPHERE, cli_command
+from helpers import EXTRAS, SPHERE, cli_command, file_size_limited
 
 from creps_gym.cli import main
 from creps_gym.errors import RunDirError
@@ -93,13 +92,6 @@ def _snapshot(folder: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(folder.iterdir()) if p.is_file() and not p.is_symlink()}
 
 
-def _file_limit(n_bytes: int):
-    def limit():  # `ulimit -f`: the CLI ignores SIGXFSZ, so a write past it fails with EFBIG
-        resource.setrlimit(resource.RLIMIT_FSIZE, (n_bytes, n_bytes))
-
-    return limit
-
-
 # -- item 15: every output path follows the rules -o follows -------------------------------------------------
 def _plant(tmp_path: Path, kind: str, other: Path) -> Path:
     if kind == "fifo":
@@ -145,6 +137,16 @@ def test_policy_save_follows_a_link_and_names_its_target(tmp_path, capsys, spher
 
 
 @LINUX
+def test_a_child_under_a_file_size_limit_leaves_no_cut_bytecode_behind(tmp_path):
+    """The suite's children share one bytecode cache where PYTHONDONTWRITEBYTECODE is set (tests/conftest.py):
+    a child under ``ulimit -f`` must not write there, or a ``.pyc`` cut at the limit breaks later children."""
+    keywords = file_size_limited(1024)
+    keywords["env"]["PYTHONPYCACHEPREFIX"] = str(tmp_path)
+    done = subprocess.run([sys.executable, "-c", "import json.decoder"], timeout=60, **keywords)
+    assert done.returncode == 0 and list(tmp_path.rglob("*.pyc")) == []
+
+
+@LINUX
 @pytest.mark.slow
 def test_a_policy_save_that_cannot_be_written_names_the_file(tmp_path, sphere_run):
     target = tmp_path / "big.npz"
@@ -153,7 +155,7 @@ def test_a_policy_save_that_cannot_be_written_names_the_file(tmp_path, sphere_ru
         capture_output=True,
         text=True,
         timeout=120,
-        preexec_fn=_file_limit(1024),
+        **file_size_limited(1024),
     )
     assert result.returncode == 2, result.stderr
     assert f"argument --save: cannot write {target}: File too large" in result.stderr
@@ -226,7 +228,7 @@ def test_a_video_cut_by_a_full_disk_is_an_error_naming_the_file(
         capture_output=True,
         text=True,
         timeout=120,
-        preexec_fn=_file_limit(4096),
+        **file_size_limited(4096),
     )
     assert result.returncode == 2, result.stderr
     assert f"argument --video: cannot write {target}: " in result.stderr and '"video"' not in result.stdout

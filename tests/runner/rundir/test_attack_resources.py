@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import SPHERE, cli_command, cli_in_process, run_argv
+from helpers import SPHERE, cli_command, cli_in_process, file_size_limited, run_argv
 from rundir_setup import (
     POSIX,
     checked_cli,
@@ -82,11 +82,8 @@ def test_a_write_that_fails_stops_the_run_with_exit_3_and_resume_is_bit_identica
 def test_a_file_size_limit_gives_exit_3_not_a_signal_and_resume_is_bit_identical(tmp_path, templates):
     out = tmp_path / "run"
 
-    def limit_file_size():
-        resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))  # `ulimit -f 2`: log.jsonl outgrows it
-
-    command = cli_command(*six_iterations(out))
-    done = subprocess.run(command, capture_output=True, text=True, timeout=120, preexec_fn=limit_file_size)
+    command = cli_command(*six_iterations(out))  # `ulimit -f 2`: log.jsonl outgrows it
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120, **file_size_limited(2048))
     assert done.returncode == 3, (done.returncode, done.stderr)  # not -SIGXFSZ
     assert "File too large, EFBIG" in one_error_naming(done.stderr, out)
     assert resume(out).equals(templates["history"])
@@ -231,7 +228,6 @@ def test_ctrl_c_checkpoints_so_that_resume_loses_nothing(tmp_path):
 # -- issue 15 item 15: sizes that would exhaust the machine are refused up front ---------------------------
 def limited_memory(gigabytes: float):
     def limit():  # so that a missing guard fails with MemoryError instead of hurting the machine
-        import resource
 
         resource.setrlimit(resource.RLIMIT_AS, (int(gigabytes * 2**30),) * 2)
 

@@ -165,6 +165,46 @@ def acquisition_table(grouped: Cells, tasks: Sequence[str], budgets: Sequence[in
     return "\n".join(lines) + "\n"
 
 
+#: The columns of c-bo on a library's GP (library_gp.py), set beside c-bo on its own.
+LIBRARY_COLUMNS = ("c-bo-botorch", "c-bo-sklearn")
+
+
+def library_table(grouped: Cells, tasks: Sequence[str], seeds: int, budgets: Sequence[int]) -> str:
+    """c-bo on its own GP against the same c-bo on BoTorch's and on scikit-learn's (issue 44: "measure both
+    on this issue's study and choose"), on the tasks where a library column has runs: the medians over seeds
+    at each budget (``[k/n]``: k of the n seeds), and at the last budget the seeds where the library's run
+    ends better than c-bo's of the same seed, of those both finished, with the sign test's p-value."""
+    head = " | ".join(f"{b} episodes" for b in budgets)
+    lines = [
+        f"| task | method | {head} | better than c-bo at {budgets[-1]} |",
+        "|---|---|" + "---|" * (len(budgets) + 1),
+    ]
+    for task in tasks:
+        if any(grouped.get((task, m)) for m in LIBRARY_COLUMNS):
+            own = grouped.get((task, "c-bo"))
+            lines += [
+                _library_row(task, m, grouped.get((task, m)), own, seeds, budgets)
+                for m in ("c-bo", *LIBRARY_COLUMNS)
+            ]
+    return "\n".join(lines) + "\n"
+
+
+def _library_row(task: str, method: str, runs: Any, own: Any, seeds: int, budgets: Sequence[int]) -> str:
+    """:func:`library_table`'s row of ``method``'s ``runs`` (``own``: c-bo's)."""
+    medians = []
+    for budget in budgets:
+        values = _values(runs or [], budget)
+        partial = f" [{values.size}/{seeds}]" if 0 < values.size < seeds else ""
+        medians.append(_g(float(np.median(values)) if values.size else None) + partial)
+    theirs, mine = _by_seed(runs, budgets[-1]), _by_seed(own, budgets[-1])
+    pairs = [(theirs[s], mine[s]) for s in sorted(set(theirs) & set(mine)) if theirs[s] != mine[s]]
+    wins = sum((a < b) == task_by_name(task).lower_is_better for a, b in pairs)
+    paired = (
+        f"{wins}/{len(pairs)} (p {sign_test(wins, len(pairs)):.2g})" if pairs and method != "c-bo" else ""
+    )
+    return f"| {task} | `{method}` | {' | '.join(medians)} | {paired or '—' if method != 'c-bo' else ''} |"
+
+
 def _g(value: float | None) -> str:
     return "—" if value is None else f"{value:.3g}"
 

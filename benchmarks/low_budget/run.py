@@ -36,6 +36,7 @@ from benchmarks.low_budget.report import (
     completeness_text,
     cost_text,
     grouped_tasks,
+    library_table,
     plot_curves,
     targets_table,
     task_table,
@@ -172,6 +173,13 @@ def write_report(args: argparse.Namespace, documents: list[dict[str, Any]], timi
         "test's two-sided p-value (the same seed starts both from the same initial design).",
         "",
         acquisition_table(grouped, tasks, budgets),
+        "## c-bo on its own GP and on the libraries' (BoTorch, scikit-learn)",
+        "",
+        "The same c-bo with BoTorch's model and optimiser (`c-bo-botorch`) or scikit-learn's "
+        "`GaussianProcessRegressor` (`c-bo-sklearn`) in place of its own GP (`library_gp.py`), on the tasks "
+        "where they have runs: medians over seeds (regret or the kicks' metric, as in the tables per task).",
+        "",
+        library_table(grouped, tasks, args.seeds, budgets),
         f"## The optimiser's own seconds per asked episode at {budgets[-1]} episodes",
         "",
         "The last batch's ask + tell per episode in CPU seconds (median over seeds, and the largest), its "

@@ -83,6 +83,26 @@ def test_mes_against_ucb_is_counted_seed_by_seed_with_an_exact_sign_test() -> No
     assert "| KickFlexibilityLowDim | 1/2 (p 1) |" in table and "Sphere" not in table
 
 
+def test_the_library_columns_are_set_beside_c_bo_seed_by_seed() -> None:
+    from benchmarks.low_budget.report import library_table
+
+    def run(method, seed, values):
+        spec = {"task": "Sphere-p2-z1", "method": method, "seed": seed}
+        return {"spec": spec, "budgets": [50, 100], "values": values}
+
+    grouped = {  # regret: lower is better; at 100 sklearn beats c-bo on seeds 0 and 1, ties on 2
+        ("Sphere-p2-z1", "c-bo"): [run("c-bo", s, [9.0, v]) for s, v in enumerate([3.0, 2.0, 1.0])],
+        ("Sphere-p2-z1", "c-bo-sklearn"): [
+            run("c-bo-sklearn", s, [8.0, v]) for s, v in enumerate([1.0, 1.0, 1.0])
+        ],
+        ("Rosenbrock-p2-z1", "c-bo"): [run("c-bo", 0, [1.0, 1.0])],  # no library run: no row
+    }
+    table = library_table(grouped, ["Sphere-p2-z1", "Rosenbrock-p2-z1"], 4, [50, 100])
+    assert "| Sphere-p2-z1 | `c-bo` | 9 [3/4] | 2 [3/4] |  |" in table
+    assert "| Sphere-p2-z1 | `c-bo-sklearn` | 8 [3/4] | 1 [3/4] | 2/2 (p 0.5) |" in table
+    assert "| Sphere-p2-z1 | `c-bo-botorch` | — | — | — |" in table and "Rosenbrock" not in table
+
+
 def test_every_method_starts_from_the_same_distribution(monkeypatch: pytest.MonkeyPatch) -> None:
     seen = []
 

@@ -147,6 +147,12 @@ def study_in_process(study: str, *args: Any) -> str:
     return stdout.getvalue()
 
 
+def no_figure(*args: Any) -> Path:
+    """A stand-in for a study's ``plot_*`` function where a test checks no figure: draws nothing and returns
+    the figure's path (its first ``Path`` argument), as the plotting functions do."""
+    return next(arg for arg in args if isinstance(arg, Path))
+
+
 # -- forged checkpoints and crashes: the run-folder attack and recovery tests
 _CHECKPOINT_KEYS = ("format", "fingerprint", "state_crc")
 

@@ -10,6 +10,7 @@ depth (a function's deferred import runs as surely as a top-level one, only late
 from __future__ import annotations
 
 import ast
+import functools
 import sys
 from pathlib import Path
 
@@ -61,12 +62,19 @@ def imported_modules(source: str, package: str, modules: set[str]) -> set[str]:
 
 
 def import_graph() -> dict[str, set[str]]:
-    """Module name -> the other package modules it imports."""
+    """Module name -> the other package modules it imports (a copy of the graph read once per process)."""
+    return {name: set(modules) for name, modules in _import_graph().items()}
+
+
+@functools.cache
+def _import_graph() -> dict[str, frozenset[str]]:
     graph = {}
     files = {module_name(path): path for path in PACKAGE.rglob("*.py")}
     for name, path in files.items():
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        graph[name] = imported_modules(path.read_text(encoding="utf-8"), package, set(files)) - {name}
+        graph[name] = frozenset(
+            imported_modules(path.read_text(encoding="utf-8"), package, set(files)) - {name}
+        )
     return graph
 
 
@@ -138,7 +146,12 @@ MUJOCO_HOMES = ("creps_gym.envs.kick", "creps_gym.envs.opengl", "creps_gym.wrapp
 
 def external_imports(source: str) -> list[tuple[str, bool]]:
     """(top-level module name, deferred) of every absolute import of ``source`` outside ``creps_gym``;
-    deferred: inside a function, so it runs only when that function is called."""
+    deferred: inside a function, so it runs only when that function is called (each source parsed once)."""
+    return list(_external_imports(source))
+
+
+@functools.cache
+def _external_imports(source: str) -> tuple[tuple[str, bool], ...]:
     found: list[tuple[str, bool]] = []
 
     def visit(node: ast.AST, deferred: bool) -> None:
@@ -153,7 +166,7 @@ def external_imports(source: str) -> list[tuple[str, bool]]:
             visit(child, inner)
 
     visit(ast.parse(source), False)
-    return [(name, deferred) for name, deferred in found if name != "creps_gym"]
+    return tuple((name, deferred) for name, deferred in found if name != "creps_gym")
 
 
 #: The optional libraries (import name: distribution in ``pyproject.toml``'s extras): imported only where

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import re
 import shlex
+import shutil
 import signal
 import subprocess
 import time
@@ -42,6 +43,23 @@ def _workspace(tmp_path: Path) -> Path:
     return tmp_path
 
 
+@pytest.fixture(scope="module")
+def _ran_once(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    work = _workspace(tmp_path_factory.mktemp("workspace"))
+    run = cli(*COMMANDS[0][:-2], "--out", "runs/x", "--iterations", "3", "--no-plot", cwd=work)
+    assert run.returncode == 0, run.stderr
+    return work
+
+
+@pytest.fixture
+def ran(_ran_once: Path, tmp_path: Path) -> Path:
+    """A workspace in which the guide's ``run`` (with ``--import``) ran 3 iterations into ``runs/x``, in a
+    process of its own: a copy, in ``tmp_path``, of the one computed once per module (the run folder names
+    no absolute path). A ``scipy.py.imported`` mark the run left would be copied too."""
+    shutil.copytree(_ran_once, tmp_path, dirs_exist_ok=True)
+    return tmp_path
+
+
 @EXTRAS  # `plot` needs matplotlib
 @pytest.mark.slow
 def test_the_guide_module_is_short_and_its_commands_run_resume_plot_and_export(tmp_path):
@@ -65,11 +83,9 @@ def test_the_guide_module_is_short_and_its_commands_run_resume_plot_and_export(t
 
 
 @pytest.mark.slow
-def test_without_import_every_command_refuses_the_run_and_names_the_flag(tmp_path):
+def test_without_import_every_command_refuses_the_run_and_names_the_flag(ran):
     """In processes: a user's optimiser registered by one command must not be known to the next."""
-    work = _workspace(tmp_path)
-    run = cli(*COMMANDS[0][:-2], "--out", "runs/x", "--iterations", "3", "--no-plot", cwd=work)
-    assert run.returncode == 0, run.stderr
+    work = ran
     for command in (
         ["resume", "runs/x"],
         ["plot", "runs/x", "-o", "x.png"],
@@ -85,10 +101,8 @@ def test_without_import_every_command_refuses_the_run_and_names_the_flag(tmp_pat
 
 @EXTRAS  # `plot` needs matplotlib
 @pytest.mark.slow
-def test_a_run_folder_never_puts_its_files_on_the_path(tmp_path):
-    work = _workspace(tmp_path)
-    run = cli(*COMMANDS[0][:-2], "--out", "runs/x", "--iterations", "3", "--no-plot", cwd=work)
-    assert run.returncode == 0, run.stderr
+def test_a_run_folder_never_puts_its_files_on_the_path(ran):
+    work = ran
     folder = work / "runs" / "x"
     (folder / "scipy.py").write_text(SHADOW)
     (folder / "my_search.py").write_text(MODULE.replace("my-search", "folder-search"))

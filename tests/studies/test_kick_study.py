@@ -3,6 +3,7 @@ is exactly what the committed code renders from the committed ``results.json``."
 
 from __future__ import annotations
 
+import copy
 import json
 import shutil
 import subprocess
@@ -29,11 +30,48 @@ def precision_env() -> study.OffsetParams:
     return study.make_env("precision", threads=1)
 
 
+@pytest.fixture(scope="module")
+def trained(precision_env, tmp_path_factory: pytest.TempPathFactory):
+    """``train(spec, trial, seed, folder)``: ``study.train_run(spec, precision_env, trial, seed, folder,
+    checkpoint_every=1)``. A run is trained once per module, into a folder of its own: each call copies that
+    folder's files into ``folder`` and returns a copy of the result (runs several tests share)."""
+    runs: dict[str, tuple[Path, dict]] = {}
+
+    def train(spec: study.RunSpec, trial: int, seed: int, folder: Path) -> dict:
+        key = f"{spec!r} {trial} {seed}"
+        if key not in runs:
+            computed = tmp_path_factory.mktemp("trained")
+            result = study.train_run(spec, precision_env, trial, seed, computed, checkpoint_every=1)
+            runs[key] = computed, result
+        computed, result = runs[key]
+        shutil.copytree(computed, folder, dirs_exist_ok=True)
+        return copy.deepcopy(result)
+
+    return train
+
+
+@pytest.fixture(scope="module")
+def _oracle_at_3_once(precision_env, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    folder = tmp_path_factory.mktemp("oracle")
+    return folder, oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=folder)
+
+
+@pytest.fixture
+def oracle_at_3(_oracle_at_3_once, tmp_path: Path) -> tuple[Path, dict]:
+    """The precision oracle at target 3 (26 episodes, seed 0), computed once per module: a copy of the
+    folder it was cached in (``tmp_path / "oracle"``) and a copy of the result it returned."""
+    folder, result = _oracle_at_3_once
+    shutil.copytree(folder, tmp_path / "oracle")
+    return tmp_path / "oracle", copy.deepcopy(result)
+
+
 @pytest.mark.parametrize("name", ["c-cma-es", "creps-cma-old"])
 @pytest.mark.slow
-def test_an_interrupted_run_resumes_bit_identically(name: str, precision_env, tmp_path: Path) -> None:
+def test_an_interrupted_run_resumes_bit_identically(
+    name: str, precision_env, trained, tmp_path: Path
+) -> None:
     spec = study.RunSpec("precision", name, samples=6, iterations=4, options={"ridge": 1e-2})
-    straight = study.train_run(spec, precision_env, 0, 7, tmp_path / "straight", checkpoint_every=1)
+    straight = trained(spec, 0, 7, tmp_path / "straight")
     half = study.RunSpec("precision", name, samples=6, iterations=2, options={"ridge": 1e-2})
     study.train_run(half, precision_env, 0, 7, tmp_path / "resumed", checkpoint_every=1)
     resumed = study.train_run(spec, precision_env, 0, 7, tmp_path / "resumed", checkpoint_every=1)
@@ -43,9 +81,9 @@ def test_an_interrupted_run_resumes_bit_identically(name: str, precision_env, tm
 
 
 @pytest.mark.slow
-def test_a_finished_run_is_read_back_and_the_seed_changes_it(precision_env, tmp_path: Path) -> None:
+def test_a_finished_run_is_read_back_and_the_seed_changes_it(precision_env, trained, tmp_path: Path) -> None:
     spec = study.RunSpec("precision", "creps", samples=6, iterations=2)
-    first = study.train_run(spec, precision_env, 0, 0, tmp_path, checkpoint_every=1)
+    first = trained(spec, 0, 0, tmp_path)
     path = tmp_path / "creps-trial0.json"
     document = json.loads(path.read_text())
     document["values"] = [-1.0] * 10  # a cached result is returned as it is, without training again
@@ -60,10 +98,10 @@ def test_a_finished_run_is_read_back_and_the_seed_changes_it(precision_env, tmp_
 
 @pytest.mark.slow
 def test_study_files_are_read_bounded_and_a_linked_run_file_is_refused(
-    precision_env, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    precision_env, trained, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     spec = study.RunSpec("precision", "creps", samples=6, iterations=2)
-    study.train_run(spec, precision_env, 0, 0, tmp_path / "real", checkpoint_every=1)
+    trained(spec, 0, 0, tmp_path / "real")
     linked = tmp_path / "linked" / "runs" / "precision"
     linked.mkdir(parents=True)
     (linked / "creps-trial0.json").symlink_to(tmp_path / "real" / "creps-trial0.json")
@@ -133,11 +171,11 @@ def test_features_choose_the_mean_map_and_the_results_folder(precision_env, tmp_
 
 
 @pytest.mark.slow
-def test_the_oracle_learns_one_context_and_caches_it(precision_env, tmp_path: Path) -> None:
-    result = oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path)
+def test_the_oracle_learns_one_context_and_caches_it(precision_env, oracle_at_3) -> None:
+    folder, result = oracle_at_3  # oracle_point(precision_env, "precision", 3, 26, seed=0, folder=folder)
     assert result["context"] == [6.0] and result["episodes"] == 26 and result["population"] == 13
     assert np.isfinite(result["value"]) and result["value"] >= 0.0
-    assert oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path) == result
+    assert oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=folder) == result
 
 
 def test_run_files_that_name_no_env_ran_on_the_legacy_one() -> None:
@@ -182,8 +220,10 @@ def test_the_oracle_restarts_with_twice_the_population_when_a_start_stops(
 
 
 @pytest.mark.slow
-def test_an_old_oracle_record_is_reused_only_if_its_start_ran_its_budget(precision_env, tmp_path) -> None:
-    fresh = oracle.oracle_point(precision_env, "precision", 3, episodes=26, seed=0, folder=tmp_path / "fresh")
+def test_an_old_oracle_record_is_reused_only_if_its_start_ran_its_budget(
+    precision_env, oracle_at_3, tmp_path
+) -> None:
+    _, fresh = oracle_at_3  # oracle_point(precision_env, "precision", 3, 26, seed=0, folder=a fresh folder)
     old = {k: v for k, v in fresh.items() if k != "starts"}
     (tmp_path / "old").mkdir()
     (tmp_path / "old" / "oracle-03.json").write_text(json.dumps(old))
@@ -348,7 +388,7 @@ def test_the_committed_summary_is_rendered_from_the_committed_results(name: str,
 @pytest.mark.parametrize("selector", study.SELECTED_CONTEXTS)
 @pytest.mark.slow
 def test_a_learning_selector_trains_resumes_bit_identically_and_is_wired_to_the_command_line(
-    selector: str, precision_env, tmp_path: Path
+    selector: str, precision_env, trained, tmp_path: Path
 ) -> None:
     spec = study.RunSpec("precision", "creps-cma-old", 6, 4, options={"ridge": 1e-2}, contexts=selector)
     straight = study.train_run(spec, precision_env, 0, 7, tmp_path / "straight", checkpoint_every=1)
@@ -363,7 +403,7 @@ def test_a_learning_selector_trains_resumes_bit_identically_and_is_wired_to_the_
     assert sorted(final, key=int) == ["3", "4"] and final["4"] != final["3"]  # told every iteration
     if selector == "bandit":  # ("progress" draws uniformly until it has seen two windows of 3 iterations)
         uniform = study.RunSpec("precision", "creps-cma-old", 6, 4, options={"ridge": 1e-2})
-        other = study.train_run(uniform, precision_env, 0, 7, tmp_path / "uniform", checkpoint_every=1)
+        other = trained(uniform, 0, 7, tmp_path / "uniform")
         assert other["history"]["batch"] != straight["history"]["batch"]
     args = run.parse_args(
         ["--full", "--only", "precision", "--methods", "creps-cma-old", "--contexts", selector]

@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import importlib
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-from helpers import EXTRAS, study_in_process
+from helpers import EXTRAS, no_figure, study_in_process
 
 from benchmarks import provenance, study_runner
 
@@ -37,26 +36,18 @@ def test_a_provenance_record_names_the_versions_the_cpu_the_blas_and_the_commit(
     assert "- 1 run: computed before" in provenance.provenance_text([None])
 
 
-def _study(*args: str) -> str:
-    result = subprocess.run(
-        [sys.executable, str(BENCHMARKS / "functions" / "run.py"), *args],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-        cwd=REPO,
-    )
-    assert result.returncode == 0, result.stderr
-    return result.stdout
-
-
 @pytest.mark.slow
-def test_quick_computes_every_run_again_and_render_only_redraws_the_cached_ones(tmp_path: Path) -> None:
+def test_quick_computes_every_run_again_and_render_only_redraws_the_cached_ones(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """In process (the scripts' runs by path and ``-m``: test_benchmark_scripts.py), drawing no figure: this
+    test checks the cache, ``results.md`` and ``timing.json``."""
+    monkeypatch.setattr(importlib.import_module("benchmarks.functions.run"), "plot_function", no_figure)
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = ["--quick", "--functions", "Sphere", "--context-dims", "1", "--seeds", "1", "--dim", "3"]
     args += ["--methods", "creps-cma-old", "cma-fixed", "--budget", "600", "--workers", "1"]
     args += ["--cache", str(cache), "--out", str(out)]
-    _study(*args)
+    study_in_process("functions", *args)
     paths = sorted(cache.glob("*.json"))
     assert len(paths) == 2
     for path in paths:

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import EXTRAS
+from helpers import EXTRAS, cli_in_process
 
 from creps_gym.cli import main
 from creps_gym.envs.base import ContextualEpisodicEnv
@@ -515,19 +515,11 @@ def test_resume_with_a_ray_address_that_is_not_ray_exits_2_at_once(
     assert "RAY_ADDRESS: expected the address of a running Ray cluster" in err and http_server in err
 
 
-@pytest.mark.slow
-def test_a_ray_run_without_ray_installed_exits_4_and_leaves_no_run_folder(tmp_path):
+def test_a_ray_run_without_ray_installed_exits_4_and_leaves_no_run_folder(tmp_path, monkeypatch):
     """Before: the run folder was created before the Ray backend found Ray missing."""
-    import subprocess
-    import sys
-
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if Ray were not installed: `import ray` raises
     out = tmp_path / "run"
-    code = (
-        "import sys; sys.modules['ray'] = None\n"  # as if Ray were not installed
-        "from creps_gym.cli import main\n"
-        f"sys.exit(main(['run', '--env', 'creps_gym/Sphere-v0', '--optimizer', 'creps', '--iterations', '1', "
-        f"'--seed', '0', '--backend', 'ray', '--out', {str(out)!r}, '--no-progress']))"
-    )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    argv = ["--env", "creps_gym/Sphere-v0", "--optimizer", "creps", "--iterations", "1", "--seed", "0"]
+    result = cli_in_process("run", *argv, "--backend", "ray", "--out", out, "--no-progress")
     assert result.returncode == 4, result.stderr
     assert "pip install creps-gym[ray]" in result.stderr and not out.exists()

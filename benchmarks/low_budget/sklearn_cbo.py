@@ -65,6 +65,8 @@ def _kernel(d: int) -> Any:
 
 
 def _regressor(kernel: Any, fit: bool, seed: int = 0) -> Any:
+    """A ``GaussianProcessRegressor`` on ``kernel``: fitting its hyperparameters by the library's default
+    (``fit``, from ``random_state`` ``seed``) or keeping them (``optimizer=None``)."""
     regressor = _gpr()[0]
     if fit:
         return regressor(kernel, normalize_y=True, random_state=seed)
@@ -72,6 +74,7 @@ def _regressor(kernel: Any, fit: bool, seed: int = 0) -> Any:
 
 
 def _fitted(gp: Any, inputs: Array, targets: Array) -> Any:
+    """``gp.fit(inputs (n, d), targets (n,))`` without the library's notices."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # bounds reached and L-BFGS-B's convergence notices
         return gp.fit(inputs, targets)

@@ -18,12 +18,13 @@ from benchmarks.low_budget.study import BUDGETS, NON_QUADRATIC, task_by_name
 
 __all__ = [
     "ANCHORS",
-    "acquisition_table",
     "anchors_text",
     "cells",
     "completeness_text",
     "cost_text",
     "grouped_tasks",
+    "library_table",
+    "paired_table",
     "plot_curves",
     "sign_test",
     "targets_table",
@@ -146,18 +147,21 @@ def sign_test(wins: int, trials: int) -> float:
     return min(1.0, 2.0 * tail)
 
 
-def acquisition_table(grouped: Cells, tasks: Sequence[str], budgets: Sequence[int]) -> str:
-    """``c-bo`` (max-value entropy search) against ``c-bo-ucb``, paired by seed (the same seed draws the
-    same initial design): per task and budget, the seeds where MES is better, of those both finished,
-    and the sign test's two-sided p-value; a tie counts for neither."""
+def paired_table(
+    grouped: Cells, tasks: Sequence[str], budgets: Sequence[int], first: str, second: str
+) -> str:
+    """Method ``first`` against ``second``, paired by seed (the same seed draws the same initial design):
+    per task and budget, the seeds where ``first`` is better, of those both finished, and the sign test's
+    two-sided p-value; a tie counts for neither. The tables of ``c-bo`` (max-value entropy search) against
+    ``c-bo-ucb``, and of each acquisition with active contexts against its uniform draws."""
     head = " | ".join(f"{b} episodes" for b in budgets)
     lines = [f"| task | {head} |", "|---|" + "---|" * len(budgets)]
     for task in tasks:
         lower = task_by_name(task).lower_is_better
         cells_ = []
         for budget in budgets:
-            mes, ucb = (_by_seed(grouped.get((task, m)), budget) for m in ("c-bo", "c-bo-ucb"))
-            pairs = [(mes[s], ucb[s]) for s in sorted(set(mes) & set(ucb)) if mes[s] != ucb[s]]
+            ours, theirs = (_by_seed(grouped.get((task, m)), budget) for m in (first, second))
+            pairs = [(ours[s], theirs[s]) for s in sorted(set(ours) & set(theirs)) if ours[s] != theirs[s]]
             wins = sum((a < b) == lower for a, b in pairs)
             cells_.append(f"{wins}/{len(pairs)} (p {sign_test(wins, len(pairs)):.2g})" if pairs else "—")
         if any(cell != "—" for cell in cells_):

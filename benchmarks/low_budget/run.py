@@ -30,13 +30,13 @@ if not __package__:
 
 from benchmarks.low_budget.columns import METHODS
 from benchmarks.low_budget.report import (
-    acquisition_table,
     anchors_text,
     cells,
     completeness_text,
     cost_text,
     grouped_tasks,
     library_table,
+    paired_table,
     plot_curves,
     targets_table,
     task_table,
@@ -172,7 +172,19 @@ def write_report(args: argparse.Namespace, documents: list[dict[str, Any]], timi
         "Seeds where `c-bo` (MES) ends better than `c-bo-ucb`, of the seeds both finished, and the sign "
         "test's two-sided p-value (the same seed starts both from the same initial design).",
         "",
-        acquisition_table(grouped, tasks, budgets),
+        paired_table(grouped, tasks, budgets, "c-bo", "c-bo-ucb"),
+        "## Active contexts against uniform draws, seed by seed",
+        "",
+        "Seeds where the acquisition with the `active` context selector (issue 44, item 2) ends better than "
+        "the same acquisition on the env's uniform draws, of the seeds both finished, and the sign test's "
+        "two-sided p-value (the same seed starts both from the same initial design).",
+        "",
+        "`c-bo+active` against `c-bo` (max-value entropy search):",
+        "",
+        paired_table(grouped, tasks, budgets, "c-bo+active", "c-bo"),
+        "`c-bo-ucb+active` against `c-bo-ucb` (GP-UCB):",
+        "",
+        paired_table(grouped, tasks, budgets, "c-bo-ucb+active", "c-bo-ucb"),
         "## c-bo on its own GP and on the libraries' (BoTorch, scikit-learn)",
         "",
         "The same c-bo with BoTorch's model and optimiser (`c-bo-botorch`) or scikit-learn's "

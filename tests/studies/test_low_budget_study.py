@@ -66,7 +66,7 @@ def test_a_committed_c_bo_run_is_what_the_code_computes() -> None:
 
 
 def test_mes_against_ucb_is_counted_seed_by_seed_with_an_exact_sign_test() -> None:
-    from benchmarks.low_budget.report import acquisition_table, sign_test
+    from benchmarks.low_budget.report import paired_table, sign_test
 
     assert sign_test(5, 10) == 1.0 and sign_test(0, 0) == 1.0
     assert sign_test(10, 10) == pytest.approx(2 / 1024) and sign_test(1, 10) == pytest.approx(22 / 1024)
@@ -79,7 +79,7 @@ def test_mes_against_ucb_is_counted_seed_by_seed_with_an_exact_sign_test() -> No
         ("KickFlexibilityLowDim", "c-bo"): [run("c-bo", s, v) for s, v in enumerate([3.0, 1.0, 2.0, 5.0])],
         ("KickFlexibilityLowDim", "c-bo-ucb"): [run("c-bo-ucb", s, v) for s, v in enumerate([2.0, 4.0, 2.0])],
     }
-    table = acquisition_table(grouped, ["KickFlexibilityLowDim", "Sphere-p2-z1"], [200])
+    table = paired_table(grouped, ["KickFlexibilityLowDim", "Sphere-p2-z1"], [200], "c-bo", "c-bo-ucb")
     assert "| KickFlexibilityLowDim | 1/2 (p 1) |" in table and "Sphere" not in table
 
 
@@ -229,3 +229,68 @@ def test_every_committed_run_records_its_columns_optimiser_options_and_selector(
         expected = {"optimizer": method.optimizer, "options": options, "selector": method.selector}
         expected |= {} if method.factory is None else {"factory": method.factory}
         assert document["method"] == expected, path.name
+
+
+def _table(results: str, heading: str) -> list[list[str]]:
+    """The table under ``heading`` in ``results``: its header and rows as lists of cells."""
+    section = results[results.index(heading) :].split("\n## ")[0]
+    lines = [line.strip() for line in section.splitlines() if line.startswith("|")]
+    return [[c.strip() for c in line.strip("|").split("|")] for line in lines if not line.startswith("|---")]
+
+
+def test_the_docs_library_comparison_quotes_the_rendered_tables() -> None:
+    """docs/optimizers.md's c-bo against c-bo-botorch and c-bo-sklearn: every number from the full results."""
+    root = Path(study_run.__file__).resolve().parents[2]
+    results = (root / "docs" / "results" / "low_budget" / "full" / "results.md").read_text(encoding="utf-8")
+    doc = " ".join((root / "docs" / "optimizers.md").read_text(encoding="utf-8").split())
+    library = {(row[0], row[1].strip("`")): row[2:] for row in _table(results, "## c-bo on its own GP")[1:]}
+
+    def at_500(task: str, method: str) -> str:
+        return library[(task, method)][4].split(" [")[0]
+
+    def better(task: str) -> str:  # "k/n (p …)": the seeds where scikit-learn's run ends better than c-bo's
+        return library[(task, "c-bo-sklearn")][5].split(" (")[0].replace("/", " of ")
+
+    rb, dp, ra = (f"{f}-p4-z1" for f in ("Rosenbrock", "DifferentPowers", "Rastrigin"))
+    pr, fl = "KickPrecisionLowDim-v1", "KickFlexibilityLowDim-v1"
+    botorch_dp, botorch_seeds = library[(dp, "c-bo-botorch")][4][:-1].split(" [")
+    phrases = [
+        f"Rosenbrock (p = 4, z = 1) {at_500(rb, 'c-bo')} against BoTorch's {at_500(rb, 'c-bo-botorch')} "
+        f"and scikit-learn's {at_500(rb, 'c-bo-sklearn')}",
+        f"Different Powers {at_500(dp, 'c-bo')} against scikit-learn's {at_500(dp, 'c-bo-sklearn')} "
+        f"(BoTorch's {botorch_dp} on {botorch_seeds.split('/')[0]} of its 10 seeds so far)",
+        f"Rastrigin {at_500(ra, 'c-bo')} against {at_500(ra, 'c-bo-sklearn')} "
+        f"(scikit-learn better on {better(ra)} seeds)",
+        f"{at_500(pr, 'c-bo-sklearn')} m of precision error against {at_500(pr, 'c-bo')} m and at "
+        f"{at_500(fl, 'c-bo-sklearn')} m of flexibility distance against {at_500(fl, 'c-bo')} m "
+        f"(better on {better(pr)} seeds in both)",
+    ]
+    assert better(pr) == better(fl)
+    header, *rows = _table(results, "## The optimiser's own seconds per asked episode")
+    timing = {row[0]: row for row in rows}
+
+    def seconds(method: str, tasks: tuple[str, ...]) -> str:
+        values = [float(timing[t][header.index(f"`{method}`")].split()[0]) for t in tasks]
+        return f"{min(values):.2g}–{max(values):.2g}"
+
+    five = (rb, dp, ra, pr, fl)
+    phrases.append(f"{seconds('c-bo-sklearn', five)} against c-bo's {seconds('c-bo', five)}")
+    phrases.append(f"BoTorch's {seconds('c-bo-botorch', (rb, dp))}. So c-bo keeps its own GP.")
+    for phrase in phrases:
+        assert phrase in doc, phrase
+
+
+def test_the_docs_active_contexts_sentence_quotes_the_rendered_tables() -> None:
+    """docs/contexts.md's "at most k of 10 seeds" at 500 episodes: the largest count of both tables of active
+    contexts against uniform draws, over the tasks with all 10 seeds."""
+    root = Path(study_run.__file__).resolve().parents[2]
+    results = (root / "docs" / "results" / "low_budget" / "full" / "results.md").read_text(encoding="utf-8")
+    section = results[results.index("## Active contexts against uniform draws") :].split("\n## ")[0]
+    counts = [
+        tuple(map(int, line.strip().strip("|").split("|")[-1].split("(")[0].split("/")))
+        for line in section.splitlines()
+        if line.startswith("| ") and not line.startswith("| task")
+    ]
+    most = max(wins for wins, seeds in counts if seeds == 10)
+    doc = " ".join((root / "docs" / "contexts.md").read_text(encoding="utf-8").split())
+    assert f"at 500 episodes it ends better on at most {most} of 10 seeds of any task" in doc

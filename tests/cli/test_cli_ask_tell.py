@@ -238,6 +238,7 @@ def _result(path: Path, log: dict[float, Any]) -> tuple[Any, ...]:
     return log, [r.to_dict() for r in history.records], history.stop_reason, Policy.load(path / RunDir.POLICY)
 
 
+@pytest.mark.slow
 def test_a_crash_before_any_write_loses_nothing_and_counts_nothing_twice(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

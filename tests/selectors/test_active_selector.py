@@ -162,6 +162,7 @@ def test_context_information_with_pending_contexts_never_swaps_the_points_it_cou
     assert (after <= alone + 1e-12).all()  # one more planned episode only removes variance
 
 
+@pytest.mark.slow
 def test_a_c_bo_run_with_the_active_selector_resumes_bit_identically(tmp_path):
     kwargs = {"env_kwargs": SPHERE_1D, "context_selector": "active", "checkpoint_every": 2, "eval_every": 3}
     uninterrupted = run("c-bo", SPHERE, 6, 4, 3, **kwargs)

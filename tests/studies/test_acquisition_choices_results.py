@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 from helpers import EXTRAS, driven_cbo
 
 from benchmarks.low_budget import acquisition_choices, recommenders
@@ -15,6 +16,7 @@ from benchmarks.low_budget import acquisition_choices, recommenders
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 
 
+@pytest.mark.slow
 @EXTRAS  # bit for bit only on the stack that computed the study's run (the full environment)
 def test_a_replayed_run_is_the_study_run_and_records_both_choices():
     """Rosenbrock p = 2, z = 1, seed 0, to 50 episodes: the value at 50 is the committed study run's bit for

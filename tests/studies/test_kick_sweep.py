@@ -71,6 +71,7 @@ def _compute(out: Path, *argv: str) -> None:
     run.compute(run.parse_args([*PRECISION, "--trials", "1", "--threads", "1", "--out", str(out), *argv]))
 
 
+@pytest.mark.slow
 def test_an_opt_run_records_its_options_resumes_bit_identically_and_joins_the_sweep(tmp_path: Path) -> None:
     full, sweep = tmp_path / "full", tmp_path / "full-opt-epsilon-1.0"
     _compute(tmp_path / "straight", "--iterations", "2", "--opt", "epsilon=1.0")
@@ -171,6 +172,7 @@ def test_the_readme_s_sweep_quotes_the_rendered_rows() -> None:
     assert quotes and all(line in summary for line in quotes), [q for q in quotes if q not in summary]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("divide_by_z", [True, False])
 def test_without_selection_the_z_divisor_alone_grows_the_old_mean_covariance(divide_by_z: bool) -> None:
     """README, "The sweep": with returns that say nothing about θ, E[S] = Σ/Z around the old mean, so each

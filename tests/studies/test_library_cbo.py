@@ -25,8 +25,12 @@ def _needs(*modules: str) -> Any:
 
 
 BOTORCH, SKLEARN = _needs("torch", "botorch"), _needs("sklearn")
-#: The study's columns on a library's GP.
-COLUMNS = [pytest.param("c-bo-botorch", marks=BOTORCH), pytest.param("c-bo-sklearn", marks=SKLEARN)]
+#: The study's columns on a library's GP. BoTorch's is slow (torch takes about 2 s to import, and its asks
+#: cost ten times c-bo's), so ``-m "not slow"`` leaves it out.
+COLUMNS = [
+    pytest.param("c-bo-botorch", marks=[BOTORCH, pytest.mark.slow]),
+    pytest.param("c-bo-sklearn", marks=SKLEARN),
+]
 
 
 def _class(column: str) -> type:
@@ -146,6 +150,7 @@ def test_the_study_column_builds_it_and_records_its_factory(
 
 # -- BoTorch's own ---------------------------------------------------------------------------------------
 @BOTORCH
+@pytest.mark.slow
 def test_torchs_generator_and_threads_are_left_as_they_were() -> None:
     import torch
 

@@ -27,6 +27,7 @@ def _tiny(tmp_path: Path, *flags: str) -> Path:
     return out / "results.md"
 
 
+@pytest.mark.slow
 def test_quick_mode_writes_runs_with_their_curve_timing_and_provenance(tmp_path: Path) -> None:
     table = _tiny(tmp_path, "--seeds", "1", "--budget", "24").read_text()
     documents = {p.stem: json.loads(p.read_text()) for p in (tmp_path / "runs").glob("*.json")}
@@ -151,6 +152,7 @@ def test_the_full_study_computes_the_issues_target_cells_first() -> None:
     assert [(s.method, s.seed) for s in specs[: methods + 1]][-1] == ("c-bo", 1)  # seed by seed, every method
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["quick", "full"])
 def test_committed_renderings_are_drawn_from_the_committed_runs(
     mode: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch

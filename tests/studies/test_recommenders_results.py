@@ -17,6 +17,7 @@ from benchmarks.low_budget import recommenders
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 
 
+@pytest.mark.slow
 @EXTRAS  # bit for bit only on the stack that computed the study's run (the full environment), not the lowest
 def test_a_run_is_the_study_run_and_both_rules_are_measured_on_it():
     """Rosenbrock p = 2, z = 1, seed 0, to 50 episodes: the default rule's value is the committed study

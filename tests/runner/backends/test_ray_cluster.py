@@ -445,6 +445,7 @@ def _listener(reply: bytes | None):
     return sock, held
 
 
+@pytest.mark.slow
 def test_a_listener_that_is_not_ray_is_refused_within_seconds(http_server):
     from creps_gym.runner.backends.ray import check_reachable
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+
 from creps_gym import errors
 
 PACKAGE = Path(errors.__file__).resolve().parent
@@ -45,6 +47,7 @@ def test_no_other_module_re_exports_an_exception() -> None:
     assert not found, "exceptions exported outside creps_gym/errors.py:\n" + "\n".join(found)
 
 
+@pytest.mark.slow
 def test_every_import_of_an_exception_is_from_creps_gym_errors() -> None:
     folders = ("creps_gym", "tests", "benchmarks", "examples", "scripts")
     found = [

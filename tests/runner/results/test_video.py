@@ -185,6 +185,7 @@ def test_mujoco_envs_give_a_frame_per_step_through_the_episode(env_id, kwargs):
     assert float(changed) > 0.001  # the motion changed the picture
 
 
+@pytest.mark.slow
 @EXTRAS
 @pytest.mark.parametrize("mode", ["rgb_array", "rgb_array_list"])
 def test_the_reacher_drawings_have_a_legend(mode, monkeypatch):

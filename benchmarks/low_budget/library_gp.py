@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numpy as np
@@ -37,7 +38,9 @@ __all__ = ["FIXED_OPTIONS", "SEEDS", "LibraryGPCBO", "LibraryGPConfig"]
 Array = NDArray[np.float64]
 SEEDS = 2**31 - 1  #: the seeds a library's call draws from the optimiser's Generator are below this
 #: The options of c-bo's own GP that a library's model has no use for, with the values they must keep.
-FIXED_OPTIONS = {"prior_mean": "min", "trend": "constant", "hyper_restarts": 1}
+FIXED_OPTIONS: Mapping[str, Any] = MappingProxyType(
+    {"prior_mean": "min", "trend": "constant", "hyper_restarts": 1}
+)
 
 
 @dataclass(frozen=True, eq=False)

@@ -158,15 +158,20 @@ def paired_table(
     lines = [f"| task | {head} |", "|---|" + "---|" * len(budgets)]
     for task in tasks:
         lower = task_by_name(task).lower_is_better
-        cells_ = []
-        for budget in budgets:
-            ours, theirs = (_by_seed(grouped.get((task, m)), budget) for m in (first, second))
-            pairs = [(ours[s], theirs[s]) for s in sorted(set(ours) & set(theirs)) if ours[s] != theirs[s]]
-            wins = sum((a < b) == lower for a, b in pairs)
-            cells_.append(f"{wins}/{len(pairs)} (p {sign_test(wins, len(pairs)):.2g})" if pairs else "—")
+        ours, theirs = grouped.get((task, first)), grouped.get((task, second))
+        cells_ = [_paired_cell(ours, theirs, budget, lower) for budget in budgets]
         if any(cell != "—" for cell in cells_):
             lines.append(f"| {task} | {' | '.join(cells_)} |")
     return "\n".join(lines) + "\n"
+
+
+def _paired_cell(ours: Any, theirs: Any, budget: int, lower: bool) -> str:
+    """``k/n (p …)``: the seeds where ``ours`` ends better than ``theirs`` at ``budget``, of the n seeds both
+    finished without a tie, and the sign test's p-value; ``—`` with no such seed."""
+    first, second = _by_seed(ours, budget), _by_seed(theirs, budget)
+    pairs = [(first[s], second[s]) for s in sorted(set(first) & set(second)) if first[s] != second[s]]
+    wins = sum((a < b) == lower for a, b in pairs)
+    return f"{wins}/{len(pairs)} (p {sign_test(wins, len(pairs)):.2g})" if pairs else "—"
 
 
 #: The columns of c-bo on a library's GP (library_gp.py), set beside c-bo on its own.
@@ -200,13 +205,9 @@ def _library_row(task: str, method: str, runs: Any, own: Any, seeds: int, budget
         values = _values(runs or [], budget)
         partial = f" [{values.size}/{seeds}]" if 0 < values.size < seeds else ""
         medians.append(_g(float(np.median(values)) if values.size else None) + partial)
-    theirs, mine = _by_seed(runs, budgets[-1]), _by_seed(own, budgets[-1])
-    pairs = [(theirs[s], mine[s]) for s in sorted(set(theirs) & set(mine)) if theirs[s] != mine[s]]
-    wins = sum((a < b) == task_by_name(task).lower_is_better for a, b in pairs)
-    paired = (
-        f"{wins}/{len(pairs)} (p {sign_test(wins, len(pairs)):.2g})" if pairs and method != "c-bo" else ""
-    )
-    return f"| {task} | `{method}` | {' | '.join(medians)} | {paired or '—' if method != 'c-bo' else ''} |"
+    lower = task_by_name(task).lower_is_better
+    paired = "" if method == "c-bo" else _paired_cell(runs, own, budgets[-1], lower)
+    return f"| {task} | `{method}` | {' | '.join(medians)} | {paired} |"
 
 
 def _g(value: float | None) -> str:

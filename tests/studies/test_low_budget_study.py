@@ -233,6 +233,11 @@ def test_every_committed_run_records_its_columns_optimiser_options_and_selector(
         assert document["method"] == expected, path.name
 
 
+def _committed_text(*parts: str) -> str:
+    """A committed file of the repository, by its path's parts."""
+    return Path(study_run.__file__).resolve().parents[2].joinpath(*parts).read_text(encoding="utf-8")
+
+
 def _table(results: str, heading: str) -> list[list[str]]:
     """The table under ``heading`` in ``results``: its header and rows as lists of cells."""
     section = results[results.index(heading) :].split("\n## ")[0]
@@ -242,9 +247,8 @@ def _table(results: str, heading: str) -> list[list[str]]:
 
 def test_the_docs_library_comparison_quotes_the_rendered_tables() -> None:
     """docs/optimizers.md's c-bo against c-bo-botorch and c-bo-sklearn: every number from the full results."""
-    root = Path(study_run.__file__).resolve().parents[2]
-    results = (root / "docs" / "results" / "low_budget" / "full" / "results.md").read_text(encoding="utf-8")
-    doc = " ".join((root / "docs" / "optimizers.md").read_text(encoding="utf-8").split())
+    results = _committed_text("docs", "results", "low_budget", "full", "results.md")
+    doc = " ".join(_committed_text("docs", "optimizers.md").split())
     library = {(row[0], row[1].strip("`")): row[2:] for row in _table(results, "## c-bo on its own GP")[1:]}
 
     def at_500(task: str, method: str) -> str:
@@ -285,14 +289,9 @@ def test_the_docs_library_comparison_quotes_the_rendered_tables() -> None:
 def test_the_docs_active_contexts_sentence_quotes_the_rendered_tables() -> None:
     """docs/contexts.md's "at most k of 10 seeds" at 500 episodes: the largest count of both tables of active
     contexts against uniform draws, over the tasks with all 10 seeds."""
-    root = Path(study_run.__file__).resolve().parents[2]
-    results = (root / "docs" / "results" / "low_budget" / "full" / "results.md").read_text(encoding="utf-8")
-    section = results[results.index("## Active contexts against uniform draws") :].split("\n## ")[0]
-    counts = [
-        tuple(map(int, line.strip().strip("|").split("|")[-1].split("(")[0].split("/")))
-        for line in section.splitlines()
-        if line.startswith("| ") and not line.startswith("| task")
-    ]
+    results = _committed_text("docs", "results", "low_budget", "full", "results.md")
+    rows = [row for row in _table(results, "## Active contexts against uniform draws") if row[0] != "task"]
+    counts = [tuple(map(int, row[-1].split(" (")[0].split("/"))) for row in rows if row[-1] != "—"]
     most = max(wins for wins, seeds in counts if seeds == 10)
-    doc = " ".join((root / "docs" / "contexts.md").read_text(encoding="utf-8").split())
+    doc = " ".join(_committed_text("docs", "contexts.md").split())
     assert f"at 500 episodes it ends better on at most {most} of 10 seeds of any task" in doc

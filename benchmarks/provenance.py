@@ -2,13 +2,15 @@
 
 :func:`provenance` describes this process: Python and the package versions a study depends on, creps_gym's
 git commit (with ``-dirty`` when its source differs from the commit), the CPU and the BLAS library numpy
-runs on (OpenBLAS picks its kernels per CPU at run time: ``blas.architecture``). Results computed before
-the record existed carry :func:`unrecorded` instead, which says so. :func:`provenance_text` renders the
-records of a study's runs as one Markdown paragraph.
+runs on (OpenBLAS picks its kernels per CPU at run time: ``blas.architecture``) and numpy's SIMD dispatch
+(``simd``: :mod:`benchmarks.numeric_stack`). Results computed before the record existed carry
+:func:`unrecorded` instead, which says so. :func:`provenance_text` renders the records of a study's runs
+as one Markdown paragraph.
 
-Why the CPU and BLAS matter: a matrix product's last bits depend on the kernel OpenBLAS picks for the CPU
-(and on numpy's and pycma's versions), and the optimisers amplify such differences over thousands of
-iterations, so runs are bit-identical only on the same stack; on another one they agree statistically.
+Why the CPU and BLAS matter: a matrix product's last bits depend on the kernel OpenBLAS picks for the CPU,
+an exponential's on the instruction set numpy's loop runs (and on numpy's and pycma's versions), and the
+optimisers amplify such differences over thousands of iterations, so runs are bit-identical only on the
+same stack; on another one they agree statistically.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ from collections.abc import Iterable, Sequence
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
+
+from benchmarks.numeric_stack import blas, numpy_simd
 
 __all__ = [
     "CORE_PACKAGES",
@@ -57,8 +61,9 @@ def provenance(packages: Sequence[str] = ()) -> dict[str, Any]:
         repository's HEAD when this module was imported, i.e. the code this process runs, ``-dirty`` if a
         tracked ``.py`` file of ``creps_gym/`` or ``benchmarks/`` differed from it; None outside a git
         checkout), ``cpu`` (model name), ``cpu_count``, ``platform``, ``blas`` (the BLAS numpy calls:
-        library, version and the kernel architecture chosen for this CPU where threadpoolctl can tell) and
-        ``date`` (UTC, ISO 8601).
+        library, version and the kernel architecture chosen for this CPU where threadpoolctl can tell),
+        ``simd`` (numpy's dispatch targets enabled, :func:`benchmarks.numeric_stack.numpy_simd`; records
+        before it was recorded lack it) and ``date`` (UTC, ISO 8601).
     """
     found = {"python": sys.version.split()[0]}
     for name in (*CORE_PACKAGES, *packages):
@@ -73,7 +78,8 @@ def provenance(packages: Sequence[str] = ()) -> dict[str, Any]:
         "cpu": _cpu_model(),
         "cpu_count": os.cpu_count(),
         "platform": platform.platform(),
-        "blas": _blas(),
+        "blas": blas(),
+        "simd": numpy_simd(),
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
     }
 
@@ -130,11 +136,12 @@ def provenance_text(records: Iterable[Any], what: str = "runs") -> str:
 
 def _stack_text(record: dict[str, Any]) -> str:
     packages = ", ".join(f"{name} {v}" for name, v in record["packages"].items())
-    blas = record["blas"]
-    blas_text = " ".join(str(blas[k]) for k in ("library", "version", "architecture") if blas.get(k))
+    entry = record["blas"]
+    blas_text = " ".join(str(entry[k]) for k in ("library", "version", "architecture") if entry.get(k))
     commit = record["creps_gym_commit"] or "unknown"
     cpu = f"{record['cpu']} ({record['cpu_count']} cores)"
-    return f"{packages}; CPU {cpu}, BLAS {blas_text}; creps_gym {commit}"
+    simd = f", numpy SIMD {' '.join(record['simd'])}" if record.get("simd") else ""
+    return f"{packages}; CPU {cpu}, BLAS {blas_text}{simd}; creps_gym {commit}"
 
 
 def _git_commit() -> str | None:
@@ -171,26 +178,3 @@ def _cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine() or "unknown"
-
-
-def _blas() -> dict[str, Any]:
-    """The BLAS numpy calls: library, version, kernel architecture and threads (threadpoolctl), else
-    numpy's build configuration."""
-    import numpy as np
-
-    try:
-        from threadpoolctl import threadpool_info
-
-        pools = [pool for pool in threadpool_info() if pool.get("user_api") == "blas"]
-        pools.sort(key=lambda pool: "numpy" not in str(pool.get("filepath")))  # numpy's own first (scipy
-        if pools:  # may load another OpenBLAS)
-            keys = {"internal_api": "library", "version": "version", "architecture": "architecture"}
-            found = {new: pools[0].get(old) for old, new in keys.items()}
-            return {**found, "threads": pools[0].get("num_threads")}
-    except ImportError:
-        pass
-    try:
-        blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
-        return {"library": blas.get("name"), "version": blas.get("version"), "architecture": None}
-    except (KeyError, TypeError, ValueError):
-        return {"library": None, "version": None, "architecture": None}

@@ -60,6 +60,7 @@ def run_all(
     log: Callable[[str], None] = print,
     compute: bool | Callable[[RunSpec], bool] = True,
     recompute: bool = False,
+    packages: Sequence[str] = ("cma",),
 ) -> list[dict[str, Any]]:
     """Results of the specs, in order: cached ones are read, the others computed in a process pool.
 
@@ -85,6 +86,9 @@ def run_all(
     recompute : bool
         Compute every run, reading no cached document (a ``--quick`` invocation reproduces its results);
         the new documents replace the cached ones.
+    packages : sequence of str
+        Distributions the computed runs use besides the core ones, whose versions the provenance records
+        (default pycma, which the studies' baselines use; a study on MuJoCo or a GP library adds them).
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
@@ -114,7 +118,7 @@ def run_all(
     )
 
     partial = cache / "partial"
-    record = provenance(("cma",)) if todo else None  # the studies' baselines use pycma
+    record = provenance(packages) if todo else None
 
     running = {spec.key for spec in todo}
 
@@ -192,11 +196,18 @@ def update_block(path: str | os.PathLike[str], name: str, text: str) -> Path:
     return path
 
 
-def invocation_timing(out: str | os.PathLike[str], wall: float, computed: int, total: int) -> dict[str, Any]:
+def invocation_timing(
+    out: str | os.PathLike[str],
+    wall: float,
+    computed: int,
+    total: int,
+    packages: Sequence[str] = ("cma",),
+) -> dict[str, Any]:
     """Wall time of the last invocation that computed runs, kept in ``out/timing.json``.
 
     An invocation that only reads the cache (to re-render) keeps the stored timing, so the reports always
-    state how long the computation took. A computing invocation records its ``provenance`` there too.
+    state how long the computation took. A computing invocation records its ``provenance`` there too
+    (with ``packages``' versions, as :func:`run_all`).
     """
     path = Path(out) / "timing.json"
     stored = load_document(path) if computed == 0 else None
@@ -204,7 +215,7 @@ def invocation_timing(out: str | os.PathLike[str], wall: float, computed: int, t
         return {**stored, "expected": total}  # this invocation's run count, for the completeness check
     timing = {"wall_seconds": round(wall, 1), "computed": computed, "total": total, "cores": os.cpu_count()}
     if computed:
-        timing["provenance"] = provenance(("cma",))
+        timing["provenance"] = provenance(packages)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_text(path, json.dumps(timing) + "\n")
     return timing
@@ -301,13 +312,15 @@ def run_study(
     script: str,
     figures_marker: str,
     readme: Path,
+    packages: Sequence[str] = ("cma",),
 ) -> int:
     """Run (or resume) ``specs``, write the report, and update the results index and the study README.
 
     ``baselines`` maps the study's baseline method names to their runners (see :func:`execute`).
     ``title`` names the study in the index (e.g. "Function study"), ``script`` is its command's path,
     ``figures_marker`` is the line where the generated table's figures start (the README gets the text
-    above it), and ``readme`` is the study README with a generated ``results-<mode>`` block.
+    above it), ``readme`` is the study README with a generated ``results-<mode>`` block, and ``packages``
+    the distributions whose versions the computed runs' provenance records (see :func:`run_all`).
     """
     start = time.perf_counter()
     worker = functools.partial(execute, baselines=baselines)
@@ -325,14 +338,20 @@ def run_study(
 
     cached_before = sum(map(read_back, specs))
     documents = run_all(
-        specs, args.cache, workers=args.workers, worker=worker, compute=compute, recompute=recompute
+        specs,
+        args.cache,
+        workers=args.workers,
+        worker=worker,
+        compute=compute,
+        recompute=recompute,
+        packages=packages,
     )
     if not documents:
         print(f"no cached runs in {args.cache}: nothing to render")
         return 1
     wall = time.perf_counter() - start
     computed = 0 if args.render_only else len(documents) - cached_before
-    timing = invocation_timing(args.out, wall, computed, len(specs))
+    timing = invocation_timing(args.out, wall, computed, len(specs), packages)
     table = write_report(args, documents, timing)
     print(f"wrote {table} and its figures in {wall:.0f} s")
     if args.index is not None:

@@ -1,4 +1,4 @@
-"""Suite-wide test set-up: one BLAS thread per test process.
+"""Suite-wide test set-up: one BLAS thread per test process, on the committed runs' numeric stack.
 
 ``python -m pytest`` runs everything (CI runs exactly that). ``python -m pytest -m "not slow"`` is the
 development subset: it leaves out the tests marked ``@pytest.mark.slow``, each marked where it is defined
@@ -20,6 +20,8 @@ import tempfile
 import pytest
 from suite_order import DURATIONS, file_of, order_by_durations, write_durations
 
+from benchmarks.numeric_stack import pinned_environment
+
 # One BLAS thread per test process: the suite runs two workers on CI's two cores, and each worker's BLAS
 # threads would oversubscribe them (OpenBLAS spins while it waits: c-bo's small Cholesky factorisations ran
 # up to 20x slower). Set before numpy is imported (the workers import it with the test modules, after this
@@ -27,6 +29,12 @@ from suite_order import DURATIONS, file_of, order_by_durations, write_durations
 if "numpy" not in sys.modules:
     for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(_variable, "1")
+    # The committed study runs' numeric stack (OpenBLAS's Haswell kernels, numpy's dispatch up to X86_V3),
+    # on any x86-64 CPU with AVX2 and FMA: on an AVX-512 CPU numpy's own loops would take other paths, and
+    # the tests that compute a committed run again bit for bit (helpers.skip_unless_stack_of) would
+    # compute another run. Elsewhere nothing is set and those tests skip, naming what differs.
+    for _variable, _value in pinned_environment().items():
+        os.environ.setdefault(_variable, _value)
 
 # Bytecode for the processes the suite starts (its workers and about 160 test subprocesses). Where
 # PYTHONDONTWRITEBYTECODE is set (to keep the source tree free of __pycache__), each of those processes

@@ -186,6 +186,18 @@ def crash_at(iteration: int) -> Any:
     return CrashAt()
 
 
+def skip_unless_stack_of(packages: Any, blas: Any = None, simd: Any = None) -> None:
+    """Skip the calling test, naming what differs, unless this process computes on the numeric stack of
+    a committed record (its numpy and scipy, BLAS kernels and numpy's SIMD dispatch; see
+    :mod:`benchmarks.numeric_stack`): a committed run is bit for bit the code's only there. The suite's
+    processes compute on the committed runs' stack on any x86-64 CPU with AVX2 and FMA (``conftest.py``)."""
+    from benchmarks.numeric_stack import differences
+
+    found = differences(packages, blas, simd)
+    if found:
+        pytest.skip("bit for bit only on the stack that computed the committed run: " + "; ".join(found))
+
+
 # -- the `extras` marker: tests that need an optional extra; CI's lowest-versions environment runs the others
 EXTRAS = pytest.mark.extras
 _EXTRA_ENV_MODULES = ("creps_gym.envs.kick", "creps_gym.wrappers")  # MuJoCo, Gymnasium(-Robotics) MuJoCo envs

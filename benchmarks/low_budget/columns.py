@@ -24,7 +24,8 @@ class Method:
     active selector for c-bo is one more entry, e.g. ``Method("c-bo+active", "c-bo", selector="active")``.
     ``factory`` (``"module:Class"``) builds an optimiser outside the registry (c-bo on BoTorch's or
     scikit-learn's GP, libraries the package does not depend on) with ``make_optimizer``'s arguments;
-    ``optimizer`` then names the registered optimiser whose batch size it takes.
+    ``optimizer`` then names the registered optimiser whose batch size it takes. ``packages`` names the
+    distributions such a class uses, whose versions the runs' provenance records.
     """
 
     name: str
@@ -34,6 +35,7 @@ class Method:
     selector_options: tuple[tuple[str, Any], ...] = ()
     note: str = ""
     factory: str | None = None
+    packages: tuple[str, ...] = ()
 
     def build(self, n_params: int, n_context_dims: int, seed: int, **options: Any) -> Any:
         """The column's optimiser: ``make_optimizer`` of ``optimizer``, or ``factory``'s class."""
@@ -66,12 +68,14 @@ METHODS = (
         "c-bo",
         note="max-value entropy search on BoTorch's model and optimiser (botorch_cbo.py)",
         factory="benchmarks.low_budget.botorch_cbo:BoTorchCBO",
+        packages=("torch", "botorch", "gpytorch"),
     ),
     Method(
         "c-bo-sklearn",
         "c-bo",
         note="max-value entropy search on scikit-learn's GaussianProcessRegressor (sklearn_cbo.py)",
         factory="benchmarks.low_budget.sklearn_cbo:SklearnCBO",
+        packages=("scikit-learn",),
     ),
     Method("creps", "creps", (("epsilon", 1.0),), note="ε = 1, as Fabisch (GECCO 2019)"),
     Method("creps-cma-old", "creps-cma-old", note="the paper's CREPS-CMA"),

@@ -28,7 +28,7 @@ from typing import Any
 if not __package__:
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
-from benchmarks.low_budget.columns import METHODS
+from benchmarks.low_budget.columns import METHODS, method_by_name
 from benchmarks.low_budget.report import (
     anchors_text,
     cells,
@@ -227,6 +227,13 @@ def write_report(args: argparse.Namespace, documents: list[dict[str, Any]], timi
     return path
 
 
+def study_packages(args: argparse.Namespace) -> tuple[str, ...]:
+    """The distributions whose versions the computed runs' provenance records besides the core ones:
+    pycma (the C-CMA-ES columns), MuJoCo (the kicks) and the GP libraries of the chosen library columns."""
+    libraries = {name for method in args.methods for name in method_by_name(method).packages}
+    return ("cma", "mujoco", *sorted(libraries))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run (or resume) the study and write its report."""
     args = parse_args(argv)
@@ -240,6 +247,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         script="benchmarks/low_budget/run.py",
         figures_marker="\n## Per task",
         readme=HERE / "README.md",
+        packages=study_packages(args),
     )
 
 

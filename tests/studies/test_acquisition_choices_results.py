@@ -4,12 +4,13 @@ committed table is the rendering of the committed JSON."""
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import EXTRAS, driven_cbo
+from helpers import EXTRAS, driven_cbo, skip_unless_stack_of
 
 from benchmarks.low_budget import acquisition_choices, recommenders
 
@@ -22,6 +23,9 @@ def test_a_replayed_run_is_the_study_run_and_records_both_choices():
     """Rosenbrock p = 2, z = 1, seed 0, to 50 episodes: the value at 50 is the committed study run's bit for
     bit (so computing both proposals before each batch changed nothing), one record per batch after the
     initial design (6 episodes: batches at 8, 12, ..., 44)."""
+    study_run = json.loads((recommenders.RUNS / "Rosenbrock-p2-z1-c-bo-s0-b500-n4.json").read_text())
+    record = study_run["provenance"]
+    skip_unless_stack_of(record["packages"], record["blas"], record.get("simd"))
     run = acquisition_choices.one_run("Rosenbrock-p2-z1", 0, 50)
     assert recommenders.check_against_study(run) is True
     asks = np.array(run["asks"])

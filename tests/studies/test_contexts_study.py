@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import EXTRAS, python_blocks
+from helpers import EXTRAS, python_blocks, skip_unless_stack_of
 
 from benchmarks.contexts import report, run
 from benchmarks.contexts.tasks import SteepFunction
@@ -84,7 +84,9 @@ def test_the_doc_example_runs():
     ],
 )
 def test_a_committed_quick_run_is_what_the_code_computes(key):
-    committed = json.loads((RESULTS / "quick.json").read_text())["runs"][key]
+    document = json.loads((RESULTS / "quick.json").read_text())
+    skip_unless_stack_of(document["versions"])  # computed on the committed machine (no BLAS entry)
+    committed = document["runs"][key]
     task, optimizer, selector, trial = key.split("/")
     computed = run.one_run(task, optimizer, selector, int(trial), "quick")
     assert {**computed, "seconds": 0} == {**committed, "seconds": 0}

@@ -9,7 +9,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from helpers import EXTRAS, no_figure
+from helpers import EXTRAS, no_figure, skip_unless_stack_of
 
 pytest.importorskip("matplotlib")
 
@@ -35,6 +35,7 @@ def test_quick_mode_writes_runs_with_their_curve_timing_and_provenance(tmp_path:
     for document in documents.values():
         assert document["budgets"] == [24] and document["episodes"] == [24]
         assert document["provenance"]["recorded"] is True and document["values"][0] >= 0
+        assert {"cma", "mujoco"} <= set(document["provenance"]["packages"])  # the study's own stack
         assert document["optimizer_seconds"][0] > 0 and document["last_batch_seconds_per_episode"][0] > 0
         assert document["optimizer_cpu_seconds"][0] > 0 and document["cpu_seconds"] > 0
     assert "| `c-bo` | 4 |" in table and "Sphere-p2-z1" in table
@@ -42,6 +43,18 @@ def test_quick_mode_writes_runs_with_their_curve_timing_and_provenance(tmp_path:
     # A second invocation with more seeds marks the cells whose seeds have not all finished.
     partial = _tiny(tmp_path, "--seeds", "2", "--budget", "24", "--render-only").read_text()
     assert "[1/2]" in partial and "Partial: 2 of 4 runs" in partial
+
+
+def test_the_provenance_records_the_libraries_of_the_columns_computed() -> None:
+    """A library column's runs record its library's version; a study without one records none of them."""
+    packages = study_run.study_packages(study_run.parse_args(["--full", "--methods", "c-bo-sklearn"]))
+    assert packages == ("cma", "mujoco", "scikit-learn")
+    everything = study_run.study_packages(study_run.parse_args(["--full"]))
+    assert {"torch", "botorch", "gpytorch", "scikit-learn"} <= set(everything)
+    assert study_run.study_packages(study_run.parse_args(["--full", "--methods", "c-bo"])) == (
+        "cma",
+        "mujoco",
+    )
 
 
 def test_a_run_is_deterministic_and_its_budgets_come_from_one_run() -> None:
@@ -61,6 +74,8 @@ def test_a_committed_c_bo_run_is_what_the_code_computes() -> None:
     gives its curve and test contexts bit for bit (the GP's solves call LAPACK directly: the same bits)."""
     path = Path(study_run.__file__).parent / "runs" / "quick" / "PlanarReacherLowDim-c-bo-s0-b100-n4.json"
     committed = json.loads(path.read_text(encoding="utf-8"))
+    record = committed["provenance"]
+    skip_unless_stack_of(record["packages"], record["blas"], record.get("simd"))
     computed = study.one_run(study.LowBudgetSpec("PlanarReacherLowDim", "c-bo", 0, 100))
     for field in ("values", "episodes", "test_contexts", "final", "stop_reason"):
         assert computed[field] == committed[field], field

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from helpers import EXTRAS, no_figure, study_in_process
 
-from benchmarks import provenance, study_runner
+from benchmarks import numeric_stack, provenance, study_runner
 
 pytestmark = EXTRAS  # the studies need matplotlib and pycma, and record the full environment's BLAS
 
@@ -34,6 +34,39 @@ def test_a_provenance_record_names_the_versions_the_cpu_the_blas_and_the_commit(
     assert f"- 2 runs: python {packages['python']}, numpy {packages['numpy']}" in text
     assert "- 2 runs: computed before provenance was recorded" in text
     assert "- 1 run: computed before" in provenance.provenance_text([None])
+    assert record["simd"] == numeric_stack.numpy_simd() and f", numpy SIMD {record['simd'][0]}" in text
+    older = {key: value for key, value in record.items() if key != "simd"}  # recorded before the SIMD
+    assert "numpy SIMD" not in provenance.provenance_text([older])  # level: its text is as it was
+
+
+def test_the_committed_stack_is_pinned_only_where_its_kernels_run() -> None:
+    pinned = numeric_stack.pinned_environment({"avx2", "fma", "avx512f"})
+    assert pinned["OPENBLAS_CORETYPE"] == "Haswell"
+    assert {"X86_V4", "AVX512F", "AVX512_SKX"} <= set(pinned["NPY_DISABLE_CPU_FEATURES"].split())
+    assert "X86_V3" not in pinned["NPY_DISABLE_CPU_FEATURES"].split()
+    assert numeric_stack.pinned_environment({"avx", "sse4_2"}) == {}  # no AVX2: Haswell would not run
+    assert numeric_stack.pinned_environment(set()) == {}  # not x86-64 Linux
+
+
+def test_the_stack_differences_name_each_field_that_differs() -> None:
+    live = {
+        "numpy": importlib.import_module("numpy").__version__,
+        "scipy": importlib.import_module("scipy").__version__,
+    }
+    blas = numeric_stack.blas()
+    simd = numeric_stack.numpy_simd()
+    assert numeric_stack.differences(live, blas, simd) == []
+    found = numeric_stack.differences({**live, "numpy": "1.0"}, {**blas, "architecture": "Zen"}, ["SSE2"])
+    assert found == [
+        f"numpy: 1.0 there, {live['numpy']} here",
+        f"BLAS architecture: Zen there, {blas['architecture']} here",
+        f"numpy SIMD: SSE2 there, {' '.join(simd)} here",
+    ]
+    assert numeric_stack.differences(live, {"library": blas["library"]}, simd) == (
+        []
+        if blas["architecture"] == "Haswell"
+        else [f"BLAS architecture: Haswell there, {blas['architecture']} here"]
+    )  # a record without an architecture was computed on the committed machine's
 
 
 @pytest.mark.slow

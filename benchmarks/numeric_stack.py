@@ -1,0 +1,146 @@
+"""The numeric stack a process computes on, beyond package versions: the BLAS numpy calls (library,
+version, kernel architecture) and the SIMD instruction sets numpy's own loops dispatch to.
+
+Both change the last bits of a result, and an optimiser amplifies such bits over hundreds of iterations
+into a different run: the same code, seed and package versions give other numbers on an AVX-512 CPU than on
+an AVX2 one. Every committed study run was computed on an AMD EPYC whose OpenBLAS ran its Haswell kernels and
+whose numpy dispatched up to ``X86_V3`` (AVX2, FMA); :data:`COMMITTED` names that stack, and
+:func:`pinned_environment` gives the environment variables under which any x86-64 CPU with AVX2 and FMA
+computes on it (what the test suite sets, so that its bit-for-bit checks of committed runs hold on such a
+CPU). :func:`differences` says what separates this process's stack from a recorded one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+__all__ = ["COMMITTED", "blas", "differences", "numpy_simd", "pinned_environment"]
+
+#: The committed runs' stack where a record does not say (records before the SIMD level was recorded, and
+#: those without a BLAS entry): OpenBLAS's Haswell kernels and numpy's dispatch up to X86_V3.
+COMMITTED = {"blas_architecture": "Haswell", "simd": ("X86_V3",)}
+
+#: numpy's dispatch targets above X86_V3, under the names of numpy 2.4 on (X86_V4 ...) and before
+#: (AVX512F ...); numpy ignores a name it does not dispatch to.
+_ABOVE_X86_V3 = (
+    "X86_V4",
+    "AVX512F",
+    "AVX512CD",
+    "AVX512_KNL",
+    "AVX512_KNM",
+    "AVX512_SKX",
+    "AVX512_CLX",
+    "AVX512_CNL",
+    "AVX512_ICL",
+    "AVX512_SPR",
+)
+
+
+def pinned_environment(cpu_flags: set[str] | None = None) -> dict[str, str]:
+    """Environment variables that make a process started with them compute on :data:`COMMITTED`.
+
+    Parameters
+    ----------
+    cpu_flags : set of str, optional
+        The CPU's feature flags (``/proc/cpuinfo``'s ``flags``); read from there when None.
+
+    Returns
+    -------
+    dict
+        ``OPENBLAS_CORETYPE`` (Haswell) and ``NPY_DISABLE_CPU_FEATURES`` (every target above X86_V3) where
+        the CPU has AVX2 and FMA; empty elsewhere (Haswell kernels would not run there, and other
+        architectures have other kernels), so a bit-for-bit check of a committed run is skipped there.
+        Both are read once, when numpy is first imported: they act on a process started with them.
+    """
+    flags = _cpu_flags() if cpu_flags is None else cpu_flags
+    if not {"avx2", "fma"} <= flags:
+        return {}
+    return {"OPENBLAS_CORETYPE": "Haswell", "NPY_DISABLE_CPU_FEATURES": " ".join(_ABOVE_X86_V3)}
+
+
+def numpy_simd() -> list[str]:
+    """numpy's dispatch targets enabled in this process (e.g. ``["X86_V3"]``), in numpy's order."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    except ImportError:  # numpy < 2
+        from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    return [name for name in __cpu_dispatch__ if __cpu_features__.get(name)]
+
+
+def blas() -> dict[str, Any]:
+    """The BLAS numpy calls: library, version, kernel architecture and threads (threadpoolctl), else
+    numpy's build configuration."""
+    import numpy as np
+
+    try:
+        from threadpoolctl import threadpool_info
+
+        pools = [pool for pool in threadpool_info() if pool.get("user_api") == "blas"]
+        pools.sort(key=lambda pool: "numpy" not in str(pool.get("filepath")))  # numpy's own first (scipy
+        if pools:  # may load another OpenBLAS)
+            keys = {"internal_api": "library", "version": "version", "architecture": "architecture"}
+            found = {new: pools[0].get(old) for old, new in keys.items()}
+            return {**found, "threads": pools[0].get("num_threads")}
+    except ImportError:
+        pass
+    try:
+        config = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
+        return {"library": config.get("name"), "version": config.get("version"), "architecture": None}
+    except (KeyError, TypeError, ValueError):
+        return {"library": None, "version": None, "architecture": None}
+
+
+def differences(
+    packages: Mapping[str, str], record_blas: Mapping[str, Any] | None = None, simd: Any = None
+) -> list[str]:
+    """What separates this process's numeric stack from a recorded one (empty: the same stack).
+
+    Parameters
+    ----------
+    packages : mapping
+        The record's package versions; numpy's and scipy's are compared.
+    record_blas : mapping, optional
+        The record's ``blas`` entry; its library and version are compared where present, its architecture
+        with :data:`COMMITTED`'s where absent.
+    simd : list of str, optional
+        The record's numpy dispatch targets; :data:`COMMITTED`'s where None.
+
+    Returns
+    -------
+    list of str
+        One ``"<what>: <recorded> there, <live> here"`` line per difference.
+    """
+    found = []
+    for name in ("numpy", "scipy"):
+        if packages.get(name) != _version(name):
+            found.append(f"{name}: {packages.get(name)} there, {_version(name)} here")
+    live, recorded = blas(), dict(record_blas or {})
+    recorded.setdefault("architecture", COMMITTED["blas_architecture"])
+    for key in ("library", "version", "architecture"):
+        if recorded.get(key) is not None and recorded[key] != live.get(key):
+            found.append(f"BLAS {key}: {recorded[key]} there, {live.get(key)} here")
+    expected = list(COMMITTED["simd"] if simd is None else simd)
+    if numpy_simd() != expected:
+        found.append(f"numpy SIMD: {' '.join(expected)} there, {' '.join(numpy_simd())} here")
+    return found
+
+
+def _version(name: str) -> str | None:
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return None
+
+
+def _cpu_flags() -> set[str]:
+    """The CPU's feature flags from ``/proc/cpuinfo`` (Linux); empty elsewhere."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace").splitlines():
+            if line.startswith("flags"):
+                return set(line.partition(":")[2].split())
+    except OSError:
+        pass
+    return set()

@@ -12,6 +12,8 @@ CPU). :func:`differences` says what separates this process's stack from a record
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from collections.abc import Mapping
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -23,42 +25,45 @@ __all__ = ["COMMITTED", "blas", "differences", "numpy_simd", "pinned_environment
 #: those without a BLAS entry): OpenBLAS's Haswell kernels and numpy's dispatch up to X86_V3.
 COMMITTED = {"blas_architecture": "Haswell", "simd": ("X86_V3",)}
 
-#: numpy's dispatch targets above X86_V3, under the names of numpy 2.4 on (X86_V4 ...) and before
-#: (AVX512F ...); numpy ignores a name it does not dispatch to.
-_ABOVE_X86_V3 = (
-    "X86_V4",
-    "AVX512F",
-    "AVX512CD",
-    "AVX512_KNL",
-    "AVX512_KNM",
-    "AVX512_SKX",
-    "AVX512_CLX",
-    "AVX512_CNL",
-    "AVX512_ICL",
-    "AVX512_SPR",
-)
+#: numpy's code for its dispatch targets enabled in a fresh process (run by :func:`pinned_environment`
+#: before this process imports numpy, which would read the variables it sets).
+_ENABLED_TARGETS = """
+try:
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+except ImportError:  # numpy < 2
+    from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+print(" ".join(name for name in __cpu_dispatch__ if __cpu_features__.get(name)))
+"""
 
 
-def pinned_environment(cpu_flags: set[str] | None = None) -> dict[str, str]:
+def pinned_environment(cpu_flags: set[str] | None = None, enabled: list[str] | None = None) -> dict[str, str]:
     """Environment variables that make a process started with them compute on :data:`COMMITTED`.
 
     Parameters
     ----------
     cpu_flags : set of str, optional
         The CPU's feature flags (``/proc/cpuinfo``'s ``flags``); read from there when None.
+    enabled : list of str, optional
+        numpy's dispatch targets enabled on this CPU (:func:`numpy_simd` of a process started without the
+        variables); asked of a fresh Python process when None.
 
     Returns
     -------
     dict
-        ``OPENBLAS_CORETYPE`` (Haswell) and ``NPY_DISABLE_CPU_FEATURES`` (every target above X86_V3) where
-        the CPU has AVX2 and FMA; empty elsewhere (Haswell kernels would not run there, and other
-        architectures have other kernels), so a bit-for-bit check of a committed run is skipped there.
-        Both are read once, when numpy is first imported: they act on a process started with them.
+        Where the CPU has AVX2 and FMA: ``OPENBLAS_CORETYPE`` (Haswell) and, where numpy dispatches above
+        X86_V3 here (``X86_V4``, ``AVX512_*``; ``AVX512F`` ... before numpy 2.4), ``NPY_DISABLE_CPU_FEATURES``
+        naming exactly those targets (numpy warns about a name it does not dispatch to). Empty elsewhere:
+        Haswell kernels would not run there, and other architectures have other kernels, so a bit-for-bit
+        check of a committed run is skipped there. Both variables are read when numpy is first imported:
+        they act on a process started with them.
     """
     flags = _cpu_flags() if cpu_flags is None else cpu_flags
     if not {"avx2", "fma"} <= flags:
         return {}
-    return {"OPENBLAS_CORETYPE": "Haswell", "NPY_DISABLE_CPU_FEATURES": " ".join(_ABOVE_X86_V3)}
+    targets = _enabled_targets() if enabled is None else enabled
+    above = [name for name in targets if name == "X86_V4" or name.startswith("AVX512")]
+    pinned = {"OPENBLAS_CORETYPE": "Haswell"}
+    return pinned | ({"NPY_DISABLE_CPU_FEATURES": " ".join(above)} if above else {})
 
 
 def numpy_simd() -> list[str]:
@@ -133,6 +138,17 @@ def _version(name: str) -> str | None:
         return version(name)
     except PackageNotFoundError:
         return None
+
+
+def _enabled_targets() -> list[str]:
+    """numpy's dispatch targets enabled in a fresh Python process (none if it cannot tell)."""
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", _ENABLED_TARGETS], capture_output=True, text=True, timeout=60, check=True
+        )
+    except (OSError, subprocess.SubprocessError):
+        return []
+    return done.stdout.split()
 
 
 def _cpu_flags() -> set[str]:

@@ -82,7 +82,8 @@ PRESETS = {
 }
 #: The issue's target cells, computed first: p = 4, z = 1 on the non-quadratic functions, then the kick
 #: precision, then the quadratic functions at p = 4, z = 1 and the other robot tasks.
-FIRST = [f"{f}-p4-z1" for f in NON_QUADRATIC] + ["KickPrecisionLowDim", "KickPrecisionLowDim-v1"]
+FIRST = [f"{f}-p4-z1" for f in NON_QUADRATIC]
+FIRST += ["KickPrecisionLowDim", "KickPrecisionLowDim-v1", "KickPrecisionLowDim-v2"]
 FIRST += [f"{f}-p4-z1" for f in QUADRATIC]
 FIRST += ["KickFlexibilityLowDim", "KickFlexibilityLowDim-v1", "PlanarReacherLowDim"]
 

@@ -105,6 +105,7 @@ ROBOT_TASKS = (
     Task("KickFlexibilityLowDim", "creps_gym/KickFlexibilityLowDim-v0", "distance"),
     Task("KickPrecisionLowDim-v1", "creps_gym/KickPrecisionLowDim-v1", "error"),
     Task("KickFlexibilityLowDim-v1", "creps_gym/KickFlexibilityLowDim-v1", "distance"),
+    Task("KickPrecisionLowDim-v2", "creps_gym/KickPrecisionLowDim-v2", "error"),
     Task("PlanarReacherLowDim", "creps_gym/PlanarReacherLowDim-v0", "cost"),
 )
 

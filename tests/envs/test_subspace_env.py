@@ -10,7 +10,13 @@ import pytest
 from helpers import EXTRAS
 
 from creps_gym.envs.kick import REGISTRATIONS as KICK_REGISTRATIONS
-from creps_gym.envs.kick.subspace import METAPARAMETERS, POWER_KICK, REACH_KICK, kick_metaparameters
+from creps_gym.envs.kick.subspace import (
+    DIRECTIONS,
+    METAPARAMETERS,
+    POWER_KICK,
+    REACH_KICK,
+    kick_metaparameters,
+)
 from creps_gym.envs.reacher.subspace import via_point_bumps
 from creps_gym.envs.subspace import AffineSubspaceEnv
 
@@ -85,21 +91,32 @@ def test_the_v1_recipes_add_the_columns_to_the_power_and_reach_kicks_after_the_s
         "creps_gym/KickFlexibilityLowDim-v0": None,
         "creps_gym/KickPrecisionLowDim-v1": (*METAPARAMETERS, "power"),
         "creps_gym/KickFlexibilityLowDim-v1": (*METAPARAMETERS, "power", "reach"),
+        "creps_gym/KickPrecisionLowDim-v2": ("duration", "aim", "power"),
     }
+
+
+def test_a_recipe_of_a_few_directions_takes_their_columns_in_its_order():
+    """The v2 ids search a few of the eight directions: the same columns as in the v1 recipe."""
+    _, eight, names = kick_metaparameters(_Kick(), DIRECTIONS)
+    assert names == [*METAPARAMETERS, "power", "reach"] and eight.shape == (25, 8)
+    for few in (("duration", "aim", "power"), ("power", "amplitude"), ("reach",)):
+        _, basis, chosen = kick_metaparameters(_Kick(), few)
+        assert chosen == list(few)
+        assert basis.tobytes() == eight[:, [DIRECTIONS.index(n) for n in few]].tobytes()
 
 
 @pytest.mark.parametrize(
     "names",
     [
-        ("amplitude",),
+        (),
         (*METAPARAMETERS, "power", "power"),
         (*METAPARAMETERS, "speed"),
-        ("power", *METAPARAMETERS),
+        ("aim", "aim"),
     ],
 )
-def test_a_recipe_of_unknown_or_misordered_names_is_refused_naming_them(names):
+def test_a_recipe_of_unknown_or_repeated_names_is_refused_naming_them(names):
     with pytest.raises(
-        ValueError, match=r"^names: expected \['amplitude', .* followed by distinct names of "
+        ValueError, match=r"^names: expected distinct names of \['amplitude', .*'reach'\], got"
     ):
         kick_metaparameters(_Kick(), names)
 
@@ -107,10 +124,15 @@ def test_a_recipe_of_unknown_or_misordered_names_is_refused_naming_them(names):
 @EXTRAS
 @pytest.mark.parametrize(
     ("low", "context", "column", "forward"),
-    [("Precision", [12.0], 6, (11.95, 12.05)), ("Flexibility", [0.30, 0.0], 7, (12.0, 12.5))],
+    [
+        ("Precision", [12.0], 6, (11.95, 12.05)),
+        ("Flexibility", [0.30, 0.0], 7, (12.0, 12.5)),
+        ("Precision", [12.0], 2, (11.95, 12.05)),  # v2's `power`: the same kick
+    ],
 )
 def test_the_v1_kicks_at_their_unit_vectors_stand_and_go_as_far_as_documented(low, context, column, forward):
-    env = gym.make(f"creps_gym/Kick{low}LowDim-v1").unwrapped
+    version = "v2" if column == 2 else "v1"
+    env = gym.make(f"creps_gym/Kick{low}LowDim-{version}").unwrapped
     u = np.zeros((1, env.action_space.shape[0]))
     u[0, column] = 1.0
     info = env.evaluate(np.array([context]), u)[1]

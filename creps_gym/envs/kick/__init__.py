@@ -23,6 +23,10 @@ Registered ids
 ``creps_gym/KickPrecisionLowDim-v1``, ``creps_gym/KickFlexibilityLowDim-v1``
     As v0, with ``power`` (towards a standing 12 m kick) and, for the flexibility, ``reach`` (towards a
     standing kick of a ball at x_B = 0.30 m) as a seventh and eighth metaparameter.
+``creps_gym/KickPrecisionLowDim-v2``
+    KickPrecision-v1 searched over three of those: ``duration``, ``aim`` and ``power`` (the distance from
+    2.6 to 11.8 m and the sideways direction), as a real robot's engineer would pick a kick's strength,
+    timing and aim.
 """
 
 from __future__ import annotations
@@ -84,4 +88,13 @@ REGISTRATIONS: list[dict[str, Any]] = [
             ("Flexibility", "v2", (*_SIX, "power", "reach")),
         )
     ),
+    {
+        "id": "creps_gym/KickPrecisionLowDim-v2",
+        "entry_point": "creps_gym.envs.kick.subspace:make_low_dimensional_kick",
+        "kwargs": {
+            "full_id": "creps_gym/KickPrecision-v1",
+            "initial_std": 0.3,
+            "names": ("duration", "aim", "power"),
+        },
+    },
 ]

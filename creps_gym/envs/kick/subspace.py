@@ -33,7 +33,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["METAPARAMETERS", "POWER_KICK", "REACH_KICK", "kick_metaparameters", "make_low_dimensional_kick"]
+__all__ = [
+    "DIRECTIONS",
+    "METAPARAMETERS",
+    "POWER_KICK",
+    "REACH_KICK",
+    "kick_metaparameters",
+    "make_low_dimensional_kick",
+]
 
 Array = NDArray[np.float64]
 METAPARAMETERS = ("amplitude", "hip", "ankle", "duration", "aim", "lean")
@@ -100,40 +107,34 @@ REACH_KICK = (
 )
 #: The v1 ids' extra metaparameters: u = 1 is the kick itself (θ = θ_kick, the column θ_kick − θ_ref).
 _KICKS = {"power": POWER_KICK, "reach": REACH_KICK}
+#: Every direction a low-dimensional kick id may search: the six and the two kicks'.
+DIRECTIONS = (*METAPARAMETERS, *_KICKS)
 
 
 def kick_metaparameters(env: Any, names: tuple[str, ...] = METAPARAMETERS) -> tuple[Array, Array, list[str]]:
     """(θ_ref (25,), B (25, k), names) for a kick env (its ``reference_params()``).
 
-    ``names``: the v0 ids' six (:data:`METAPARAMETERS`, the default) followed by none, some or all of the
-    v1 ids' ``"power"`` and ``"reach"`` (the columns :data:`POWER_KICK` − θ_ref and
-    :data:`REACH_KICK` − θ_ref).
+    ``names``: distinct names of :data:`DIRECTIONS`, B's columns in their order: the v0 ids' six
+    (:data:`METAPARAMETERS`, the default), the v1 ids' six followed by ``"power"`` and ``"reach"`` (the
+    columns :data:`POWER_KICK` − θ_ref and :data:`REACH_KICK` − θ_ref), or the v2 ids' few.
     """
     names = tuple(names)
-    extra = names[len(METAPARAMETERS) :]
-    if (
-        names[: len(METAPARAMETERS)] != METAPARAMETERS
-        or any(n not in _KICKS for n in extra)
-        or len(set(extra)) != len(extra)
-    ):
-        raise ValueError(
-            f"names: expected {list(METAPARAMETERS)} followed by distinct names of {sorted(_KICKS)}, "
-            f"got {list(names)}"
-        )
+    if not names or any(n not in DIRECTIONS for n in names) or len(set(names)) != len(names):
+        raise ValueError(f"names: expected distinct names of {list(DIRECTIONS)}, got {list(names)}")
     reference = np.asarray(env.reference_params(), dtype=np.float64)
     swing = reference[_FINAL + _R : _FINAL + _R + 6] - reference[_R : _R + 6]
-    basis = np.zeros((reference.shape[0], len(names)))
-    basis[_FINAL + _R : _FINAL + _R + 6, 0] = 0.5 * swing
-    basis[_FINAL + _R + _HIP_PITCH, 1] = 0.6
-    basis[_FINAL + _R + _ANKLE_PITCH, 2] = 0.6
-    basis[_DURATION, 3] = 0.5
-    basis[_FINAL + _R + _HIP_ROLL, 4] = 0.6
+    columns = {name: np.zeros(reference.shape[0]) for name in DIRECTIONS}
+    columns["amplitude"][_FINAL + _R : _FINAL + _R + 6] = 0.5 * swing
+    columns["hip"][_FINAL + _R + _HIP_PITCH] = 0.6
+    columns["ankle"][_FINAL + _R + _ANKLE_PITCH] = 0.6
+    columns["duration"][_DURATION] = 0.5
+    columns["aim"][_FINAL + _R + _HIP_ROLL] = 0.6
     for pose in (0, _FINAL):
         for leg in (_R, _L):
-            basis[pose + leg + _HIP_ROLL, 5] += 0.1
-    for column, name in enumerate(extra, start=len(METAPARAMETERS)):
-        basis[:, column] = np.asarray(_KICKS[name]) - reference
-    return reference, basis, list(names)
+            columns["lean"][pose + leg + _HIP_ROLL] += 0.1
+    for name, kick in _KICKS.items():
+        columns[name] = np.asarray(kick) - reference
+    return reference, np.stack([columns[name] for name in names], axis=1), list(names)
 
 
 def make_low_dimensional_kick(full_id: str, names: tuple[str, ...] = METAPARAMETERS, **kwargs: Any) -> Any:

@@ -24,9 +24,8 @@ Registered ids
     As v0, with ``power`` (towards a standing 12 m kick) and, for the flexibility, ``reach`` (towards a
     standing kick of a ball at x_B = 0.30 m) as a seventh and eighth metaparameter.
 ``creps_gym/KickPrecisionLowDim-v2``
-    KickPrecision-v1 searched over three of those: ``duration``, ``aim`` and ``power`` (the distance from
-    2.6 to 11.8 m and the sideways direction), as a real robot's engineer would pick a kick's strength,
-    timing and aim.
+    KickPrecision-v1 searched over three of those, ``duration``, ``aim`` and ``power``: a kick's timing,
+    direction and strength, the few metaparameters a real robot's engineer would expose.
 """
 
 from __future__ import annotations

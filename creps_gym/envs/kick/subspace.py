@@ -1,5 +1,5 @@
 """The low-dimensional kicks' subspace (``creps_gym/KickPrecisionLowDim-v0``, ``KickFlexibilityLowDim-v0``):
-six movement metaparameters around the reference kick.
+six movement metaparameters around the reference kick; the v1 and v2 ids' directions.
 
 θ_ref is the reference right-leg kick (``model.REFERENCE_KICK``, normalised units). With Δ = θ_final,r −
 θ_initial,r the kicking leg's swing (its six joints), the columns of B are, in normalised units:
@@ -20,10 +20,20 @@ u_i = ±0.5 and ±1 (eight contexts): none of them makes the robot fall alone, w
 which is why neither is a larger direction. They are not fitted, and a combination of several large u_i
 can still fall.
 
-What the subspace reaches (``benchmarks/low_budget/reach.py``, pycma per context, 300 episodes each):
+The v1 ids add ``power`` and ``reach``: the columns to a standing 12 m kick and to a standing kick of a ball
+at x_B = 0.30 m (u = 1 is that kick), found by pycma in the full ids
+(``benchmarks/low_budget/strong_kicks.py``). ``creps_gym/KickPrecisionLowDim-v2`` searches three of the
+eight directions only, ``duration``, ``aim`` and ``power`` (:data:`DIRECTIONS`; the same columns): the
+kick's timing, direction and strength, which together set where the ball stops, as the real-robot BO-CPS
+work searches the two parameters of a throw. The other four shape the swing; within a real robot's budget
+the seven of the v1 id are learnt far less well (``benchmarks/low_budget/README.md``).
+
+What the six reach (``benchmarks/low_budget/reach.py``, pycma per context, 300 episodes each):
 the farthest precision kick that stands is 9.68 m, short of the paper's 10–12 m targets (best mean
 error over its 10 targets 0.427 m, above the paper's 0.34 m), and no flexibility kick moves a ball at
-x_B = 0.30 m (best mean distance over the 28 positions 4.1 m, below the paper's 6.5 m).
+x_B = 0.30 m (best mean distance over the 28 positions 4.1 m, below the paper's 6.5 m). The v2 id's three
+reach a best mean error of 0.00616 m (``benchmarks/low_budget/results/reach_v2.md``;
+the v1 id's seven 0.032 m).
 """
 
 from __future__ import annotations

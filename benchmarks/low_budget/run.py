@@ -85,7 +85,8 @@ PRESETS = {
 FIRST = [f"{f}-p4-z1" for f in NON_QUADRATIC]
 FIRST += ["KickPrecisionLowDim", "KickPrecisionLowDim-v1", "KickPrecisionLowDim-v2"]
 FIRST += [f"{f}-p4-z1" for f in QUADRATIC]
-FIRST += ["KickFlexibilityLowDim", "KickFlexibilityLowDim-v1", "PlanarReacherLowDim"]
+FIRST += ["KickFlexibilityLowDim", "KickFlexibilityLowDim-v1", "KickFlexibilityLowDim-v2"]
+FIRST += ["PlanarReacherLowDim"]
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:

@@ -106,6 +106,7 @@ ROBOT_TASKS = (
     Task("KickPrecisionLowDim-v1", "creps_gym/KickPrecisionLowDim-v1", "error"),
     Task("KickFlexibilityLowDim-v1", "creps_gym/KickFlexibilityLowDim-v1", "distance"),
     Task("KickPrecisionLowDim-v2", "creps_gym/KickPrecisionLowDim-v2", "error"),
+    Task("KickFlexibilityLowDim-v2", "creps_gym/KickFlexibilityLowDim-v2", "distance"),
     Task("PlanarReacherLowDim", "creps_gym/PlanarReacherLowDim-v0", "cost"),
 )
 

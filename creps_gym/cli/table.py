@@ -18,10 +18,12 @@ ENVS = [['creps_gym/CigTab-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'CigTab: 
  ['creps_gym/KickFlexibility-v2', '[0.15, 0.3]×[-0.15, 0.15]', '[-1, 1]^25', 'N(env-declared mean, 0.02^2)', 'Humanoid kick, flexibility task: kick the ball as far as possible from wherever it lies.', ['mujoco']],
  ['creps_gym/KickFlexibilityLowDim-v0', '[0.15, 0.3]×[-0.15, 0.15]', '[-1, 1]^6', 'N(0, 0.3^2)', "A fixed affine subspace θ = θ_ref + B u of a full env's parameters (see the module docstring).", ['mujoco']],
  ['creps_gym/KickFlexibilityLowDim-v1', '[0.15, 0.3]×[-0.15, 0.15]', '[-1, 1]^8', 'N(0, 0.3^2)', "A fixed affine subspace θ = θ_ref + B u of a full env's parameters (see the module docstring).", ['mujoco']],
+ ['creps_gym/KickFlexibilityLowDim-v2', '[0.15, 0.3]×[-0.15, 0.15]', '[-1, 1]^4', 'N(0, 0.3^2)', "A fixed affine subspace θ = θ_ref + B u of a full env's parameters (see the module docstring).", ['mujoco']],
  ['creps_gym/KickPrecision-v0', '[3, 12]', '[-1, 1]^25', 'N(env-declared mean, 0.02^2)', 'Humanoid kick, precision task: kick a fixed ball to a target distance.', ['mujoco']],
  ['creps_gym/KickPrecision-v1', '[3, 12]', '[-1, 1]^25', 'N(env-declared mean, 0.02^2)', 'Humanoid kick, precision task: kick a fixed ball to a target distance.', ['mujoco']],
  ['creps_gym/KickPrecisionLowDim-v0', '[3, 12]', '[-1, 1]^6', 'N(0, 0.3^2)', "A fixed affine subspace θ = θ_ref + B u of a full env's parameters (see the module docstring).", ['mujoco']],
  ['creps_gym/KickPrecisionLowDim-v1', '[3, 12]', '[-1, 1]^7', 'N(0, 0.3^2)', "A fixed affine subspace θ = θ_ref + B u of a full env's parameters (see the module docstring).", ['mujoco']],
+ ['creps_gym/KickPrecisionLowDim-v2', '[3, 12]', '[-1, 1]^3', 'N(0, 0.3^2)', "A fixed affine subspace θ = θ_ref + B u of a full env's parameters (see the module docstring).", ['mujoco']],
  ['creps_gym/ParabolicRidge-v0', '[0, 3]', '[-5, 5]^15', 'N(0, 2.5^2)', 'Parabolic Ridge: contextual version, x = theta + A s.', []],
  ['creps_gym/PlanarReacher-v0', '[0, 2]^2', '[-30, 30]^25', 'N(0, 15^2)', 'A 5-link planar arm, driven by joint-space DMPs, passes a via-point and reaches a fixed goal.', []],
  ['creps_gym/PlanarReacher-v1', '[0, 2]^2', '[-30, 30]^25', 'N(0, 1^2)', 'A 5-link planar arm, driven by joint-space DMPs, passes a via-point and reaches a fixed goal.', []],
@@ -79,6 +81,8 @@ REGISTRATIONS = [{'id': 'creps_gym/Rosenbrock-v0', 'entry_point': 'creps_gym.env
  {'id': 'creps_gym/KickFlexibilityLowDim-v0', 'entry_point': 'creps_gym.envs.kick.subspace:make_low_dimensional_kick', 'kwargs': {'full_id': 'creps_gym/KickFlexibility-v2', 'initial_std': 0.3}},
  {'id': 'creps_gym/KickPrecisionLowDim-v1', 'entry_point': 'creps_gym.envs.kick.subspace:make_low_dimensional_kick', 'kwargs': {'full_id': 'creps_gym/KickPrecision-v1', 'initial_std': 0.3, 'names': ('amplitude', 'hip', 'ankle', 'duration', 'aim', 'lean', 'power')}},
  {'id': 'creps_gym/KickFlexibilityLowDim-v1', 'entry_point': 'creps_gym.envs.kick.subspace:make_low_dimensional_kick', 'kwargs': {'full_id': 'creps_gym/KickFlexibility-v2', 'initial_std': 0.3, 'names': ('amplitude', 'hip', 'ankle', 'duration', 'aim', 'lean', 'power', 'reach')}},
+ {'id': 'creps_gym/KickPrecisionLowDim-v2', 'entry_point': 'creps_gym.envs.kick.subspace:make_low_dimensional_kick', 'kwargs': {'full_id': 'creps_gym/KickPrecision-v1', 'initial_std': 0.3, 'names': ('duration', 'aim', 'power')}},
+ {'id': 'creps_gym/KickFlexibilityLowDim-v2', 'entry_point': 'creps_gym.envs.kick.subspace:make_low_dimensional_kick', 'kwargs': {'full_id': 'creps_gym/KickFlexibility-v2', 'initial_std': 0.3, 'names': ('aim', 'lean', 'power', 'reach')}},
  {'id': 'creps_gym/PointMazeGoal-v0', 'entry_point': 'creps_gym.wrappers.examples:PointMazeGoalEnv', 'vector_entry_point': 'creps_gym.wrappers.examples:PointMazeGoalVectorEnv'},
  {'id': 'creps_gym/ReacherTarget-v0', 'entry_point': 'creps_gym.wrappers.examples:ReacherTargetEnv', 'vector_entry_point': 'creps_gym.wrappers.examples:ReacherTargetVectorEnv'}]
 # fmt: on

@@ -70,10 +70,12 @@ def test_same_seed_gives_identical_episodes(env_id):
 
 def _candidate_actions(env: gym.Env, model: ContextualEpisodicEnv) -> list[np.ndarray]:
     """Parameters to probe the context with: the env's reference parameters, if it ships some (a random kick
-    just falls over, with the same penalty in every context), then seeded samples of the parameter box."""
-    candidates = (
-        [np.asarray(model.reference_params())] if callable(getattr(model, "reference_params", None)) else []
-    )
+    just falls over, with the same penalty in every context), else its declared start's mean (a
+    low-dimensional kick's u = 0 is the reference kick), then seeded samples of the parameter box."""
+    if callable(getattr(model, "reference_params", None)):
+        candidates = [np.asarray(model.reference_params())]
+    else:
+        candidates = [np.asarray(model.initial_distribution()[0])]
     candidates.append(_fixed_action(env))
     candidates += [env.action_space.sample() for _ in range(2)]
     return candidates

@@ -92,6 +92,7 @@ def test_the_v1_recipes_add_the_columns_to_the_power_and_reach_kicks_after_the_s
         "creps_gym/KickPrecisionLowDim-v1": (*METAPARAMETERS, "power"),
         "creps_gym/KickFlexibilityLowDim-v1": (*METAPARAMETERS, "power", "reach"),
         "creps_gym/KickPrecisionLowDim-v2": ("duration", "aim", "power"),
+        "creps_gym/KickFlexibilityLowDim-v2": ("aim", "lean", "power", "reach"),
     }
 
 
@@ -127,11 +128,12 @@ def test_a_recipe_of_unknown_or_repeated_names_is_refused_naming_them(names):
     [
         ("Precision", [12.0], 6, (11.95, 12.05)),
         ("Flexibility", [0.30, 0.0], 7, (12.0, 12.5)),
-        ("Precision", [12.0], 2, (11.95, 12.05)),  # v2's `power`: the same kick
+        ("Precision", [12.0], 2, (11.95, 12.05)),  # the v2 ids' `power` and `reach`: the same kicks
+        ("Flexibility", [0.30, 0.0], 3, (12.0, 12.5)),
     ],
 )
 def test_the_v1_kicks_at_their_unit_vectors_stand_and_go_as_far_as_documented(low, context, column, forward):
-    version = "v2" if column == 2 else "v1"
+    version = "v2" if column < 6 else "v1"
     env = gym.make(f"creps_gym/Kick{low}LowDim-{version}").unwrapped
     u = np.zeros((1, env.action_space.shape[0]))
     u[0, column] = 1.0

@@ -156,7 +156,7 @@ def test_unknown_tasks_methods_and_bad_budgets_are_rejected() -> None:
 def test_the_full_study_computes_the_issues_target_cells_first() -> None:
     specs = study_run.study_specs(study_run.parse_args(["--full"]))
     methods = len(columns.METHODS)
-    assert len(specs) == 36 * methods * 10 and len({s.key for s in specs}) == len(specs)
+    assert len(specs) == 37 * methods * 10 and len({s.key for s in specs}) == len(specs)
     first = [s.task for s in specs[: 6 * methods * 10 : methods * 10]]
     targets = ["Rosenbrock-p4-z1", "DifferentPowers-p4-z1", "Rastrigin-p4-z1", "KickPrecisionLowDim"]
     assert first == [*targets, "KickPrecisionLowDim-v1", "KickPrecisionLowDim-v2"]

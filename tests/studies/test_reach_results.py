@@ -19,7 +19,7 @@ from benchmarks.low_budget.study import evaluation_contexts, task_by_name
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 
 
-#: The committed results: the v0 ids', the v1 ids', the precision's v2.
+#: The committed results: the v0 ids', the v1 ids', the v2 ids'.
 FILES = {"reach": reach.TASKS[:2], "reach_v1": reach.TASKS[2:4], "reach_v2": reach.TASKS[4:]}
 
 

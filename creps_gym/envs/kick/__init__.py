@@ -26,6 +26,9 @@ Registered ids
 ``creps_gym/KickPrecisionLowDim-v2``
     KickPrecision-v1 searched over three of those, ``duration``, ``aim`` and ``power``: a kick's timing,
     direction and strength, the few metaparameters a real robot's engineer would expose.
+``creps_gym/KickFlexibilityLowDim-v2``
+    KickFlexibility-v2 searched over four: ``aim``, ``lean``, ``power`` and ``reach``, the kick's sideways
+    direction and body shift (for a ball off the centre line) and its strength for a near and a far ball.
 """
 
 from __future__ import annotations
@@ -94,6 +97,15 @@ REGISTRATIONS: list[dict[str, Any]] = [
             "full_id": "creps_gym/KickPrecision-v1",
             "initial_std": 0.3,
             "names": ("duration", "aim", "power"),
+        },
+    },
+    {
+        "id": "creps_gym/KickFlexibilityLowDim-v2",
+        "entry_point": "creps_gym.envs.kick.subspace:make_low_dimensional_kick",
+        "kwargs": {
+            "full_id": "creps_gym/KickFlexibility-v2",
+            "initial_std": 0.3,
+            "names": ("aim", "lean", "power", "reach"),
         },
     },
 ]

@@ -3,15 +3,18 @@ version, kernel architecture) and the SIMD instruction sets numpy's own loops di
 
 Both change the last bits of a result, and an optimiser amplifies such bits over hundreds of iterations
 into a different run: the same code, seed and package versions give other numbers on an AVX-512 CPU than on
-an AVX2 one. Every committed study run was computed on an AMD EPYC whose OpenBLAS ran its Haswell kernels and
-whose numpy dispatched up to ``X86_V3`` (AVX2, FMA); :data:`COMMITTED` names that stack, and
-:func:`pinned_environment` gives the environment variables under which any x86-64 CPU with AVX2 and FMA
-computes on it (what the test suite sets, so that its bit-for-bit checks of committed runs hold on such a
-CPU). :func:`differences` says what separates this process's stack from a recorded one.
+an AVX2 one. The study runs committed before 2026-11-29 were computed on an AMD EPYC whose OpenBLAS ran its
+Haswell kernels and whose numpy dispatched up to ``X86_V3`` (AVX2, FMA); later ones on an Intel Xeon with
+that stack pinned. :data:`COMMITTED` names the stack, and :func:`pinned_environment` gives the environment
+variables under which any x86-64 Linux CPU with AVX2 and FMA computes on it (what the test suite sets, so
+that its bit-for-bit checks of committed runs hold on such a CPU). torch's own kernels (ATen's CPU
+capability, its BLAS) are not pinned by them: a BoTorch run is the same only on the same CPU.
+:func:`differences` says what separates this process's stack from a recorded one.
 """
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from collections.abc import Mapping
@@ -25,6 +28,8 @@ __all__ = ["COMMITTED", "blas", "differences", "numpy_simd", "pinned_environment
 #: those without a BLAS entry): OpenBLAS's Haswell kernels and numpy's dispatch up to X86_V3.
 COMMITTED = {"blas_architecture": "Haswell", "simd": ("X86_V3",)}
 
+#: The variables that restrict numpy's dispatch (a process asked for the CPU's own targets runs without).
+_NUMPY_FEATURE_VARIABLES = ("NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES")
 #: numpy's code for its dispatch targets enabled in a fresh process (run by :func:`pinned_environment`
 #: before this process imports numpy, which would read the variables it sets).
 _ENABLED_TARGETS = """
@@ -120,7 +125,8 @@ def differences(
     """
     found = []
     for name in ("numpy", "scipy"):
-        if packages.get(name) != _version(name):
+        recorded = packages.get(name)
+        if (None if recorded == "not installed" else recorded) != _version(name):
             found.append(f"{name}: {packages.get(name)} there, {_version(name)} here")
     live, recorded = blas(), dict(record_blas or {})
     recorded.setdefault("architecture", COMMITTED["blas_architecture"])
@@ -141,10 +147,17 @@ def _version(name: str) -> str | None:
 
 
 def _enabled_targets() -> list[str]:
-    """numpy's dispatch targets enabled in a fresh Python process (none if it cannot tell)."""
+    """numpy's dispatch targets on this CPU: those a fresh Python process without numpy's feature variables
+    enables (none if it cannot tell)."""
+    unpinned = {k: v for k, v in os.environ.items() if k not in _NUMPY_FEATURE_VARIABLES}
     try:
         done = subprocess.run(
-            [sys.executable, "-c", _ENABLED_TARGETS], capture_output=True, text=True, timeout=60, check=True
+            [sys.executable, "-c", _ENABLED_TARGETS],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=True,
+            env=unpinned,
         )
     except (OSError, subprocess.SubprocessError):
         return []

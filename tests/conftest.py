@@ -33,9 +33,10 @@ if "numpy" not in sys.modules:
     # on any x86-64 CPU with AVX2 and FMA: on an AVX-512 CPU numpy's own loops would take other paths, and
     # the tests that compute a committed run again bit for bit (helpers.skip_unless_stack_of) would
     # compute another run. Elsewhere nothing is set and those tests skip, naming what differs. Set once, in
-    # the first process (a worker inherits it); a variable the user set is kept, and the other then left.
-    if not {"OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES"} & set(os.environ):
-        os.environ.update(pinned_environment())
+    # the first process (a worker inherits it); a variable the user set is kept.
+    if not {"OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES"} <= set(os.environ):
+        for _variable, _value in pinned_environment().items():
+            os.environ.setdefault(_variable, _value)
 
 # Bytecode for the processes the suite starts (its workers and about 160 test subprocesses). Where
 # PYTHONDONTWRITEBYTECODE is set (to keep the source tree free of __pycache__), each of those processes

@@ -186,14 +186,15 @@ def crash_at(iteration: int) -> Any:
     return CrashAt()
 
 
-def skip_unless_stack_of(packages: Any, blas: Any = None, simd: Any = None) -> None:
+def skip_unless_stack_of(record: dict[str, Any]) -> None:
     """Skip the calling test, naming what differs, unless this process computes on the numeric stack of
-    a committed record (its numpy and scipy, BLAS kernels and numpy's SIMD dispatch; see
-    :mod:`benchmarks.numeric_stack`): a committed run is bit for bit the code's only there. The suite's
-    processes compute on the committed runs' stack on any x86-64 CPU with AVX2 and FMA (``conftest.py``)."""
+    a committed provenance ``record`` (its ``packages``' numpy and scipy, its ``blas`` kernels and its
+    ``simd``, numpy's dispatch; the committed stack's where absent; see :mod:`benchmarks.numeric_stack`):
+    a committed run is bit for bit the code's only there. The suite's processes compute on the committed
+    runs' stack on any x86-64 Linux CPU with AVX2 and FMA (``conftest.py``)."""
     from benchmarks.numeric_stack import differences
 
-    found = differences(packages, blas, simd)
+    found = differences(record["packages"], record.get("blas"), record.get("simd"))
     if found:
         pytest.skip("bit for bit only on the stack that computed the committed run: " + "; ".join(found))
 

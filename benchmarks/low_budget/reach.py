@@ -10,6 +10,8 @@ precision task also the farthest kick it finds that does not fall (any target: t
 depend on it). Its values are reachable (they were reached); they bound what the search can find, not the
 truth, so a larger ``--evaluations`` can only find better values.
 Writes one JSON document with provenance and a Markdown table next to it (``--render-only`` redraws it).
+The committed v2 results were computed with :func:`benchmarks.numeric_stack.pinned_environment`'s
+variables set (their provenance records the stack).
 
     OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.reach \\
         --out benchmarks/low_budget/results/reach.json            # the v0 ids

@@ -4,6 +4,8 @@ tests: check_env, overflow, the runner.)"""
 
 from __future__ import annotations
 
+import hashlib
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -97,9 +99,12 @@ def test_the_v1_recipes_add_the_columns_to_the_power_and_reach_kicks_after_the_s
 
 
 def test_a_recipe_of_a_few_directions_takes_their_columns_in_its_order():
-    """The v2 ids search a few of the eight directions: the same columns as in the v1 recipe."""
+    """The v2 ids search a few of the eight directions: the same columns as in the v1 recipe, which are the
+    columns the recipe gave before it took any subset (their SHA-256, computed by the recipe of 5ad396f)."""
     _, eight, names = kick_metaparameters(_Kick(), DIRECTIONS)
     assert names == [*METAPARAMETERS, "power", "reach"] and eight.shape == (25, 8)
+    digest = hashlib.sha256(np.ascontiguousarray(eight).tobytes()).hexdigest()
+    assert digest == "e14a731f83a4f9268f5d4ff548c6cc292f4121fdb5eaa8dc36b34fcd56a77698"
     for few in (("duration", "aim", "power"), ("power", "amplitude"), ("reach",)):
         _, basis, chosen = kick_metaparameters(_Kick(), few)
         assert chosen == list(few)
@@ -124,17 +129,18 @@ def test_a_recipe_of_unknown_or_repeated_names_is_refused_naming_them(names):
 
 @EXTRAS
 @pytest.mark.parametrize(
-    ("low", "context", "column", "forward"),
+    ("env_id", "context", "column", "forward"),
     [
-        ("Precision", [12.0], 6, (11.95, 12.05)),
-        ("Flexibility", [0.30, 0.0], 7, (12.0, 12.5)),
-        ("Precision", [12.0], 2, (11.95, 12.05)),  # the v2 ids' `power` and `reach`: the same kicks
-        ("Flexibility", [0.30, 0.0], 3, (12.0, 12.5)),
+        ("creps_gym/KickPrecisionLowDim-v1", [12.0], 6, (11.95, 12.05)),
+        ("creps_gym/KickFlexibilityLowDim-v1", [0.30, 0.0], 7, (12.0, 12.5)),
+        ("creps_gym/KickPrecisionLowDim-v2", [12.0], 2, (11.95, 12.05)),  # v2's `power` and `reach`: the
+        ("creps_gym/KickFlexibilityLowDim-v2", [0.30, 0.0], 3, (12.0, 12.5)),  # same kicks
     ],
 )
-def test_the_v1_kicks_at_their_unit_vectors_stand_and_go_as_far_as_documented(low, context, column, forward):
-    version = "v2" if column < 6 else "v1"
-    env = gym.make(f"creps_gym/Kick{low}LowDim-{version}").unwrapped
+def test_the_strong_kicks_at_their_unit_vectors_stand_and_go_as_far_as_documented(
+    env_id, context, column, forward
+):
+    env = gym.make(env_id).unwrapped
     u = np.zeros((1, env.action_space.shape[0]))
     u[0, column] = 1.0
     info = env.evaluate(np.array([context]), u)[1]

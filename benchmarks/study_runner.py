@@ -60,7 +60,7 @@ def run_all(
     log: Callable[[str], None] = print,
     compute: bool | Callable[[RunSpec], bool] = True,
     recompute: bool = False,
-    packages: Sequence[str] = ("cma",),
+    packages: Sequence[str] | Callable[[RunSpec], Sequence[str]] = ("cma",),
 ) -> list[dict[str, Any]]:
     """Results of the specs, in order: cached ones are read, the others computed in a process pool.
 
@@ -86,9 +86,10 @@ def run_all(
     recompute : bool
         Compute every run, reading no cached document (a ``--quick`` invocation reproduces its results);
         the new documents replace the cached ones.
-    packages : sequence of str
+    packages : sequence of str, or callable
         Distributions the computed runs use besides the core ones, whose versions the provenance records
-        (default pycma, which the studies' baselines use; a study on MuJoCo or a GP library adds them).
+        (default pycma, which the studies' baselines use; a study on MuJoCo or a GP library adds them), or
+        ``packages(spec)``: each run's own.
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
@@ -118,12 +119,18 @@ def run_all(
     )
 
     partial = cache / "partial"
-    record = provenance(packages) if todo else None
+    records: dict[tuple[str, ...], dict[str, Any]] = {}  # one provenance per package list, as first needed
+
+    def record(spec: RunSpec) -> dict[str, Any]:
+        names = tuple(packages(spec) if callable(packages) else packages)
+        if names not in records:
+            records[names] = provenance(names)
+        return records[names]
 
     running = {spec.key for spec in todo}
 
     def done(spec: RunSpec, document: dict[str, Any], count: int) -> None:
-        document = {**document, "provenance": record}
+        document = {**document, "provenance": record(spec)}
         store_document(cache / f"{spec.key}.json", document)
         running.discard(spec.key)
         for stale in partial.glob(f"{spec.prefix}-b*-n{spec.samples}"):  # this run, under any budget ...
@@ -312,7 +319,7 @@ def run_study(
     script: str,
     figures_marker: str,
     readme: Path,
-    packages: Sequence[str] = ("cma",),
+    packages: Sequence[str] | Callable[[RunSpec], Sequence[str]] = ("cma",),
 ) -> int:
     """Run (or resume) ``specs``, write the report, and update the results index and the study README.
 
@@ -351,7 +358,8 @@ def run_study(
         return 1
     wall = time.perf_counter() - start
     computed = 0 if args.render_only else len(documents) - cached_before
-    timing = invocation_timing(args.out, wall, computed, len(specs), packages)
+    union = sorted({name for spec in specs for name in packages(spec)}) if callable(packages) else packages
+    timing = invocation_timing(args.out, wall, computed, len(specs), union)
     table = write_report(args, documents, timing)
     print(f"wrote {table} and its figures in {wall:.0f} s")
     if args.index is not None:

@@ -51,6 +51,7 @@ from benchmarks.low_budget.study import (
     LowBudgetSpec,
     function_task,
     one_run,
+    task_by_name,
 )
 from benchmarks.study_runner import (
     add_mode_options,
@@ -229,11 +230,11 @@ def write_report(args: argparse.Namespace, documents: list[dict[str, Any]], timi
     return path
 
 
-def study_packages(args: argparse.Namespace) -> tuple[str, ...]:
-    """The distributions whose versions the computed runs' provenance records besides the core ones:
-    pycma (the C-CMA-ES columns), MuJoCo (the kicks) and the GP libraries of the chosen library columns."""
-    libraries = {name for method in args.methods for name in method_by_name(method).packages}
-    return ("cma", "mujoco", *sorted(libraries))
+def run_packages(spec: LowBudgetSpec) -> tuple[str, ...]:
+    """The distributions whose versions a run's provenance records besides the core ones: pycma (as every
+    study's), MuJoCo for a kick, and its column's GP library (:attr:`~columns.Method.packages`)."""
+    kick = ("mujoco",) if task_by_name(spec.task).env_id.startswith("creps_gym/Kick") else ()
+    return ("cma", *kick, *method_by_name(spec.method).packages)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -249,7 +250,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         script="benchmarks/low_budget/run.py",
         figures_marker="\n## Per task",
         readme=HERE / "README.md",
-        packages=study_packages(args),
+        packages=run_packages,
     )
 
 

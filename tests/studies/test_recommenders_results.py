@@ -15,6 +15,8 @@ from helpers import EXTRAS, driven_cbo, skip_unless_stack_of
 from benchmarks.low_budget import recommenders
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
+#: The committed measurements: the v1 kicks, with the quadratic prior mean, the functions, the v2 kicks.
+NAMES = ["recommenders", "recommenders_quadratic", "recommenders_functions", "recommenders_v2"]
 
 
 @pytest.mark.slow
@@ -48,14 +50,14 @@ def test_a_run_needs_a_c_bo_column_and_leaves_the_optimisers_rule_as_it_was():
     assert all((optimizer.params == row).all(axis=1).any() for row in observed)
 
 
-@pytest.mark.parametrize("name", ["recommenders", "recommenders_quadratic", "recommenders_functions"])
+@pytest.mark.parametrize("name", NAMES)
 def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path, name):
     copy = tmp_path / f"{name}.json"
     shutil.copy(RESULTS / f"{name}.json", copy)
     assert recommenders.render(copy) == (RESULTS / f"{name}.md").read_text(encoding="utf-8")
 
 
-@pytest.mark.parametrize("name", ["recommenders", "recommenders_quadratic", "recommenders_functions"])
+@pytest.mark.parametrize("name", NAMES)
 def test_every_committed_run_is_the_study_run_of_its_task_column_and_seed(name):
     """Each run's default-rule values equal the study's committed document bit for bit, at every budget,
     for 10 seeds of each task, and the kicks count their falls."""

@@ -6,7 +6,7 @@ into a different run: the same code, seed and package versions give other number
 an AVX2 one. The study runs committed before 2026-11-29 were computed on an AMD EPYC whose OpenBLAS ran its
 Haswell kernels and whose numpy dispatched up to ``X86_V3`` (AVX2, FMA); later ones on an Intel Xeon with
 that stack pinned. :data:`COMMITTED` names the stack, and :func:`pinned_environment` gives the environment
-variables under which any x86-64 Linux CPU with AVX2 and FMA computes on it (what the test suite sets, so
+variables under which any x86-64 CPU with AVX2 and FMA computes on it (what the test suite sets, so
 that its bit-for-bit checks of committed runs hold on such a CPU). torch's own kernels (ATen's CPU
 capability, its BLAS) are not pinned by them: a BoTorch run is the same only on the same CPU.
 :func:`differences` says what separates this process's stack from a recorded one.
@@ -19,7 +19,6 @@ import subprocess
 import sys
 from collections.abc import Mapping
 from importlib.metadata import PackageNotFoundError, version
-from pathlib import Path
 from typing import Any
 
 __all__ = ["COMMITTED", "blas", "differences", "numpy_simd", "pinned_environment"]
@@ -30,27 +29,29 @@ COMMITTED = {"blas_architecture": "Haswell", "simd": ("X86_V3",)}
 
 #: The variables that restrict numpy's dispatch (a process asked for the CPU's own targets runs without).
 _NUMPY_FEATURE_VARIABLES = ("NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES")
-#: numpy's code for its dispatch targets enabled in a fresh process (run by :func:`pinned_environment`
-#: before this process imports numpy, which would read the variables it sets).
-_ENABLED_TARGETS = """
+#: numpy's code for what a fresh process sees of the CPU (run by :func:`pinned_environment` before this
+#: process imports numpy, which would read the variables it sets): its enabled dispatch targets on one
+#: line, the CPU features numpy detects on the next.
+_NUMPY_CPU = """
 try:
     from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 except ImportError:  # numpy < 2
     from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 print(" ".join(name for name in __cpu_dispatch__ if __cpu_features__.get(name)))
+print(" ".join(name for name, found in __cpu_features__.items() if found))
 """
 
 
-def pinned_environment(cpu_flags: set[str] | None = None, enabled: list[str] | None = None) -> dict[str, str]:
+def pinned_environment(features: set[str] | None = None, enabled: list[str] | None = None) -> dict[str, str]:
     """Environment variables that make a process started with them compute on :data:`COMMITTED`.
 
     Parameters
     ----------
-    cpu_flags : set of str, optional
-        The CPU's feature flags (``/proc/cpuinfo``'s ``flags``); read from there when None.
+    features : set of str, optional
+        The CPU's features as numpy names them (``AVX2``, ``FMA3``, ``AVX512F`` ...).
     enabled : list of str, optional
         numpy's dispatch targets enabled on this CPU (:func:`numpy_simd` of a process started without the
-        variables); asked of a fresh Python process when None.
+        variables). Both are asked of a fresh Python process when None (on any operating system).
 
     Returns
     -------
@@ -62,10 +63,13 @@ def pinned_environment(cpu_flags: set[str] | None = None, enabled: list[str] | N
         check of a committed run is skipped there. Both variables are read when numpy is first imported:
         they act on a process started with them.
     """
-    flags = _cpu_flags() if cpu_flags is None else cpu_flags
-    if not {"avx2", "fma"} <= flags:
+    if features is None or enabled is None:
+        asked_targets, asked_features = _numpy_cpu()
+        features = asked_features if features is None else features
+        enabled = asked_targets if enabled is None else enabled
+    if not {"AVX2", "FMA3"} <= features:
         return {}
-    targets = _enabled_targets() if enabled is None else enabled
+    targets = enabled
     above = [name for name in targets if name == "X86_V4" or name.startswith("AVX512")]
     pinned = {"OPENBLAS_CORETYPE": "Haswell"}
     return pinned | ({"NPY_DISABLE_CPU_FEATURES": " ".join(above)} if above else {})
@@ -146,13 +150,13 @@ def _version(name: str) -> str | None:
         return None
 
 
-def _enabled_targets() -> list[str]:
-    """numpy's dispatch targets on this CPU: those a fresh Python process without numpy's feature variables
-    enables (none if it cannot tell)."""
+def _numpy_cpu() -> tuple[list[str], set[str]]:
+    """(numpy's dispatch targets on this CPU, the CPU features numpy detects), as a fresh Python process
+    without numpy's feature variables sees them (empty if it cannot tell)."""
     unpinned = {k: v for k, v in os.environ.items() if k not in _NUMPY_FEATURE_VARIABLES}
     try:
         done = subprocess.run(
-            [sys.executable, "-c", _ENABLED_TARGETS],
+            [sys.executable, "-c", _NUMPY_CPU],
             capture_output=True,
             text=True,
             timeout=60,
@@ -160,16 +164,6 @@ def _enabled_targets() -> list[str]:
             env=unpinned,
         )
     except (OSError, subprocess.SubprocessError):
-        return []
-    return done.stdout.split()
-
-
-def _cpu_flags() -> set[str]:
-    """The CPU's feature flags from ``/proc/cpuinfo`` (Linux); empty elsewhere."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace").splitlines():
-            if line.startswith("flags"):
-                return set(line.partition(":")[2].split())
-    except OSError:
-        pass
-    return set()
+        return [], set()
+    lines = [*done.stdout.splitlines(), "", ""]
+    return lines[0].split(), set(lines[1].split())

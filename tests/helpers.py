@@ -191,7 +191,7 @@ def skip_unless_stack_of(record: dict[str, Any]) -> None:
     a committed provenance ``record`` (its ``packages``' numpy and scipy, its ``blas`` kernels and its
     ``simd``, numpy's dispatch; the committed stack's where absent; see :mod:`benchmarks.numeric_stack`):
     a committed run is bit for bit the code's only there. The suite's processes compute on the committed
-    runs' stack on any x86-64 Linux CPU with AVX2 and FMA (``conftest.py``)."""
+    runs' stack on any x86-64 CPU with AVX2 and FMA (``conftest.py``)."""
     from benchmarks.numeric_stack import differences
 
     found = differences(record["packages"], record.get("blas"), record.get("simd"))

@@ -40,18 +40,19 @@ def test_a_provenance_record_names_the_versions_the_cpu_the_blas_and_the_commit(
 
 
 def test_the_committed_stack_is_pinned_only_where_its_kernels_run() -> None:
-    avx512 = numeric_stack.pinned_environment({"avx2", "fma"}, ["X86_V3", "X86_V4", "AVX512_ICL"])
+    x86 = {"AVX2", "FMA3"}
+    avx512 = numeric_stack.pinned_environment(x86 | {"AVX512F"}, ["X86_V3", "X86_V4", "AVX512_ICL"])
     assert avx512 == {"OPENBLAS_CORETYPE": "Haswell", "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL"}
-    older_names = numeric_stack.pinned_environment({"avx2", "fma"}, ["AVX2", "AVX512F", "AVX512_SKX"])
+    older_names = numeric_stack.pinned_environment(x86, ["AVX2", "AVX512F", "AVX512_SKX"])
     assert older_names["NPY_DISABLE_CPU_FEATURES"] == "AVX512F AVX512_SKX"  # numpy before 2.4
-    assert numeric_stack.pinned_environment({"avx2", "fma"}, ["X86_V3"]) == {"OPENBLAS_CORETYPE": "Haswell"}
-    assert numeric_stack.pinned_environment({"avx", "sse4_2"}, ["AVX"]) == {}  # no AVX2: Haswell cannot run
-    assert numeric_stack.pinned_environment(set(), []) == {}  # not x86-64 Linux
+    assert numeric_stack.pinned_environment(x86, ["X86_V3"]) == {"OPENBLAS_CORETYPE": "Haswell"}
+    assert numeric_stack.pinned_environment({"AVX", "SSE42"}, ["AVX"]) == {}  # no AVX2: Haswell cannot run
+    assert numeric_stack.pinned_environment({"ASIMD", "NEON"}, ["ASIMDHP"]) == {}  # not x86-64
     # Asked of a fresh process without numpy's feature variables (this suite's processes have them): the
-    # CPU's own targets, so on an AVX-512 CPU those above X86_V3 too.
-    targets = numeric_stack._enabled_targets()
-    assert set(targets) >= set(numeric_stack.numpy_simd())
-    if "avx512f" in numeric_stack._cpu_flags():
+    # CPU's own targets and features, so on an AVX-512 CPU the targets above X86_V3 too.
+    targets, features = numeric_stack._numpy_cpu()
+    assert set(targets) >= set(numeric_stack.numpy_simd()) and features
+    if "AVX512F" in features:
         assert any(name == "X86_V4" or name.startswith("AVX512") for name in targets), targets
 
 

@@ -96,16 +96,7 @@ def run_all(
     cache = Path(cache_dir)
     cache.mkdir(parents=True, exist_ok=True)
     specs = list(specs)
-    results: dict[str, dict[str, Any]] = {}
-    todo = []
-    names = os.listdir(cache)
-    for spec in specs:
-        fresh = recompute and (compute is True or (callable(compute) and compute(spec)))
-        cached = None if fresh else cached_result(cache, spec, names)
-        if cached is not None:
-            results[spec.key] = cached
-        elif spec.key not in {s.key for s in todo}:
-            todo.append(spec)
+    results, todo = _cached_and_missing(specs, cache, compute, recompute)
     if not compute:
         log(f"{len(specs) - len(todo)} runs cached in {cache}, {len(todo)} missing (not computed)")
         return [results[spec.key] for spec in specs if spec.key in results]
@@ -119,14 +110,7 @@ def run_all(
     )
 
     partial = cache / "partial"
-    records: dict[tuple[str, ...], dict[str, Any]] = {}  # one provenance per package list, as first needed
-
-    def record(spec: RunSpec) -> dict[str, Any]:
-        names = tuple(packages(spec) if callable(packages) else packages)
-        if names not in records:
-            records[names] = provenance(names)
-        return records[names]
-
+    record = _provenance_by_packages(packages)
     running = {spec.key for spec in todo}
 
     def done(spec: RunSpec, document: dict[str, Any], count: int) -> None:
@@ -149,6 +133,39 @@ def run_all(
             for count, future in enumerate(as_completed(futures), 1):
                 done(futures[future], future.result(), count)
     return [results[spec.key] for spec in specs if spec.key in results]
+
+
+def _cached_and_missing(
+    specs: list[RunSpec], cache: Path, compute: bool | Callable[[RunSpec], bool], recompute: bool
+) -> tuple[dict[str, dict[str, Any]], list[RunSpec]]:
+    """:func:`run_all`'s cached results by key, and the specs it would compute (each key once, in order)."""
+    results: dict[str, dict[str, Any]] = {}
+    missing: list[RunSpec] = []
+    names = os.listdir(cache)
+    for spec in specs:
+        fresh = recompute and (compute is True or (callable(compute) and compute(spec)))
+        cached = None if fresh else cached_result(cache, spec, names)
+        if cached is not None:
+            results[spec.key] = cached
+        elif spec.key not in {s.key for s in missing}:
+            missing.append(spec)
+    return results, missing
+
+
+def _provenance_by_packages(
+    packages: Sequence[str] | Callable[[RunSpec], Sequence[str]],
+) -> Callable[[RunSpec], dict[str, Any]]:
+    """A run's provenance record: one per package list (``packages``, or ``packages(spec)``), made when
+    first needed."""
+    records: dict[tuple[str, ...], dict[str, Any]] = {}
+
+    def record(spec: RunSpec) -> dict[str, Any]:
+        names = tuple(packages(spec) if callable(packages) else packages)
+        if names not in records:
+            records[names] = provenance(names)
+        return records[names]
+
+    return record
 
 
 def available_methods(
@@ -201,6 +218,22 @@ def update_block(path: str | os.PathLike[str], name: str, text: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     write_text(path, new)
     return path
+
+
+def _what_to_compute(args: Any) -> bool | Callable[[RunSpec], bool]:
+    """:func:`run_all`'s ``compute`` for a study's arguments: nothing with ``--render-only``, else every
+    missing run, or only those of ``args.compute_methods`` where it names some."""
+    chosen = getattr(args, "compute_methods", None)
+    if chosen and not args.render_only:
+        return lambda spec: spec.method in chosen
+    return not args.render_only
+
+
+def _all_packages(
+    packages: Sequence[str] | Callable[[RunSpec], Sequence[str]], specs: Sequence[RunSpec]
+) -> Sequence[str]:
+    """Every package the specs' runs record (``packages``, or the union of ``packages(spec)``)."""
+    return sorted({name for spec in specs for name in packages(spec)}) if callable(packages) else packages
 
 
 def invocation_timing(
@@ -331,10 +364,7 @@ def run_study(
     """
     start = time.perf_counter()
     worker = functools.partial(execute, baselines=baselines)
-    chosen = getattr(args, "compute_methods", None)  # compute only these methods' missing runs
-    compute = (
-        (lambda spec: spec.method in chosen) if chosen and not args.render_only else not args.render_only
-    )
+    compute = _what_to_compute(args)
     recompute = args.mode == "quick"  # a quick study is a reproduction: it computes every run again
 
     names = os.listdir(args.cache) if args.cache.is_dir() else []
@@ -358,8 +388,7 @@ def run_study(
         return 1
     wall = time.perf_counter() - start
     computed = 0 if args.render_only else len(documents) - cached_before
-    union = sorted({name for spec in specs for name in packages(spec)}) if callable(packages) else packages
-    timing = invocation_timing(args.out, wall, computed, len(specs), union)
+    timing = invocation_timing(args.out, wall, computed, len(specs), _all_packages(packages, specs))
     table = write_report(args, documents, timing)
     print(f"wrote {table} and its figures in {wall:.0f} s")
     if args.index is not None:

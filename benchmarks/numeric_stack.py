@@ -57,7 +57,7 @@ def pinned_environment(features: set[str] | None = None, enabled: list[str] | No
     -------
     dict
         Where the CPU has AVX2 and FMA: ``OPENBLAS_CORETYPE`` (Haswell) and, where numpy dispatches above
-        X86_V3 here (``X86_V4``, ``AVX512_*``; ``AVX512F`` ... before numpy 2.4), ``NPY_DISABLE_CPU_FEATURES``
+        X86_V3 here (every target after it; ``AVX512F`` ... before numpy 2.4), ``NPY_DISABLE_CPU_FEATURES``
         naming exactly those targets (numpy warns about a name it does not dispatch to). Empty elsewhere:
         Haswell kernels would not run there, and other architectures have other kernels, so a bit-for-bit
         check of a committed run is skipped there. Both variables are read when numpy is first imported:
@@ -70,7 +70,10 @@ def pinned_environment(features: set[str] | None = None, enabled: list[str] | No
     if not {"AVX2", "FMA3"} <= features:
         return {}
     targets = enabled
-    above = [name for name in targets if name == "X86_V4" or name.startswith("AVX512")]
+    if "X86_V3" in targets:  # numpy 2.4 on: the targets in ascending order, so all after it
+        above = targets[targets.index("X86_V3") + 1 :]
+    else:
+        above = [name for name in targets if name.startswith("AVX512")]
     pinned = {"OPENBLAS_CORETYPE": "Haswell"}
     return pinned | ({"NPY_DISABLE_CPU_FEATURES": " ".join(above)} if above else {})
 

@@ -46,6 +46,8 @@ def test_the_committed_stack_is_pinned_only_where_its_kernels_run() -> None:
     older_names = numeric_stack.pinned_environment(x86, ["AVX2", "AVX512F", "AVX512_SKX"])
     assert older_names["NPY_DISABLE_CPU_FEATURES"] == "AVX512F AVX512_SKX"  # numpy before 2.4
     assert numeric_stack.pinned_environment(x86, ["X86_V3"]) == {"OPENBLAS_CORETYPE": "Haswell"}
+    later = numeric_stack.pinned_environment(x86, ["X86_V3", "X86_V4", "AVX10_2"])  # a target yet to come
+    assert later["NPY_DISABLE_CPU_FEATURES"] == "X86_V4 AVX10_2"
     assert numeric_stack.pinned_environment({"AVX", "SSE42"}, ["AVX"]) == {}  # no AVX2: Haswell cannot run
     assert numeric_stack.pinned_environment({"ASIMD", "NEON"}, ["ASIMDHP"]) == {}  # not x86-64
     # Asked of a fresh process without numpy's feature variables (this suite's processes have them): the

@@ -19,6 +19,7 @@ import subprocess
 import sys
 from collections.abc import Mapping
 from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
 from typing import Any
 
 __all__ = ["COMMITTED", "blas", "differences", "numpy_simd", "pinned_environment"]
@@ -29,17 +30,7 @@ COMMITTED = {"blas_architecture": "Haswell", "simd": ("X86_V3",)}
 
 #: The variables that restrict numpy's dispatch (a process asked for the CPU's own targets runs without).
 _NUMPY_FEATURE_VARIABLES = ("NPY_DISABLE_CPU_FEATURES", "NPY_ENABLE_CPU_FEATURES")
-#: numpy's code for what a fresh process sees of the CPU (run by :func:`pinned_environment` before this
-#: process imports numpy, which would read the variables it sets): its enabled dispatch targets on one
-#: line, the CPU features numpy detects on the next.
-_NUMPY_CPU = """
-try:
-    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
-except ImportError:  # numpy < 2
-    from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
-print(" ".join(name for name in __cpu_dispatch__ if __cpu_features__.get(name)))
-print(" ".join(name for name, found in __cpu_features__.items() if found))
-"""
+_REPO = Path(__file__).resolve().parents[1]
 
 
 def pinned_environment(features: set[str] | None = None, enabled: list[str] | None = None) -> dict[str, str]:
@@ -69,22 +60,27 @@ def pinned_environment(features: set[str] | None = None, enabled: list[str] | No
         enabled = asked_targets if enabled is None else enabled
     if not {"AVX2", "FMA3"} <= features:
         return {}
-    targets = enabled
-    if "X86_V3" in targets:  # numpy 2.4 on: the targets in ascending order, so all after it
-        above = targets[targets.index("X86_V3") + 1 :]
+    if "X86_V3" in enabled:  # numpy 2.4 on: the targets in ascending order, so all after it
+        above = enabled[enabled.index("X86_V3") + 1 :]
     else:
-        above = [name for name in targets if name.startswith("AVX512")]
+        above = [name for name in enabled if name.startswith("AVX512")]
     pinned = {"OPENBLAS_CORETYPE": "Haswell"}
     return pinned | ({"NPY_DISABLE_CPU_FEATURES": " ".join(above)} if above else {})
 
 
 def numpy_simd() -> list[str]:
     """numpy's dispatch targets enabled in this process (e.g. ``["X86_V3"]``), in numpy's order."""
+    dispatch, features = _cpu_tables()
+    return [name for name in dispatch if features.get(name)]
+
+
+def _cpu_tables() -> tuple[list[str], dict[str, bool]]:
+    """numpy's dispatch targets (ascending) and the CPU features it detects, as this process sees them."""
     try:
         from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
     except ImportError:  # numpy < 2
         from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
-    return [name for name in __cpu_dispatch__ if __cpu_features__.get(name)]
+    return list(__cpu_dispatch__), dict(__cpu_features__)
 
 
 def blas() -> dict[str, Any]:
@@ -132,17 +128,17 @@ def differences(
     """
     found = []
     for name in ("numpy", "scipy"):
-        recorded = packages.get(name)
-        if (None if recorded == "not installed" else recorded) != _version(name):
-            found.append(f"{name}: {packages.get(name)} there, {_version(name)} here")
-    live, recorded = blas(), dict(record_blas or {})
-    recorded.setdefault("architecture", COMMITTED["blas_architecture"])
+        recorded, here = packages.get(name), _version(name)
+        if (None if recorded == "not installed" else recorded) != here:
+            found.append(f"{name}: {recorded} there, {here} here")
+    live, recorded_blas = blas(), dict(record_blas or {})
+    recorded_blas.setdefault("architecture", COMMITTED["blas_architecture"])
     for key in ("library", "version", "architecture"):
-        if recorded.get(key) is not None and recorded[key] != live.get(key):
-            found.append(f"BLAS {key}: {recorded[key]} there, {live.get(key)} here")
-    expected = list(COMMITTED["simd"] if simd is None else simd)
-    if numpy_simd() != expected:
-        found.append(f"numpy SIMD: {' '.join(expected)} there, {' '.join(numpy_simd())} here")
+        if recorded_blas.get(key) is not None and recorded_blas[key] != live.get(key):
+            found.append(f"BLAS {key}: {recorded_blas[key]} there, {live.get(key)} here")
+    expected, here_simd = list(COMMITTED["simd"] if simd is None else simd), numpy_simd()
+    if here_simd != expected:
+        found.append(f"numpy SIMD: {' '.join(expected)} there, {' '.join(here_simd)} here")
     return found
 
 
@@ -157,16 +153,23 @@ def _numpy_cpu() -> tuple[list[str], set[str]]:
     """(numpy's dispatch targets on this CPU, the CPU features numpy detects), as a fresh Python process
     without numpy's feature variables sees them (empty if it cannot tell)."""
     unpinned = {k: v for k, v in os.environ.items() if k not in _NUMPY_FEATURE_VARIABLES}
-    try:
+    try:  # this module run as a script (below), before this process imports numpy
         done = subprocess.run(
-            [sys.executable, "-c", _NUMPY_CPU],
+            [sys.executable, "-m", "benchmarks.numeric_stack"],
             capture_output=True,
             text=True,
             timeout=60,
             check=True,
+            cwd=_REPO,
             env=unpinned,
         )
     except (OSError, subprocess.SubprocessError):
         return [], set()
     lines = [*done.stdout.splitlines(), "", ""]
     return lines[0].split(), set(lines[1].split())
+
+
+if __name__ == "__main__":  # what a fresh process sees (for _numpy_cpu): its targets, then its CPU features
+    _dispatch, _features = _cpu_tables()
+    print(" ".join(name for name in _dispatch if _features.get(name)))
+    print(" ".join(name for name, found in _features.items() if found))

@@ -24,8 +24,7 @@ def test_a_replayed_run_is_the_study_run_and_records_both_choices():
     bit (so computing both proposals before each batch changed nothing), one record per batch after the
     initial design (6 episodes: batches at 8, 12, ..., 44)."""
     study_run = json.loads((recommenders.RUNS / "Rosenbrock-p2-z1-c-bo-s0-b500-n4.json").read_text())
-    record = study_run["provenance"]
-    skip_unless_stack_of(record)
+    skip_unless_stack_of(study_run["provenance"])
     run = acquisition_choices.one_run("Rosenbrock-p2-z1", 0, 50)
     assert recommenders.check_against_study(run) is True
     asks = np.array(run["asks"])

@@ -24,8 +24,7 @@ def test_the_committed_table_is_rendered_from_the_committed_runs():
 def test_a_committed_ipop_run_is_what_the_code_computes():
     """The population doubles at each restart (the largest batch 50·2²), and C12 declines the restart
     that 4·E_search would not fit; the run's numbers are the committed ones, bit for bit."""
-    record = DOCUMENT["provenance"]
-    skip_unless_stack_of(record)
+    skip_unless_stack_of(DOCUMENT["provenance"])
     (committed,) = [r for r in DOCUMENT["runs"] if (r["z"], r["seed"]) == (1, 3) and r["options"]]
     computed = ipop.one_run(1, 3, committed["options"])
     assert {**computed, "cpu_seconds": 0} == {**committed, "cpu_seconds": 0}

@@ -73,8 +73,7 @@ def test_a_committed_c_bo_run_is_what_the_code_computes() -> None:
     gives its curve and test contexts bit for bit (the GP's solves call LAPACK directly: the same bits)."""
     path = Path(study_run.__file__).parent / "runs" / "quick" / "PlanarReacherLowDim-c-bo-s0-b100-n4.json"
     committed = json.loads(path.read_text(encoding="utf-8"))
-    record = committed["provenance"]
-    skip_unless_stack_of(record)
+    skip_unless_stack_of(committed["provenance"])
     computed = study.one_run(study.LowBudgetSpec("PlanarReacherLowDim", "c-bo", 0, 100))
     for field in ("values", "episodes", "test_contexts", "final", "stop_reason"):
         assert computed[field] == committed[field], field

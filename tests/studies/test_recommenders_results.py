@@ -26,8 +26,7 @@ def test_a_run_is_the_study_run_and_both_rules_are_measured_on_it():
     run's at 50 bit for bit (so measuring the other rule changed nothing before it), and the other rule
     gives its own finite value; off the kicks there are no falls to count."""
     study_run = json.loads((recommenders.RUNS / "Rosenbrock-p2-z1-c-bo-s0-b500-n4.json").read_text())
-    record = study_run["provenance"]
-    skip_unless_stack_of(record)
+    skip_unless_stack_of(study_run["provenance"])
     run = recommenders.one_run("Rosenbrock-p2-z1", "c-bo", 0, 50)
     assert run["budgets"] == [50] and run["key"] == "Rosenbrock-p2-z1-c-bo-s0-b50-n4"
     assert recommenders.check_against_study(run) is True

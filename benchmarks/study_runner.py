@@ -1,55 +1,35 @@
-"""Running a study: its runs in a process pool, its command line, its report and the READMEs it updates.
+"""Running a study: its runs in a process pool, and the invocation that runs, reports and indexes them.
 
 :func:`run_study` is what every study's ``main`` calls: it runs the specs through :func:`run_all` (cached runs
 are read, the others computed by :func:`benchmarks.study_tools.execute` with the study's baseline runners),
 writes the report from the cached documents, and updates the results index (``docs/results/README.md``) and
-the study README's generated block.
-The helpers around it pick the methods a study can run (:func:`available_methods`), summarise a cell's runs
-(:func:`summarise`) and say what computed the report (:func:`command_flags`, :func:`timing_text`).
+the study README's generated block (:mod:`benchmarks.study_report`). :func:`available_methods` picks the
+methods a study can run. The options every study's command line shares are in :mod:`benchmarks.study_cli`.
 """
 
 from __future__ import annotations
 
-import argparse
 import functools
-import json
 import os
 import shutil
-import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from benchmarks.provenance import provenance, provenance_text
+from benchmarks.provenance import provenance
+from benchmarks.study_report import invocation_timing, update_block
 from benchmarks.study_tools import (
     Baselines,
     RunSpec,
     cached_result,
     execute,
-    load_document,
     store_document,
-    write_text,
 )
 from creps_gym.optimizers import optimizer_names
 
-__all__ = [
-    "NEUTRAL_OPTIONS",
-    "add_mode_options",
-    "add_output_options",
-    "available_methods",
-    "command_flags",
-    "invocation_timing",
-    "resolve_outputs",
-    "run_all",
-    "run_study",
-    "summarise",
-    "timing_text",
-    "update_block",
-]
+__all__ = ["available_methods", "run_all", "run_study"]
 
 
 def run_all(
@@ -180,46 +160,6 @@ def available_methods(
     return [m for m in methods if m in known]
 
 
-def summarise(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Median episodes to the target over the runs that hit it, how many hit it, and the median final value.
-
-    Returns
-    -------
-    dict
-        ``hits`` (int), ``runs`` (int), ``median_hit`` (float or None), ``median_final`` (float or None),
-        ``median_total`` (median episodes used).
-    """
-    hits = [d["hit"] for d in documents if d["hit"] is not None]
-    finals = [d["final"] for d in documents if d["final"] is not None]
-    return {
-        "hits": len(hits),
-        "runs": len(documents),
-        "median_hit": float(np.median(hits)) if hits else None,
-        "median_final": float(np.median(finals)) if finals else None,
-        "median_total": float(np.median([d["total_episodes"] for d in documents])) if documents else None,
-    }
-
-
-def update_block(path: str | os.PathLike[str], name: str, text: str) -> Path:
-    """Replace the text between ``<!-- name -->`` and ``<!-- /name -->`` in a Markdown file.
-
-    The block is appended (with its markers) when the file lacks it; the file is created if missing.
-    """
-    path = Path(path)
-    start, end = f"<!-- {name} -->", f"<!-- /{name} -->"
-    old = path.read_text(encoding="utf-8") if path.exists() else ""
-    block = f"{start}\n{text.strip()}\n{end}"
-    if start in old and end in old:
-        head, _, rest = old.partition(start)
-        _, _, tail = rest.partition(end)
-        new = head + block + tail
-    else:
-        new = old.rstrip("\n") + ("\n\n" if old else "") + block + "\n"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_text(path, new)
-    return path
-
-
 def _what_to_compute(args: Any) -> bool | Callable[[RunSpec], bool]:
     """:func:`run_all`'s ``compute`` for a study's arguments: nothing with ``--render-only``, else every
     missing run, or only those of ``args.compute_methods`` where it names some."""
@@ -234,112 +174,6 @@ def _all_packages(
 ) -> Sequence[str]:
     """Every package the specs' runs record (``packages``, or the union of ``packages(spec)``)."""
     return sorted({name for spec in specs for name in packages(spec)}) if callable(packages) else packages
-
-
-def invocation_timing(
-    out: str | os.PathLike[str],
-    wall: float,
-    computed: int,
-    total: int,
-    packages: Sequence[str] = ("cma",),
-) -> dict[str, Any]:
-    """Wall time of the last invocation that computed runs, kept in ``out/timing.json``.
-
-    An invocation that only reads the cache (to re-render) keeps the stored timing, so the reports always
-    state how long the computation took. A computing invocation records its ``provenance`` there too
-    (with ``packages``' versions, as :func:`run_all`).
-    """
-    path = Path(out) / "timing.json"
-    stored = load_document(path) if computed == 0 else None
-    if stored is not None:
-        return {**stored, "expected": total}  # this invocation's run count, for the completeness check
-    timing = {"wall_seconds": round(wall, 1), "computed": computed, "total": total, "cores": os.cpu_count()}
-    if computed:
-        timing["provenance"] = provenance(packages)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_text(path, json.dumps(timing) + "\n")
-    return timing
-
-
-def timing_text(timing: dict[str, Any], documents: Sequence[dict[str, Any]]) -> str:
-    """Markdown on the time taken, on how complete the study is (see :func:`invocation_timing`) and where
-    the runs shown were computed (their provenance records)."""
-    cpu = sum(d["seconds"] for d in documents)
-    if timing["computed"]:
-        text = (
-            f"Time taken: {timing['wall_seconds']:.0f} s wall on {timing['cores']} cores for the last "
-            f"invocation that computed runs ({timing['computed']} of {timing['total']} runs computed, the "
-            "others read from the cache)"
-        )
-    else:
-        text = "Rendered from cached runs only (no invocation that computed runs has finished)"
-    text += f"; per-run times summed over the {len(documents)} runs shown: {cpu:.0f} s."
-    expected = timing.get("expected", timing["total"])
-    if len(documents) < expected:
-        text += f" **Partial: {len(documents)} of {expected} runs have finished.**"
-    return text + "\n\n" + provenance_text(d.get("provenance") for d in documents)
-
-
-def add_mode_options(parser: argparse.ArgumentParser, quick: str, full: str) -> None:
-    """``--quick``/``--full`` (into ``mode``), with their help texts."""
-    mode = parser.add_mutually_exclusive_group()
-    quick += ", computing every run again (a reproduction; --render-only redraws the committed runs)"
-    mode.add_argument("--quick", action="store_const", dest="mode", const="quick", help=quick)
-    mode.add_argument("--full", action="store_const", dest="mode", const="full", help=full)
-
-
-def add_output_options(parser: argparse.ArgumentParser, study_dir: Path, out: str) -> None:
-    """Add ``--workers``, ``--render-only``, ``--cache`` (default: see :func:`resolve_outputs`) and ``--out``
-    (help text ``out``)."""
-    parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
-    parser.add_argument(
-        "--render-only", action="store_true", help="compute nothing: render the runs already cached"
-    )
-    parser.add_argument(
-        "--cache",
-        type=Path,
-        help="per-run JSON (committed; default runs/quick/ with --quick, which computes every run again, "
-        "else runs/, where runs already cached are reused)",
-    )
-    parser.add_argument("--out", type=Path, help=out)
-
-
-def resolve_outputs(
-    args: argparse.Namespace, argv: Sequence[str] | None, study_dir: Path, label: str
-) -> None:
-    """Set ``args.flags`` (see :func:`command_flags`), ``args.index`` (the results index, or None with
-    ``--out``), ``args.out`` (default ``docs/results/<study>/<label>``) and ``args.cache`` (default
-    ``<study>/runs/quick`` for ``--quick``, whose runs are computed again by every invocation, so that they
-    never replace the documents a ``--full`` rendering reads, and ``<study>/runs`` otherwise)."""
-    results = study_dir.parents[1] / "docs" / "results"
-    if args.cache is None:
-        args.cache = study_dir / "runs" / "quick" if args.mode == "quick" else study_dir / "runs"
-    args.flags = command_flags(argv, args.mode)
-    args.index = results / "README.md" if args.out is None else None
-    args.out = args.out or results / study_dir.name / label
-
-
-#: Options that change where or how fast a study runs, not its results, with their argument counts (None:
-#: every argument up to the next option): the reported command leaves them out.
-NEUTRAL_OPTIONS = {"--render-only": 0, "--workers": 1, "--cache": 1, "--out": 1, "--compute-methods": None}
-
-
-def command_flags(argv: Sequence[str] | None, mode: str) -> str:
-    """The options of a study's command line (``sys.argv[1:]`` if ``argv`` is None) that determine its
-    results, i.e. without :data:`NEUTRAL_OPTIONS`; ``--<mode>`` when none is left."""
-    given = sys.argv[1:] if argv is None else list(argv)
-    kept, skip = [], 0
-    for arg in given:
-        name, has_value, _ = arg.partition("=")
-        if skip and not (skip < 0 and arg.startswith("--")):
-            skip -= 1
-        elif name in NEUTRAL_OPTIONS:
-            count = NEUTRAL_OPTIONS[name]
-            skip = 0 if has_value else (-1 if count is None else count)  # -1: until the next option
-        else:
-            skip = 0
-            kept.append(arg)
-    return " ".join(kept) or f"--{mode}"
 
 
 def run_study(

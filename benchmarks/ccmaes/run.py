@@ -54,15 +54,10 @@ from benchmarks.ccmaes.report import (
     sweep_table,
 )
 from benchmarks.ccmaes.surrogate_table import SURROGATE_COLUMNS, surrogate_table
+from benchmarks.study_cli import add_mode_options, add_output_options, resolve_outputs
 from benchmarks.study_options import pin_c3
-from benchmarks.study_runner import (
-    add_mode_options,
-    add_output_options,
-    available_methods,
-    resolve_outputs,
-    run_study,
-    timing_text,
-)
+from benchmarks.study_report import timing_text
+from benchmarks.study_runner import available_methods, run_study
 from benchmarks.study_tools import RunSpec, ended_early
 
 HERE = Path(__file__).resolve().parent

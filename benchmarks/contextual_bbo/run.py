@@ -31,16 +31,10 @@ from benchmarks.contextual_bbo.problems import PROBLEMS
 from benchmarks.contextual_bbo.protocol import ProtocolSpec, run_protocol
 from benchmarks.contextual_bbo.report import load_published, plot_curves, render
 from benchmarks.restart_defaults import FORMER
+from benchmarks.study_cli import add_mode_options, add_output_options, command_flags
 from benchmarks.study_options import C3_PIN, pin_c3
-from benchmarks.study_runner import (
-    add_mode_options,
-    add_output_options,
-    command_flags,
-    invocation_timing,
-    run_all,
-    timing_text,
-    update_block,
-)
+from benchmarks.study_report import invocation_timing, timing_text, update_block
+from benchmarks.study_runner import run_all
 from benchmarks.study_tools import write_text
 from creps_gym.optimizers import optimizer_names
 

@@ -34,7 +34,8 @@ import numpy as np
 from benchmarks.provenance import provenance_text
 from benchmarks.restart_defaults import FORMER
 from benchmarks.study_options import pin_c3
-from benchmarks.study_runner import run_all, update_block
+from benchmarks.study_report import update_block
+from benchmarks.study_runner import run_all
 from benchmarks.study_tools import RunSpec
 
 HERE = Path(__file__).resolve().parent

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study_runner import summarise
+from benchmarks.study_report import summarise
 from benchmarks.study_tools import PAPER_METHODS, function_spec
 
 __all__ = ["LABELS", "METHODS", "claims", "curve", "plot_function", "results_table", "stalled"]

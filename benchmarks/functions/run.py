@@ -30,15 +30,10 @@ matplotlib.use("Agg")
 
 from benchmarks.baselines import BASELINES
 from benchmarks.functions.report import METHODS, claims, plot_function, results_table
+from benchmarks.study_cli import add_mode_options, add_output_options, resolve_outputs
 from benchmarks.study_options import pin_c3
-from benchmarks.study_runner import (
-    add_mode_options,
-    add_output_options,
-    available_methods,
-    resolve_outputs,
-    run_study,
-    timing_text,
-)
+from benchmarks.study_report import timing_text
+from benchmarks.study_runner import available_methods, run_study
 from benchmarks.study_tools import RunSpec
 from creps_gym.envs.functions import SPECS
 

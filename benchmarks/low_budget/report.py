@@ -18,6 +18,7 @@ from benchmarks.low_budget.study import BUDGETS, NON_QUADRATIC, task_by_name
 
 __all__ = [
     "ANCHORS",
+    "Cells",
     "anchors_text",
     "cells",
     "completeness_text",

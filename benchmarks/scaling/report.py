@@ -12,7 +12,7 @@ import matplotlib
 import matplotlib.lines
 import numpy as np
 
-from benchmarks.study_runner import summarise
+from benchmarks.study_report import summarise
 from benchmarks.study_tools import function_spec
 
 __all__ = [
@@ -59,7 +59,7 @@ def grid(
     method: str = METHOD,
     dims: Sequence[int] | None = None,
 ) -> list[list[dict]]:
-    """Summaries (see :func:`benchmarks.study_runner.summarise`) of one function and method, indexed [p][z].
+    """Summaries (see :func:`benchmarks.study_report.summarise`) of one function and method, indexed [p][z].
 
     Each summary also has ``missed``: how many runs missed the target, by :func:`missed_kind`.
     """

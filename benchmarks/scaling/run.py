@@ -44,15 +44,10 @@ from benchmarks.scaling.report import (  # noqa: E402
     plot_baselines,
     plot_heatmaps,
 )
+from benchmarks.study_cli import add_mode_options, add_output_options, resolve_outputs  # noqa: E402
 from benchmarks.study_options import pin_c3  # noqa: E402
-from benchmarks.study_runner import (  # noqa: E402
-    add_mode_options,
-    add_output_options,
-    available_methods,
-    resolve_outputs,
-    run_study,
-    timing_text,
-)
+from benchmarks.study_report import timing_text  # noqa: E402
+from benchmarks.study_runner import available_methods, run_study  # noqa: E402
 from benchmarks.study_tools import DIVERGENCE_GROWTH, RunSpec  # noqa: E402
 
 HERE = Path(__file__).resolve().parent

@@ -26,7 +26,7 @@ pytest.importorskip("matplotlib")
 pytest.importorskip("cma")
 
 # The repository root is on sys.path (pyproject.toml: pytest's `pythonpath`), as for `python -m pytest`.
-from benchmarks import baselines, study_runner, study_tools
+from benchmarks import baselines, study_cli, study_report, study_runner, study_tools
 
 REPO = Path(__file__).resolve().parents[2]
 BENCHMARKS = REPO / "benchmarks"
@@ -155,9 +155,9 @@ def test_curve_indices_thin_long_curves_but_keep_both_ends() -> None:
 def test_update_block_replaces_only_its_block(tmp_path: Path) -> None:
     path = tmp_path / "README.md"
     path.write_text("# Results\n\nkept\n")
-    study_runner.update_block(path, "a", "first")
-    study_runner.update_block(path, "b", "other")
-    study_runner.update_block(path, "a", "second")
+    study_report.update_block(path, "a", "first")
+    study_report.update_block(path, "b", "other")
+    study_report.update_block(path, "a", "second")
     text = path.read_text()
     assert text.startswith("# Results\n\nkept\n")
     assert "second" in text and "first" not in text and "other" in text
@@ -334,10 +334,10 @@ def test_run_all_keeps_the_checkpoints_of_the_same_run_under_a_budget_it_is_stil
 
 
 def test_a_render_of_a_larger_study_runners_it_partial(tmp_path: Path) -> None:
-    computed = study_runner.invocation_timing(tmp_path, wall=3.0, computed=5, total=5)
-    assert "Partial" not in study_runner.timing_text(computed, [{"seconds": 1.0}] * 5)
-    rendered = study_runner.invocation_timing(tmp_path, wall=0.1, computed=0, total=10)  # the study grew
-    text = study_runner.timing_text(rendered, [{"seconds": 1.0}] * 8)
+    computed = study_report.invocation_timing(tmp_path, wall=3.0, computed=5, total=5)
+    assert "Partial" not in study_report.timing_text(computed, [{"seconds": 1.0}] * 5)
+    rendered = study_report.invocation_timing(tmp_path, wall=0.1, computed=0, total=10)  # the study grew
+    text = study_report.timing_text(rendered, [{"seconds": 1.0}] * 8)
     assert "3 s wall" in text and "**Partial: 8 of 10 runs have finished.**" in text
 
 
@@ -369,10 +369,10 @@ def test_the_reported_command_leaves_out_what_does_not_change_the_results() -> N
         "--seeds",
         "2",
     ]
-    assert study_runner.command_flags(flags, "full") == "--full --no-z --seeds 2"
-    assert study_runner.command_flags(["--render-only"], "quick") == "--quick"
+    assert study_cli.command_flags(flags, "full") == "--full --no-z --seeds 2"
+    assert study_cli.command_flags(["--render-only"], "quick") == "--quick"
     methods = ["--full", "--compute-methods", "c-cma-es", "creps-cma-csa", "--dims", "64", "--workers", "1"]
-    assert study_runner.command_flags(methods, "full") == "--full --dims 64"
+    assert study_cli.command_flags(methods, "full") == "--full --dims 64"
 
 
 def test_a_compute_predicate_computes_only_the_runs_it_accepts(tmp_path: Path) -> None:

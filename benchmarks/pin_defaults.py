@@ -1,11 +1,17 @@
-r"""Carry the committed ``c-cma-es`` runs over issue 45's default change: ``ridge_centre`` "zero" → "old".
+r"""Carry the committed runs over two default changes: issue 45's ``ridge_centre`` "zero" → "old" of
+``c-cma-es``, and c-bo's refit data (2026-11-30: ``fit_points`` 256 → 1024, ``fit_subset`` "recent" →
+"spread").
 
 Every committed run of ``c-cma-es`` or ``c-cma-es-surrogate`` that does not set ``ridge_centre`` was
 computed with C3, the default until issue 45. The studies pin those columns to ``ridge_centre="zero"``
 (their column definitions add it: :func:`benchmarks.study_options.pin_c3`), so their committed runs stay
 the runs of their specs and render as before; the new default's runs are measured beside them
 (``benchmarks/default_trial.py``, and the C3r columns of the
-contextual BBO and contexts studies). This script writes the pin into each such document:
+contextual BBO and contexts studies). Likewise every committed ``c-bo`` run (the low-budget study's c-bo
+columns, on its own GP and on the libraries') was computed with the refits on the 256 most recent
+episodes: its columns carry :data:`~benchmarks.study_options.CBO_FIT_PIN`, and
+``benchmarks/low_budget/refit_data.py`` measures the new default beside them.
+This script writes the pin into each such document:
 
     python benchmarks/pin_defaults.py            # list what it would change
     python benchmarks/pin_defaults.py --write    # change it (run again: nothing left to change)
@@ -14,7 +20,8 @@ contextual BBO and contexts studies). This script writes the pin into each such 
   the pin and the file is renamed to the pinned spec's key;
 * the contextual BBO study keys a run by its column's label: the options get the pin and an empty label
   becomes the method's name, so the key stays;
-* the low-budget study records the column's options (``method.options``), and the kick study its setting's
+* the low-budget study records the column's options (``method.options``): they get the pin of the
+  run's optimiser (:data:`LOW_BUDGET_PINS`), the file names stay; the kick study records its setting's
   options (``options``, ``setting.options``, in the result and in its history file): they get the pin, the
   file names stay. The kick's optimiser checkpoints have no ``ridge_centre`` field and load as C3
   (``FORMER_ABSENT`` of :mod:`creps_gym.optimizers.ccmaes_config`).
@@ -33,13 +40,16 @@ from typing import Any
 if not __package__:  # run by path: the repository root first on sys.path (see benchmarks/__init__.py)
     sys.path[0] = str(Path(__file__).resolve().parents[1])
 
-from benchmarks.study_options import C3_METHODS, options_dict, pin_c3
+from benchmarks.study_options import C3_METHODS, C3_PIN, CBO_FIT_PIN, options_dict, pin_c3
 from benchmarks.study_tools import RunSpec, load_document, store_document
 
 __all__ = ["main", "pinned", "plan"]
 
 HERE = Path(__file__).resolve().parent
 KEYED_BY_OPTIONS = ("functions", "ccmaes", "scaling")
+#: The low-budget study's pins by optimiser: C3 for C-CMA-ES and ``CBO_FIT_PIN`` for c-bo (its columns on
+#: BoTorch's and scikit-learn's GP too), each written where the run's options do not set its first option.
+LOW_BUDGET_PINS = {**{name: C3_PIN for name in C3_METHODS}, "c-bo": CBO_FIT_PIN}
 
 
 def _documents(folder: Path) -> Iterator[Path]:
@@ -65,10 +75,11 @@ def pinned(study: str, path: Path, document: dict[str, Any]) -> tuple[Path, dict
         return path.with_name(f"{key}.json"), {**document, "spec": new_spec}
     if study == "low_budget":
         method = document.get("method", {})
-        if method.get("optimizer") not in C3_METHODS or "ridge_centre" in method.get("options", {}):
+        pin = LOW_BUDGET_PINS.get(method.get("optimizer"))
+        options = method.get("options", {})
+        if pin is None or pin[0][0] in options:
             return None
-        options = dict(pin_c3(method["optimizer"], method["options"]))
-        return path, {**document, "method": {**method, "options": options}}
+        return path, {**document, "method": {**method, "options": {**options, **dict(pin)}}}
     if study == "kick":
         name = document.get("name") or path.name.split("-trial")[0]
         setting = document.get("setting", {})

@@ -16,6 +16,7 @@ from creps_gym.optimizers.registry import optimizer_class
 __all__ = [
     "C3_METHODS",
     "C3_PIN",
+    "CBO_FIT_PIN",
     "OWN_OPTIONS",
     "canonical_options",
     "config_fields",
@@ -31,6 +32,13 @@ OWN_OPTIONS = ("max_interpolation", "divide_by_z", "max_std_growth", "seed", "in
 C3_PIN = (("ridge_centre", "zero"),)
 #: The registered optimisers that take the pin (``c-cma-es-surrogate`` shares C-CMA-ES's config).
 C3_METHODS = ("c-cma-es", "c-cma-es-surrogate")
+#: The committed ``c-bo`` runs (the low-budget study's c-bo columns, on c-bo's own GP and on the libraries')
+#: were computed with the refits on the 256 most recent episodes, c-bo's default until 2026-11-30 (now
+#: every episode up to 1024, then a spread: ``fit_subset``, Eq. G3a of ``creps_gym/optimizers/gp_model.py``).
+#: The study pins its c-bo columns to it, so those runs stay the runs of their specs
+#: (``benchmarks/pin_defaults.py`` wrote the pin into them); ``benchmarks/low_budget/refit_data.py``
+#: measures the new default beside them.
+CBO_FIT_PIN = (("fit_points", 256), ("fit_subset", "recent"))
 
 
 def options_dict(options: Any) -> dict[str, Any]:

@@ -9,11 +9,12 @@ the same contextual BO with the library's model in place of c-bo's own. ``gp_bac
 
 :class:`LibraryGPCBO` keeps everything of :class:`~creps_gym.optimizers.cbo.ContextualBO` that is not the
 model: the data, the scaling of s and θ to the unit box, the initial design, the returns' transform, the
-refit schedule (``refit_growth``, ``fit_points``), the kriging believer within a batch, the recommendation
-rules, the distilled policy and the checkpoints' data. A subclass says how the library fits the
-hyperparameters (:meth:`LibraryGPCBO._fit`, on the ``fit_points`` most recent episodes, at c-bo's refits),
-how it builds the model on every episode with them (:meth:`LibraryGPCBO._model`, at every tell: a tell
-between refits costs no fit) and how its hyperparameters read in c-bo's layout
+refit schedule (``refit_growth``, ``fit_points``, ``fit_subset``), the kriging believer within a batch, the
+recommendation rules, the distilled policy and the checkpoints' data. A subclass says how the library fits
+the hyperparameters (:meth:`LibraryGPCBO._fit`, on the episodes of
+:func:`~creps_gym.optimizers.gp_model.fit_subset`, at c-bo's refits), how it builds the model on every
+episode with them (:meth:`LibraryGPCBO._model`, at every tell: a tell between refits costs no fit) and how
+its hyperparameters read in c-bo's layout
 (:meth:`LibraryGPCBO._log_hyper`). A checkpoint stores the library's raw hyperparameters by name
 (``hyper_names``, ``hyper``); the model is rebuilt from them on restore.
 """
@@ -31,7 +32,7 @@ from numpy.typing import NDArray
 from creps_gym.optimizers.cbo import ContextualBO
 from creps_gym.optimizers.cbo_config import CBOConfig
 from creps_gym.optimizers.cbo_state import check_kernel_memory, read_gp_data
-from creps_gym.optimizers.gp_model import hyper_bounds
+from creps_gym.optimizers.gp_model import fit_subset, hyper_bounds
 
 __all__ = ["FIXED_OPTIONS", "SEEDS", "LibraryGPCBO", "LibraryGPConfig"]
 
@@ -106,9 +107,9 @@ class LibraryGPCBO(ContextualBO):
             transform = self._chosen_transform(inputs, all_returns)
             targets = self._targets(all_returns, None, transform)
             if refit:
-                recent = slice(max(0, n - self.config.fit_points), n)
+                seen = fit_subset(n, self.config.fit_points, self.config.fit_subset)
                 seed = int(self.rng.integers(SEEDS))
-                names, hyper = self._fit(inputs[recent], targets[recent], seed)
+                names, hyper = self._fit(inputs[seen], targets[seen], seed)
                 fitted_at = n
             model = self._model(inputs, targets, names, hyper)
         except BaseException:

@@ -250,10 +250,11 @@ class Run:
     state: dict[str, Any]
 
 
-def start_run(spec: LowBudgetSpec) -> Run:
+def start_run(spec: LowBudgetSpec, method: Method | None = None) -> Run:
     """``spec``'s run before its first batch: every method from :func:`initial_distribution`, the training
-    contexts from ``default_rng([seed, 1])`` (or the selector's stream)."""
-    task, method = task_by_name(spec.task), method_by_name(spec.method)
+    contexts from ``default_rng([seed, 1])`` (or the selector's stream). ``method`` replaces the column of
+    ``spec.method`` (a replay's variant of it, e.g. ``benchmarks/low_budget/refit_data.py``)."""
+    task, method = task_by_name(spec.task), method or method_by_name(spec.method)
     model = task.make_env(spec.seed)
     mean, std = initial_distribution(task, model)
     start_options = {"initial_mean": mean, "initial_cov": std**2, **dict(method.options)}
@@ -274,10 +275,11 @@ def run_until(run: Run, budget: int, before_batch: Callable[[Run], None] | None 
         run_batch(run.spec, run.model, run.optimizer, run.selector, run.rng, run.state)
 
 
-def one_run(spec: LowBudgetSpec) -> dict[str, Any]:
-    """Run ``spec`` and return its result document (see the module docstring and :func:`_document`)."""
+def one_run(spec: LowBudgetSpec, method: Method | None = None) -> dict[str, Any]:
+    """Run ``spec`` and return its result document (see the module docstring and :func:`_document`);
+    ``method`` as in :func:`start_run`."""
     start, start_cpu = time.perf_counter(), time.process_time()
-    run = start_run(spec)
+    run = start_run(spec, method)
     curve: dict[str, list[Any]] = {name: [] for name in CURVE_FIELDS}
     recorded, stop_reason = 0, "budget"
     try:

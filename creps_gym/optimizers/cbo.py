@@ -53,6 +53,7 @@ from creps_gym.optimizers.gp_model import (
     default_start,
     fit_gp,
     fit_hyperparameters,
+    fit_subset,
     transformed_returns,
 )
 from creps_gym.optimizers.gp_trend import chosen_transform, detrend, residual_share, with_trend_maximiser
@@ -175,10 +176,10 @@ class ContextualBO(ContextualOptimizer):
             all_inputs = self._inputs(all_contexts, all_params, scale)
             transform = self._chosen_transform(all_inputs, all_returns)
             if refit:
-                recent = slice(max(0, n - self.config.fit_points), n)
-                inputs = all_inputs[recent]
+                seen = fit_subset(n, self.config.fit_points, self.config.fit_subset)  # G3a
+                inputs = all_inputs[seen]
                 restarts = self.config.hyper_restarts
-                targets = self._targets(all_returns, "mean", transform)[recent]
+                targets = self._targets(all_returns, "mean", transform)[seen]
                 if self._trend:  # the hyperparameters of the residuals' GP, Eq. (G4)
                     targets = detrend(inputs, targets)[0]
                 log_hyper = fit_hyperparameters(inputs, targets, log_hyper, self.rng, restarts)

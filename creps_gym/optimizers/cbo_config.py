@@ -18,6 +18,7 @@ from creps_gym._validation import (
 from creps_gym.optimizers.acquisitions import ACQUISITIONS
 from creps_gym.optimizers.cbo_recommend import RECOMMEND_RULES
 from creps_gym.optimizers.features import FeatureMap, make_features
+from creps_gym.optimizers.gp_model import FIT_SUBSETS
 from creps_gym.optimizers.policies import initial_covariance
 
 __all__ = ["CBOConfig"]
@@ -111,8 +112,14 @@ class CBOConfig:
         have grown by this factor since the last fit (a geometric schedule); in between only the Cholesky
         factor is updated, so asks stay fast.
     hyper_restarts : int            random L-BFGS-B starts of a refit, besides the previous hyperparameters.
-    fit_points : int                a refit maximises the likelihood of the most recent ``fit_points``
-        episodes only (its cost grows as their cube); the GP itself conditions on every episode.
+    fit_points : int                a refit maximises the likelihood of at most ``fit_points`` episodes (its
+        cost grows as their cube): every episode up to that many; the GP itself conditions on every episode.
+    fit_subset : str                which ``fit_points`` episodes a refit sees beyond that
+        (:func:`~creps_gym.optimizers.gp_model.fit_subset`): ``"spread"`` evenly over the whole history
+        (Eq. G3a) or ``"recent"``, the most recent ones (for a task that drifts, a robot whose wear
+        changes its returns; on a stationary task it fits the hyperparameters to where the search has
+        converged). Before 2026-11-30 the defaults were 256 and ``"recent"``: a checkpoint that does not
+        name ``fit_subset`` resumes with ``"recent"``.
     mean_features : str, dict or FeatureMap   ϕ(s) of :meth:`ContextualBO.mean_policy`'s distilled policy.
     distillation_points : int or None   contexts per dimension of the distillation grid; None:
         max(2, round(25^(1/z))).
@@ -140,7 +147,8 @@ class CBOConfig:
     recommend_over: str = "trust_region"
     refit_growth: float = 1.2
     hyper_restarts: int = 1
-    fit_points: int = 256
+    fit_points: int = 1024
+    fit_subset: str = "spread"
     mean_features: Any = "affine"
     distillation_points: int | None = None
     seed: int | None = None
@@ -179,6 +187,8 @@ class CBOConfig:
             raise ValueError(f"prior_mean: expected one of {PRIOR_MEANS}, got {self.prior_mean!r}")
         if not isinstance(self.trend, str) or self.trend not in TRENDS:
             raise ValueError(f"trend: expected one of {TRENDS}, got {self.trend!r}")
+        if not isinstance(self.fit_subset, str) or self.fit_subset not in FIT_SUBSETS:
+            raise ValueError(f"fit_subset: expected one of {FIT_SUBSETS}, got {self.fit_subset!r}")
         rule = self.recommend_over
         if not isinstance(rule, str) or rule not in RECOMMEND_RULES:
             raise ValueError(f"recommend_over: expected one of {RECOMMEND_RULES}, got {rule!r}")
@@ -244,6 +254,7 @@ class CBOConfig:
     def from_state(cls, state: Any) -> CBOConfig:
         """Rebuild the configuration from a checkpoint's ``config`` document and arrays."""
         document = dict(state["config"])
+        document.setdefault("fit_subset", "recent")  # written before the option existed: that rule
         has_param, has_context = document.pop("has_param_box", False), document.pop("has_context_box", False)
         arrays = {
             "initial_mean": np.asarray(state["initial_mean"]),

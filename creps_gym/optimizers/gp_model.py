@@ -15,6 +15,13 @@ not depend on the task. With K = k(X, X) + σ_n² I = LLᵀ and α = K⁻¹y:
 
     log p(y | h) = −½ yᵀα − Σ log L_ii − (n/2) log 2π,   ∂/∂h_k = ½ tr((ααᵀ − K⁻¹) ∂K/∂h_k).    (G3)
 
+A fit costs O(m³) in the m episodes it sees, so it may see a subset of the n told ones (:func:`fit_subset`):
+all of them while n ≤ m, and beyond either m episodes spread evenly over the whole history,
+
+    i_j = round(j (n − 1) / (m − 1)),   j = 0 … m − 1,                                         (G3a)
+
+(the first and the latest included) or the m most recent ones, n − m … n − 1.
+
 A model is a pure function of (X, y, h): :func:`fit_gp` computes the same bits from the same arrays, so an
 optimiser that stores its data and hyperparameters restores its model exactly, without pickle.
 :meth:`GPModel.condition` appends one (fantasised) observation by a rank-one extension of L (the kriging
@@ -35,11 +42,13 @@ from scipy.linalg.lapack import dtrtrs
 from creps_gym.optimizers.gp_trend import detrend, log_transform, trend_and_gradient
 
 __all__ = [
+    "FIT_SUBSETS",
     "LOG_BOUNDS",
     "GPModel",
     "default_start",
     "fit_gp",
     "fit_hyperparameters",
+    "fit_subset",
     "hyper_bounds",
     "log_marginal_likelihood",
     "matern52",
@@ -58,6 +67,8 @@ LOG_BOUNDS = {
     "noise": (math.log(1e-6), 0.0),
 }
 _JITTER = 1e-10
+#: The rules of :func:`fit_subset`: the episodes a refit sees once there are more than it may.
+FIT_SUBSETS = ("spread", "recent")
 
 
 def _scaled_differences(a: Array, b: Array, lengthscales: Array) -> Array:
@@ -271,6 +282,22 @@ def default_start(n_inputs: int) -> Array:
 def hyper_bounds(n_inputs: int) -> list[tuple[float, float]]:
     """The L-BFGS-B bounds of h for d inputs (:data:`LOG_BOUNDS`)."""
     return [LOG_BOUNDS["lengthscale"]] * n_inputs + [LOG_BOUNDS["signal"], LOG_BOUNDS["noise"]]
+
+
+def fit_subset(n: int, points: int, rule: str) -> Array:
+    """The indices (m,) of the episodes a refit sees, in order: all n while n ≤ ``points``, else ``points``
+    of them, spread over the whole history (``"spread"``, Eq. G3a) or the most recent (``"recent"``).
+
+    Fitting the hyperparameters on the most recent episodes alone fits them to where the search has
+    converged, not to the data the model conditions on: with ``points`` = 256 and ``"recent"``, c-bo's
+    default until 2026-11-30, its recommended policy got worse from 300 to 500 episodes on many tasks of
+    issue 44's study (``benchmarks/low_budget/results/refit_data.md`` counts them and measures both).
+    """
+    if n <= points:
+        return np.arange(n)
+    if rule == "recent":
+        return np.arange(n - points, n)
+    return np.round(np.linspace(0.0, n - 1.0, points)).astype(np.int64)  # G3a
 
 
 def fit_hyperparameters(

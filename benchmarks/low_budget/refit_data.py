@@ -1,0 +1,182 @@
+"""c-bo's refit data before and after 2026-11-30: the study's pinned runs against the new default (issue 44).
+
+Until 2026-11-30 c-bo fitted its hyperparameters on the 256 most recent episodes (``fit_points=256``,
+``fit_subset="recent"``); now a refit sees every episode up to 1024, and beyond that a spread over the whole
+history (Eq. G3a of ``creps_gym/optimizers/gp_model.py``). The low-budget study's c-bo columns keep the
+former (``CBO_FIT_PIN`` of ``benchmarks/study_options.py``), so their committed runs stay the runs of their
+specs. This script runs a column again without the pin (the same start, batches, training and test
+contexts and seeds: :func:`benchmarks.low_budget.study.one_run` with the unpinned column) and sets each run
+beside the study's committed run of the same task, column and seed. Both see the same data until the first
+refit past 256 episodes, so their 50-, 100- and 200-episode values must agree bit for bit (the table says
+in how many runs they do). Writes one JSON document with provenance and a Markdown table next to it
+(``--render-only`` redraws the table from it).
+
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.refit_data --workers 2 \\
+        --out benchmarks/low_budget/results/refit_data.json
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.refit_data --workers 2 --tasks \\
+        Rosenbrock-p4-z1 DifferentPowers-p4-z1 Rastrigin-p4-z1 Sphere-p4-z1 ShiftedRotatedElliptic-p4-z1 \\
+        Sphere-p8-z1 Rosenbrock-p8-z2 --out benchmarks/low_budget/results/refit_data_functions.json
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+if not __package__:  # run by path: the repository root first on sys.path, as `python -m` puts it
+    sys.path[0] = str(Path(__file__).resolve().parents[2])
+
+import argparse
+import dataclasses
+import json
+from typing import Any
+
+import numpy as np
+
+from benchmarks.low_budget import parse_runs_arguments, run_and_write
+from benchmarks.low_budget.columns import Method, method_by_name
+from benchmarks.low_budget.study import (
+    BUDGETS,
+    ROBOT_TASKS,
+    LowBudgetSpec,
+    one_run,
+    task_by_name,
+)
+from benchmarks.study_options import CBO_FIT_PIN
+
+__all__ = ["main", "render", "study_document", "summary", "unpinned", "worse_later"]
+
+RUNS = Path(__file__).resolve().parent / "runs"
+#: Budgets at which both rules have seen the same data (no refit past 256 episodes yet).
+SHARED_BUDGETS = (50, 100, 200)
+
+
+def unpinned(method: Method) -> Method:
+    """The c-bo column ``method`` without :data:`~benchmarks.study_options.CBO_FIT_PIN`: c-bo's defaults."""
+    if method.optimizer != "c-bo" or not set(CBO_FIT_PIN) <= set(method.options):
+        raise ValueError(f"method: expected a c-bo column pinned to {CBO_FIT_PIN}, got {method.name!r}")
+    return dataclasses.replace(method, options=tuple(p for p in method.options if p not in CBO_FIT_PIN))
+
+
+def study_document(
+    task: str, method: str, seed: int, samples: int, runs: Path = RUNS
+) -> dict[str, Any] | None:
+    """The study's committed run of ``task``, ``method``, ``seed`` and batch size, or None."""
+    key = LowBudgetSpec(task, method, seed, samples=samples).key
+    path = runs / f"{key}.json"
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def one(task: str, method: str, seed: int, budget: int) -> dict[str, Any]:
+    """The run of ``method`` without the pin on ``task``: its values and seconds per budget."""
+    document = one_run(LowBudgetSpec(task, method, seed, budget), unpinned(method_by_name(method)))
+    keep = ("budgets", "episodes", "values", "optimizer_cpu_seconds", "cpu_seconds")
+    run = {"task": task, "method": method, "seed": seed, "samples": document["spec"]["samples"]}
+    return {**run, "options": document["method"]["options"], **{name: document[name] for name in keep}}
+
+
+def _job(args: tuple[str, str, int, int]) -> dict[str, Any]:
+    return one(*args)
+
+
+def _cell(values: np.ndarray) -> str:
+    return f"{np.median(values):.3g} ({values.min():.3g}–{values.max():.3g})"
+
+
+def _rows(group: list[dict[str, Any]], studies: list[dict[str, Any]], larger_is_better: bool) -> list[str]:
+    """One table row per budget of a (task, column): the study's median, the new default's, the seeds where
+    the new default is better, and the new default's optimiser CPU seconds per asked episode so far (the
+    study's runs ran beside other processes, so their seconds are not compared)."""
+    rows, sign = [], 1.0 if larger_is_better else -1.0
+    task, method = group[0]["task"], group[0]["method"]
+    for index, budget in enumerate(group[0]["budgets"]):
+        old = np.array([d["values"][index] for d in studies], dtype=float)
+        new = np.array([r["values"][index] for r in group], dtype=float)
+        better = int(np.sum(sign * (new - old) > 0))
+        cpu = np.median([r["optimizer_cpu_seconds"][index] / r["episodes"][index] for r in group])
+        rows.append(
+            f"| {task} | {method} | {budget} | {_cell(old)} | {_cell(new)} | {better} of {len(group)} "
+            f"| {cpu:.3g} |"
+        )
+    return rows
+
+
+def summary(runs: list[dict[str, Any]], runs_dir: Path = RUNS) -> tuple[str, int, int]:
+    """The Markdown table per task and budget, and (runs whose shared budgets agree bit for bit with the
+    study's, runs the study has)."""
+    lines = [
+        "| task | column | budget | study (256 most recent): median (min–max over seeds) | new default: "
+        "median (min–max) | seeds where the new default is better | new default: the optimiser's CPU s "
+        "per asked episode so far (median) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    agree = compared = 0
+    for task, method in sorted({(r["task"], r["method"]) for r in runs}):
+        group = sorted(
+            (r for r in runs if (r["task"], r["method"]) == (task, method)), key=lambda r: r["seed"]
+        )
+        studies = [study_document(task, method, r["seed"], r["samples"], runs_dir) for r in group]
+        pairs = [(r, d) for r, d in zip(group, studies, strict=True) if d is not None]
+        for run, study in pairs:
+            shared = [i for i, b in enumerate(run["budgets"]) if b in SHARED_BUDGETS]
+            agree += all(run["values"][i] == study["values"][i] for i in shared)
+        compared += len(pairs)
+        if pairs:
+            larger_is_better = task_by_name(task).metric == "distance"
+            lines += _rows([r for r, _ in pairs], [d for _, d in pairs], larger_is_better)
+    return "\n".join(lines), agree, compared
+
+
+def worse_later(method: str = "c-bo", runs: Path = RUNS) -> tuple[list[str], int]:
+    """The tasks on which the study's committed runs of ``method`` have a worse median at 500 episodes than
+    at 300, and the number of tasks with runs of it."""
+    values: dict[str, list[list[float]]] = {}
+    for path in sorted(runs.glob(f"*-{method}-s*-b500-n*.json")):
+        document = json.loads(path.read_text())
+        if document["spec"]["method"] == method:
+            values.setdefault(document["task"], []).append(document["values"])
+    worse = []
+    for task, rows in sorted(values.items()):
+        medians = np.median(np.array(rows, dtype=float), axis=0)
+        at = dict(zip(BUDGETS, medians, strict=True))
+        sign = 1.0 if task_by_name(task).metric == "distance" else -1.0
+        if sign * (at[500] - at[300]) < 0:
+            worse.append(task)
+    return worse, len(values)
+
+
+def render(path: Path) -> str:
+    """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
+    document = json.loads(path.read_text())
+    command = " ".join(["python -m benchmarks.low_budget.refit_data", *document["command"][1:]])
+    table, agree, compared = summary(document["runs"])
+    worse, tasks = worse_later()
+    text = (
+        f"{table}\n\nThe metric is the study's: the mean regret on a function and the kick precision's mean "
+        "error in m (lower is better), the kick flexibility's mean distance in m (higher is better). "
+        "\"Better\" compares each seed's run with the study's committed run of the same seed. The values at "
+        f"{', '.join(map(str, SHARED_BUDGETS))} episodes, where both have fitted on the same episodes, agree "
+        f"bit for bit in {agree} of {compared} runs.\n\n"
+        f"The study's committed `c-bo` runs (the former default) have a worse median at 500 episodes than at "
+        f"300 on {len(worse)} of the {tasks} tasks: {', '.join(worse)}.\n\n"
+        f"Command: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
+    )
+    path.with_suffix(".md").write_text(text)
+    return text
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    robots = [task.name for task in ROBOT_TASKS]
+    parser.add_argument("--tasks", nargs="+", default=robots, help="study task names (default: the robots')")
+    parser.add_argument("--methods", nargs="+", default=["c-bo"], help="the study's c-bo columns")
+    parser.add_argument("--budget", type=int, default=500)
+    args = parse_runs_arguments(parser, argv, 10, render)
+    if args is None:
+        return
+    jobs = [(t, m, s, args.budget) for t in args.tasks for m in args.methods for s in range(args.seeds)]
+    run_and_write(_job, jobs, args.workers, args.out, render)
+
+
+if __name__ == "__main__":
+    main()

@@ -70,7 +70,7 @@ def study_document(
 def one(task: str, method: str, seed: int, budget: int) -> dict[str, Any]:
     """The run of ``method`` without the pin on ``task``: its values and seconds per budget."""
     document = one_run(LowBudgetSpec(task, method, seed, budget), unpinned(method_by_name(method)))
-    keep = ("budgets", "episodes", "values", "optimizer_cpu_seconds", "cpu_seconds")
+    keep = ("budgets", "episodes", "values", "optimizer_cpu_seconds", "last_batch_cpu_seconds_per_episode")
     run = {"task": task, "method": method, "seed": seed, "samples": document["spec"]["samples"]}
     return {**run, "options": document["method"]["options"], **{name: document[name] for name in keep}}
 
@@ -85,8 +85,9 @@ def _cell(values: np.ndarray) -> str:
 
 def _rows(group: list[dict[str, Any]], studies: list[dict[str, Any]], larger_is_better: bool) -> list[str]:
     """One table row per budget of a (task, column): the study's median, the new default's, the seeds where
-    the new default is better, and the new default's optimiser CPU seconds per asked episode so far (the
-    study's runs ran beside other processes, so their seconds are not compared)."""
+    the new default is better, and the new default's optimiser CPU seconds per asked episode so far and in
+    the last batch before the budget (what a robot waits for; the study's runs ran beside other processes,
+    so their seconds are not compared)."""
     rows, sign = [], 1.0 if larger_is_better else -1.0
     task, method = group[0]["task"], group[0]["method"]
     for index, budget in enumerate(group[0]["budgets"]):
@@ -94,9 +95,10 @@ def _rows(group: list[dict[str, Any]], studies: list[dict[str, Any]], larger_is_
         new = np.array([r["values"][index] for r in group], dtype=float)
         better = int(np.sum(sign * (new - old) > 0))
         cpu = np.median([r["optimizer_cpu_seconds"][index] / r["episodes"][index] for r in group])
+        last = np.array([r["last_batch_cpu_seconds_per_episode"][index] for r in group], dtype=float)
         rows.append(
             f"| {task} | {method} | {budget} | {_cell(old)} | {_cell(new)} | {better} of {len(group)} "
-            f"| {cpu:.3g} |"
+            f"| {cpu:.3g} | {np.median(last):.3g} ({last.max():.3g}) |"
         )
     return rows
 
@@ -107,8 +109,9 @@ def summary(runs: list[dict[str, Any]], runs_dir: Path = RUNS) -> tuple[str, int
     lines = [
         "| task | column | budget | study (256 most recent): median (min–max over seeds) | new default: "
         "median (min–max) | seeds where the new default is better | new default: the optimiser's CPU s "
-        "per asked episode so far (median) |",
-        "|---|---|---|---|---|---|---|",
+        "per asked episode so far (median) | new default: its last batch's CPU s per episode (median, "
+        "largest) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     agree = compared = 0
     for task, method in sorted({(r["task"], r["method"]) for r in runs}):

@@ -284,7 +284,7 @@ def hyper_bounds(n_inputs: int) -> list[tuple[float, float]]:
     return [LOG_BOUNDS["lengthscale"]] * n_inputs + [LOG_BOUNDS["signal"], LOG_BOUNDS["noise"]]
 
 
-def fit_subset(n: int, points: int, rule: str) -> Array:
+def fit_subset(n: int, points: int, rule: str) -> NDArray[np.int64]:
     """The indices (m,) of the episodes a refit sees, in order: all n while n ≤ ``points``, else ``points``
     of them, spread over the whole history (``"spread"``, Eq. G3a) or the most recent (``"recent"``).
 

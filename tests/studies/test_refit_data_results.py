@@ -17,8 +17,8 @@ from benchmarks.study_options import CBO_FIT_PIN
 from creps_gym.optimizers import make_optimizer
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
-#: The committed measurements: the robot tasks, and functions where the former default fell back.
-NAMES = ["refit_data", "refit_data_functions"]
+#: The committed measurements: the robot tasks, functions, and two more c-bo columns on the v2 kicks.
+NAMES = ["refit_data", "refit_data_functions", "refit_data_columns"]
 
 
 def test_unpinned_is_the_column_with_c_bos_own_defaults():
@@ -78,8 +78,8 @@ def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path,
 
 @pytest.mark.parametrize("name", NAMES)
 def test_every_committed_run_shares_the_study_runs_first_episodes_and_uses_the_new_default(name):
-    """10 seeds per task, each with c-bo's own defaults, each agreeing with the study's committed document
-    of its task, column and seed at 50, 100 and 200 episodes bit for bit."""
+    """10 seeds per task and column, each with c-bo's own defaults, each agreeing with the study's
+    committed document of its task, column and seed at 50, 100 and 200 episodes bit for bit."""
     document = json.loads((RESULTS / f"{name}.json").read_text(encoding="utf-8"))
     assert document["provenance"]["recorded"] is True
     runs = document["runs"]
@@ -87,5 +87,5 @@ def test_every_committed_run_shares_the_study_runs_first_episodes_and_uses_the_n
         study = refit_data.study_document(run["task"], run["method"], run["seed"], run["samples"])
         column = dict(refit_data.unpinned(method_by_name(run["method"])).options)
         assert run["options"] == column and run["values"][:3] == study["values"][:3]
-    for task in {run["task"] for run in runs}:
-        assert sorted(run["seed"] for run in runs if run["task"] == task) == list(range(10))
+    for cell in {(run["task"], run["method"]) for run in runs}:
+        assert sorted(run["seed"] for run in runs if (run["task"], run["method"]) == cell) == list(range(10))

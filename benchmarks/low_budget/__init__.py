@@ -3,7 +3,8 @@
 GP's cost against scikit-learn's), ``active_contexts.py`` (active context choice against uniform draws),
 ``reach.py`` (what the low-dimensional kicks can reach at all), ``strong_kicks.py`` (the v1 kicks'
 columns), ``recommenders.py`` (c-bo's two recommendation rules on the same runs), ``acquisition_choices.py``
-(both acquisitions' choices from the same model) and ``botorch_cbo.py`` (the study's BoTorch column)."""
+(both acquisitions' choices from the same model), ``refit_data.py`` (c-bo's refit default of 2026-11-30
+beside the study's runs) and ``botorch_cbo.py`` (the study's BoTorch column)."""
 
 from __future__ import annotations
 
@@ -57,3 +58,24 @@ def run_and_write(
     document = {"command": sys.argv, "runs": runs, "provenance": provenance()}
     out.write_text(json.dumps(document, indent=1) + "\n")
     print(render(out))
+
+
+def column_replay_main(
+    description: str,
+    tasks: Sequence[str],
+    job: Callable[[tuple[str, str, int, int]], dict[str, Any]],
+    render: Callable[[Path], str],
+    argv: list[str] | None = None,
+) -> None:
+    """The command line of a replay of the study's c-bo columns: ``--tasks`` (default ``tasks``),
+    ``--methods`` (default ``c-bo``), ``--budget`` (500) and :func:`parse_runs_arguments`' options; runs
+    ``job((task, method, seed, budget))`` for each and writes the results (:func:`run_and_write`)."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--tasks", nargs="+", default=list(tasks), help="study task names")
+    parser.add_argument("--methods", nargs="+", default=["c-bo"], help="the study's c-bo columns")
+    parser.add_argument("--budget", type=int, default=500)
+    args = parse_runs_arguments(parser, argv, 10, render)
+    if args is None:
+        return
+    jobs = [(t, m, s, args.budget) for t in args.tasks for m in args.methods for s in range(args.seeds)]
+    run_and_write(job, jobs, args.workers, args.out, render)

@@ -22,14 +22,13 @@ from pathlib import Path
 if not __package__:  # run by path: the repository root first on sys.path, as `python -m` puts it
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
-import argparse
 import dataclasses
 import json
 from typing import Any
 
 import numpy as np
 
-from benchmarks.low_budget import parse_runs_arguments, run_and_write
+from benchmarks.low_budget import column_replay_main
 from benchmarks.low_budget.columns import method_by_name
 from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
 
@@ -138,20 +137,8 @@ def _job(args: tuple[str, str, int, int]) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--tasks",
-        nargs="+",
-        default=["KickFlexibilityLowDim-v1", "KickPrecisionLowDim-v1"],
-        help="study task names",
-    )
-    parser.add_argument("--methods", nargs="+", default=["c-bo"], help="the study's c-bo columns")
-    parser.add_argument("--budget", type=int, default=500)
-    args = parse_runs_arguments(parser, argv, 10, render)
-    if args is None:
-        return
-    jobs = [(t, m, s, args.budget) for t in args.tasks for m in args.methods for s in range(args.seeds)]
-    run_and_write(_job, jobs, args.workers, args.out, render)
+    tasks = ["KickFlexibilityLowDim-v1", "KickPrecisionLowDim-v1"]  # the default tasks
+    column_replay_main(__doc__.splitlines()[0], tasks, _job, render, argv)
 
 
 if __name__ == "__main__":

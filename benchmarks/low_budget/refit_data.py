@@ -26,14 +26,13 @@ from pathlib import Path
 if not __package__:  # run by path: the repository root first on sys.path, as `python -m` puts it
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
-import argparse
 import dataclasses
 import json
 from typing import Any
 
 import numpy as np
 
-from benchmarks.low_budget import parse_runs_arguments, run_and_write
+from benchmarks.low_budget import column_replay_main
 from benchmarks.low_budget.columns import Method, method_by_name
 from benchmarks.low_budget.study import (
     BUDGETS,
@@ -169,16 +168,8 @@ def render(path: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    robots = [task.name for task in ROBOT_TASKS]
-    parser.add_argument("--tasks", nargs="+", default=robots, help="study task names (default: the robots')")
-    parser.add_argument("--methods", nargs="+", default=["c-bo"], help="the study's c-bo columns")
-    parser.add_argument("--budget", type=int, default=500)
-    args = parse_runs_arguments(parser, argv, 10, render)
-    if args is None:
-        return
-    jobs = [(t, m, s, args.budget) for t in args.tasks for m in args.methods for s in range(args.seeds)]
-    run_and_write(_job, jobs, args.workers, args.out, render)
+    robots = [task.name for task in ROBOT_TASKS]  # the default tasks
+    column_replay_main(__doc__.splitlines()[0], robots, _job, render, argv)
 
 
 if __name__ == "__main__":

@@ -48,7 +48,8 @@ __all__ = ["main", "pinned", "plan"]
 HERE = Path(__file__).resolve().parent
 KEYED_BY_OPTIONS = ("functions", "ccmaes", "scaling")
 #: The low-budget study's pins by optimiser: C3 for C-CMA-ES and ``CBO_FIT_PIN`` for c-bo (its columns on
-#: BoTorch's and scikit-learn's GP too), each written where the run's options do not set its first option.
+#: BoTorch's and scikit-learn's GP too), each added where the run's options do not set all of it (an option
+#: the run sets keeps its value).
 LOW_BUDGET_PINS = {**{name: C3_PIN for name in C3_METHODS}, "c-bo": CBO_FIT_PIN}
 
 
@@ -77,9 +78,9 @@ def pinned(study: str, path: Path, document: dict[str, Any]) -> tuple[Path, dict
         method = document.get("method", {})
         pin = LOW_BUDGET_PINS.get(method.get("optimizer"))
         options = method.get("options", {})
-        if pin is None or pin[0][0] in options:
+        if pin is None or all(name in options for name, _ in pin):
             return None
-        return path, {**document, "method": {**method, "options": {**options, **dict(pin)}}}
+        return path, {**document, "method": {**method, "options": {**dict(pin), **options}}}
     if study == "kick":
         name = document.get("name") or path.name.split("-trial")[0]
         setting = document.get("setting", {})

@@ -72,7 +72,7 @@ def invocation_timing(
 
     An invocation that only reads the cache (to re-render) keeps the stored timing, so the reports always
     state how long the computation took. A computing invocation records its ``provenance`` there too
-    (with ``packages``' versions, as :func:`run_all`).
+    (with ``packages``' versions, as :func:`benchmarks.study_runner.run_all`).
     """
     path = Path(out) / "timing.json"
     stored = load_document(path) if computed == 0 else None

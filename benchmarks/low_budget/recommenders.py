@@ -30,6 +30,7 @@ import numpy as np
 
 from benchmarks.low_budget import column_replay_main
 from benchmarks.low_budget.columns import method_by_name
+from benchmarks.low_budget.report import median_range
 from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
 
 RULES = ("trust_region", "observed")
@@ -87,7 +88,7 @@ def _row(group: list[dict[str, Any]], index: int, larger_is_better: bool) -> lis
     cells, values = [], {}
     for rule in RULES:
         values[rule] = column = np.array([r["values"][rule][index] for r in group])
-        cells.append(f"{np.median(column):.3g} ({column.min():.3g}–{column.max():.3g})")
+        cells.append(median_range(column))
     sign = 1.0 if larger_is_better else -1.0
     better = int(np.sum(sign * (values["observed"] - values["trust_region"]) > 0))
     cells.append(f"{better} of {len(group)}")
@@ -108,7 +109,7 @@ def summary(runs: list[dict[str, Any]]) -> str:
     for task, method in sorted({(r["task"], r["method"]) for r in runs}):
         group = [r for r in runs if (r["task"], r["method"]) == (task, method)]
         group.sort(key=lambda r: r["seed"])
-        larger_is_better = task_by_name(task).metric == "distance"
+        larger_is_better = not task_by_name(task).lower_is_better
         for index, budget in enumerate(group[0]["budgets"]):
             cells = _row(group, index, larger_is_better)
             lines.append(f"| {task} | {method} | {budget} | " + " | ".join(cells) + " |")

@@ -25,6 +25,7 @@ __all__ = [
     "cost_text",
     "grouped_tasks",
     "library_table",
+    "median_range",
     "paired_table",
     "plot_curves",
     "sign_test",
@@ -80,12 +81,13 @@ def _by_seed(runs: Sequence[dict[str, Any]] | None, budget: int, field: str = "v
     return found
 
 
-def _cell(values: np.ndarray, seeds: int) -> str:
-    """``median (min–max)``, ``[k/n]`` when fewer than ``seeds`` seeds finished, ``—`` with none."""
+def median_range(values: np.ndarray, seeds: int | None = None) -> str:
+    """``median (min–max)`` of ``values`` (n,), ``[k/n]`` after it when fewer than ``seeds`` seeds finished
+    (None: all did), ``—`` with none."""
     if values.size == 0:
         return "—"
     text = f"{np.median(values):.3g} ({values.min():.3g}–{values.max():.3g})"
-    return text + (f" [{values.size}/{seeds}]" if values.size < seeds else "")
+    return text + (f" [{values.size}/{seeds}]" if seeds is not None and values.size < seeds else "")
 
 
 def _median(runs: Sequence[dict[str, Any]] | None, budget: int) -> float | None:
@@ -101,7 +103,7 @@ def task_table(grouped: Cells, task: str, methods: Sequence[Any], seeds: int, bu
     for method in methods:
         runs = grouped.get((task, method.name), [])
         batch = str(runs[0]["spec"]["samples"]) if runs else "—"
-        row = " | ".join(_cell(_values(runs, b), seeds) for b in budgets)
+        row = " | ".join(median_range(_values(runs, b), seeds) for b in budgets)
         lines.append(f"| `{method.name}` | {batch} | {row} |")
     better = "lower" if task_by_name(task).lower_is_better else "higher"
     return "\n".join(lines) + f"\n\nMetric: {metric} ({better} is better).\n"
@@ -343,8 +345,7 @@ def cost_text(documents: Sequence[dict[str, Any]], specs: Sequence[Any]) -> str:
     lines = ["| task | method | runs | CPU seconds per run: median (min–max) |", "|---|---|---|---|"]
     for _, task, method in sorted(k for k in seconds if k[0] == 0):
         values = np.asarray(seconds[(0, task, method)])
-        spread = f"{np.median(values):.3g} ({values.min():.3g}–{values.max():.3g})"
-        lines.append(f"| {task} | `{method}` | {values.size} | {spread} |")
+        lines.append(f"| {task} | `{method}` | {values.size} | {median_range(values)} |")
     text = (
         f"{len(documents)} runs finished, {len(missing)} missing; estimated CPU time of the missing runs: "
         f"{total / 3600:.1f} h of one core (medians of the finished runs' CPU seconds, see "

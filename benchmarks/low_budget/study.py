@@ -277,7 +277,8 @@ def run_until(run: Run, budget: int, before_batch: Callable[[Run], None] | None 
 
 def one_run(spec: LowBudgetSpec, method: Method | None = None) -> dict[str, Any]:
     """Run ``spec`` and return its result document (see the module docstring and :func:`_document`);
-    ``method`` as in :func:`start_run`."""
+    ``method`` as in :func:`start_run` (its document then records that column's options under ``spec``'s
+    key: a replay's, never to be cached in the study's ``runs/``)."""
     start, start_cpu = time.perf_counter(), time.process_time()
     run = start_run(spec, method)
     curve: dict[str, list[Any]] = {name: [] for name in CURVE_FIELDS}

@@ -38,6 +38,15 @@ TRANSFORMS = ("none", "log", "rank", "auto")
 PRIOR_MEANS = ("min", "mean")
 TRENDS = ("constant", "quadratic")
 _BOX_ARRAYS = ("param_low", "param_high", "context_low", "context_high")
+#: The options that name one of a few choices, and their choices.
+_CHOICES = {
+    "acquisition": ACQUISITIONS,
+    "transform": TRANSFORMS,
+    "prior_mean": PRIOR_MEANS,
+    "trend": TRENDS,
+    "fit_subset": FIT_SUBSETS,
+    "recommend_over": RECOMMEND_RULES,
+}
 
 
 def _optional_box(low: Any, high: Any, names: tuple[str, str], size: int) -> tuple[Array, Array] | None:
@@ -179,19 +188,10 @@ class CBOConfig:
                     f"(points ** z), got {points} ** {z}"
                 )
             set_(self, "distillation_points", points)
-        if not isinstance(self.acquisition, str) or self.acquisition not in ACQUISITIONS:
-            raise ValueError(f"acquisition: expected one of {ACQUISITIONS}, got {self.acquisition!r}")
-        if not isinstance(self.transform, str) or self.transform not in TRANSFORMS:
-            raise ValueError(f"transform: expected one of {TRANSFORMS}, got {self.transform!r}")
-        if not isinstance(self.prior_mean, str) or self.prior_mean not in PRIOR_MEANS:
-            raise ValueError(f"prior_mean: expected one of {PRIOR_MEANS}, got {self.prior_mean!r}")
-        if not isinstance(self.trend, str) or self.trend not in TRENDS:
-            raise ValueError(f"trend: expected one of {TRENDS}, got {self.trend!r}")
-        if not isinstance(self.fit_subset, str) or self.fit_subset not in FIT_SUBSETS:
-            raise ValueError(f"fit_subset: expected one of {FIT_SUBSETS}, got {self.fit_subset!r}")
-        rule = self.recommend_over
-        if not isinstance(rule, str) or rule not in RECOMMEND_RULES:
-            raise ValueError(f"recommend_over: expected one of {RECOMMEND_RULES}, got {rule!r}")
+        for name, choices in _CHOICES.items():
+            value = getattr(self, name)
+            if not isinstance(value, str) or value not in choices:
+                raise ValueError(f"{name}: expected one of {choices}, got {value!r}")
         set_(self, "beta", check_real_in_range(self.beta, "beta", 0.0, 1e6))
         set_(self, "refit_growth", check_real_in_range(self.refit_growth, "refit_growth", 1.0, 1e6))
         if self.trust_share is not None:

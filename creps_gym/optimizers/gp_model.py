@@ -18,9 +18,10 @@ not depend on the task. With K = k(X, X) + σ_n² I = LLᵀ and α = K⁻¹y:
 A fit costs O(m³) in the m episodes it sees, so it may see a subset of the n told ones (:func:`fit_subset`):
 all of them while n ≤ m, and beyond either m episodes spread evenly over the whole history,
 
-    i_j = round(j (n − 1) / (m − 1)),   j = 0 … m − 1,                                         (G3a)
+    i_j = ⌊j (n − 1) / (m − 1) + ½⌋,   j = 0 … m − 1,                                          (G3a)
 
-(the first and the latest included) or the m most recent ones, n − m … n − 1.
+(rounded half up in integer arithmetic; the first and the latest included, all distinct since the step
+(n − 1)/(m − 1) exceeds 1) or the m most recent ones, n − m … n − 1.
 
 A model is a pure function of (X, y, h): :func:`fit_gp` computes the same bits from the same arrays, so an
 optimiser that stores its data and hyperparameters restores its model exactly, without pickle.
@@ -285,19 +286,36 @@ def hyper_bounds(n_inputs: int) -> list[tuple[float, float]]:
 
 
 def fit_subset(n: int, points: int, rule: str) -> NDArray[np.int64]:
-    """The indices (m,) of the episodes a refit sees, in order: all n while n ≤ ``points``, else ``points``
-    of them, spread over the whole history (``"spread"``, Eq. G3a) or the most recent (``"recent"``).
+    """The episodes a refit sees (Eq. G3a).
 
     Fitting the hyperparameters on the most recent episodes alone fits them to where the search has
     converged, not to the data the model conditions on: with ``points`` = 256 and ``"recent"``, c-bo's
     default until 2026-11-30, its recommended policy got worse from 300 to 500 episodes on many tasks of
-    issue 44's study (``benchmarks/low_budget/results/refit_data.md`` counts them and measures both).
+    issue 44's study (``benchmarks/low_budget/results/refit_data.md`` counts them, and measures the new
+    default, which within those 500 episodes fits every one).
+
+    Parameters
+    ----------
+    n : int         the episodes told (≥ 0).
+    points : int    m, the most a refit sees (≥ 2).
+    rule : str      ``"spread"`` (Eq. G3a) or ``"recent"`` (the last m), once n > m.
+
+    Returns
+    -------
+    (min(n, m),) int64   the indices, in increasing order: all n while n ≤ m.
     """
+    if rule not in FIT_SUBSETS:
+        raise ValueError(f"rule: expected one of {FIT_SUBSETS}, got {rule!r}")
+    if isinstance(points, bool) or not isinstance(points, (int, np.integer)) or points < 2:
+        raise ValueError(f"points: expected an integer >= 2, got {points!r}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        raise ValueError(f"n: expected an integer >= 0, got {n!r}")
     if n <= points:
-        return np.arange(n)
+        return np.arange(n, dtype=np.int64)
     if rule == "recent":
-        return np.arange(n - points, n)
-    return np.round(np.linspace(0.0, n - 1.0, points)).astype(np.int64)  # G3a
+        return np.arange(n - points, n, dtype=np.int64)
+    j = np.arange(points, dtype=np.int64)
+    return (2 * j * (n - 1) + (points - 1)) // (2 * (points - 1))  # G3a
 
 
 def fit_hyperparameters(

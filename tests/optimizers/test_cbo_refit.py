@@ -4,6 +4,7 @@ checkpoints written before the option existed."""
 from __future__ import annotations
 
 import copy
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -20,18 +21,39 @@ def test_a_fit_sees_every_episode_while_there_are_at_most_fit_points(rule, n):
     assert fit_subset(n, 8, rule).tolist() == list(range(n))
 
 
-@pytest.mark.parametrize(("n", "points"), [(9, 8), (20, 8), (500, 256), (1000, 3), (10_001, 1024)])
+@pytest.mark.parametrize(
+    ("n", "points"), [(9, 8), (20, 8), (30, 15), (116, 15), (500, 256), (1000, 3), (10_001, 1024)]
+)
 def test_spread_takes_distinct_episodes_evenly_over_the_history_from_the_first_to_the_latest(n, points):
+    """Eq. G3a in exact arithmetic, ties (30 and 116 episodes of 15: j (n − 1)/(m − 1) = 14.5, 57.5)
+    rounded up."""
     chosen = fit_subset(n, points, "spread")
-    assert chosen.shape == (points,) and chosen[0] == 0 and chosen[-1] == n - 1
+    assert chosen.dtype == np.int64 and chosen.shape == (points,) and chosen[0] == 0 and chosen[-1] == n - 1
     gaps = np.diff(chosen)
     assert (gaps >= 1).all()  # distinct and in order
     assert gaps.max() - gaps.min() <= 1  # even: every gap is ⌊(n−1)/(m−1)⌋ or one more
-    assert chosen.tolist() == [round(j * (n - 1) / (points - 1)) for j in range(points)]  # Eq. G3a
+    exact = [int(Fraction(j * (n - 1), points - 1) + Fraction(1, 2)) for j in range(points)]
+    assert chosen.tolist() == exact
 
 
-def test_recent_takes_the_latest_fit_points_episodes():
-    assert fit_subset(20, 8, "recent").tolist() == list(range(12, 20))
+@pytest.mark.parametrize("n", range(0, 40))
+def test_recent_takes_the_episodes_of_the_former_slice(n):
+    """The former refit's rows, ``slice(max(0, n − m), n)``, which the study's pinned runs used."""
+    assert fit_subset(n, 8, "recent").tolist() == list(range(n))[max(0, n - 8) : n]
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        ((10, 4, "latest"), r"rule: expected one of \('spread', 'recent'\), got 'latest'"),
+        ((10, 1, "spread"), "points: expected an integer >= 2, got 1"),
+        ((10, 4.0, "spread"), "points: expected an integer >= 2, got 4.0"),
+        ((-1, 4, "spread"), "n: expected an integer >= 0, got -1"),
+    ],
+)
+def test_bad_arguments_are_refused_naming_them(args, match):
+    with pytest.raises(ValueError, match=match):
+        fit_subset(*args)
 
 
 def _taught(batches: int = 6, **options) -> ContextualBO:
@@ -86,17 +108,22 @@ def test_a_run_past_the_cap_resumes_bit_for_bit():
     assert restored.ask(contexts).tobytes() == optimizer.ask(contexts).tobytes()
 
 
-def test_the_defaults_fit_every_episode_of_a_real_robot_budget():
-    config = make_optimizer("c-bo", 2, 1, 0).config
-    assert (config.fit_points, config.fit_subset) == (1024, "spread")
-
-
 @pytest.mark.slow
 def test_a_checkpoint_written_before_the_option_resumes_with_the_most_recent_episodes():
-    """Before 2026-11-30 a checkpoint named no ``fit_subset``; its refits took the most recent episodes."""
-    state = copy.deepcopy(_taught(batches=2, fit_points=8, fit_subset="recent").state_dict())
+    """Before 2026-11-30 a checkpoint named no ``fit_subset``; its refits took the most recent episodes.
+    Past the cap, such a checkpoint resumes bit for bit as the run that wrote it."""
+    optimizer = _taught(fit_points=8, fit_subset="recent")
+    state = copy.deepcopy(optimizer.state_dict())
     del state["config"]["fit_subset"]
-    assert ContextualBO.from_state_dict(state).config.fit_subset == "recent"
+    restored = ContextualBO.from_state_dict(state)
+    assert restored.config.fit_subset == "recent"
+    contexts = np.array([[0.1], [0.5], [0.8], [0.3]])
+    for one in (optimizer, restored):
+        for _ in range(2):  # past the next refit
+            params = one.ask(contexts)
+            one.tell(contexts, params, -((params - contexts) ** 2).sum(axis=1))
+    assert restored.state_dict()["log_hyper"].tobytes() == optimizer.state_dict()["log_hyper"].tobytes()
+    assert restored.ask(contexts).tobytes() == optimizer.ask(contexts).tobytes()
 
 
 @pytest.mark.parametrize("value", ["latest", None, ["spread"]])

@@ -1,5 +1,6 @@
-"""``benchmarks/pin_defaults.py`` and ``study_options.pin_c3``: issue 45's default change (C3 → C3r) carried
-over the committed study runs, which were computed with C3 and are pinned to it."""
+"""``benchmarks/pin_defaults.py`` and ``study_options.pin_c3``: issue 45's default change (C3 → C3r) and
+c-bo's refit default of 2026-11-30 carried over the committed study runs, which were computed with the
+former defaults and are pinned to them."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import pytest
 
 from benchmarks import pin_defaults
 from benchmarks.contextual_bbo.protocol import ProtocolSpec
-from benchmarks.study_options import C3_PIN, pin_c3
+from benchmarks.study_options import C3_PIN, CBO_FIT_PIN, pin_c3
 from benchmarks.study_tools import RunSpec
 
 
@@ -51,10 +52,31 @@ def test_a_labelled_or_recorded_document_keeps_its_key_and_file_name(tmp_path):
         pin_defaults.pinned("reacher", tmp_path / "d.json", {})
 
 
+def test_a_low_budget_c_bo_run_gets_the_refit_pin_and_keeps_the_options_it_chose(tmp_path):
+    """c-bo's pin is added to every c-bo column's document (the library columns' too), beside the options
+    the column sets; an option the run set itself keeps its value; a pinned document is left alone."""
+
+    def low(options: dict, factory: str | None = None) -> dict:
+        method = {"optimizer": "c-bo", "options": options, "selector": None}
+        return {"method": method if factory is None else {**method, "factory": factory}}
+
+    path = tmp_path / "a.json"
+    pinned = pin_defaults.pinned("low_budget", path, low({"acquisition": "ucb"}))[1]["method"]["options"]
+    assert pinned == {"acquisition": "ucb", **dict(CBO_FIT_PIN)}
+    library = pin_defaults.pinned("low_budget", path, low({}, "benchmarks.low_budget.sklearn_cbo:SklearnCBO"))
+    assert library[1]["method"]["options"] == dict(CBO_FIT_PIN)
+    chosen = pin_defaults.pinned("low_budget", path, low({"fit_subset": "spread"}))[1]["method"]["options"]
+    assert chosen == {"fit_points": 256, "fit_subset": "spread"}
+    assert pin_defaults.pinned("low_budget", path, low(dict(CBO_FIT_PIN))) is None
+    creps = {"method": {"optimizer": "creps", "options": {"epsilon": 1.0}, "selector": None}}
+    assert pin_defaults.pinned("low_budget", path, creps) is None
+
+
 @pytest.mark.parametrize("study", ["functions", "ccmaes", "scaling", "contextual_bbo", "low_budget", "kick"])
-def test_every_committed_c3_run_is_pinned(study):
-    """No committed document of ``c-cma-es`` or its surrogate runs without an explicit ``ridge_centre``: the
-    default's change cannot make a study recompute or misread one."""
+def test_every_committed_run_is_pinned(study):
+    """No committed document of ``c-cma-es`` or its surrogate runs without an explicit ``ridge_centre``, and
+    no low-budget c-bo run without its refit options: a default's change cannot make a study recompute or
+    misread one."""
     assert pin_defaults.plan(study) == []
 
 

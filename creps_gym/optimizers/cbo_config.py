@@ -121,8 +121,9 @@ class CBOConfig:
         have grown by this factor since the last fit (a geometric schedule); in between only the Cholesky
         factor is updated, so asks stay fast.
     hyper_restarts : int            random L-BFGS-B starts of a refit, besides the previous hyperparameters.
-    fit_points : int                a refit maximises the likelihood of at most ``fit_points`` episodes (its
-        cost grows as their cube): every episode up to that many; the GP itself conditions on every episode.
+    fit_points : int                a refit maximises the likelihood of at most ``fit_points`` episodes: every
+        episode up to that many; the GP itself conditions on every episode. A refit's cost grows as the cube
+        of the episodes it sees: lower it where a long run's refits would keep a robot waiting.
     fit_subset : str                which ``fit_points`` episodes a refit sees beyond that
         (:func:`~creps_gym.optimizers.gp_model.fit_subset`): ``"spread"`` evenly over the whole history
         (Eq. G3a) or ``"recent"``, the most recent ones (for a task that drifts, a robot whose wear

@@ -189,3 +189,25 @@ def test_sklearns_posterior_is_the_latent_functions_and_its_gradient_the_analyti
     for point, row in zip(points, cross, strict=True):
         gradient = scale * ((weights * row)[:, None] * -(point - inputs) / lengthscales**2).sum(axis=0)
         np.testing.assert_allclose(model.predict_with_gradient(point[None, :])[2][0], gradient, rtol=1e-5)
+
+
+@SKLEARN
+@pytest.mark.parametrize("rule", ["spread", "recent"])
+def test_a_refit_fits_the_library_gp_on_the_episodes_fit_subset_chooses(
+    rule: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The library columns refit on the same episodes as c-bo's own GP (Eq. G3a): a spy on ``_fit``."""
+    from creps_gym.optimizers.gp_model import fit_subset
+
+    cls, seen = _class("c-bo-sklearn"), []
+    real = cls._fit
+
+    def spy(self: Any, inputs: np.ndarray, targets: np.ndarray, seed: int) -> Any:
+        seen.append(inputs.copy())
+        return real(self, inputs, targets, seed)
+
+    monkeypatch.setattr(cls, "_fit", spy)
+    optimizer = driven(cls, fit_points=8, fit_subset=rule)
+    n = optimizer.fitted_at
+    data = optimizer._inputs(optimizer.contexts, optimizer.params, optimizer.context_scale)
+    assert n > 8 and seen[-1].tobytes() == data[:n][fit_subset(n, 8, rule)].tobytes()

@@ -68,14 +68,20 @@ def one_run(task_name: str, method_name: str, seed: int, budget: int) -> dict[st
     return {**document, "key": spec.key, "values": values, "falls": falls, "test_contexts": len(run.test)}
 
 
+def committed_run(key: str, runs: Path = RUNS) -> dict[str, Any] | None:
+    """The study's committed document of the task, column, seed and batch of the run key ``key`` (a
+    :attr:`~benchmarks.low_budget.study.LowBudgetSpec.key`; the largest budget's), or None."""
+    prefix, samples = key.rsplit("-b", 1)[0], key.rsplit("-n", 1)[1]
+    documents = sorted(runs.glob(f"{prefix}-b*-n{samples}.json"))
+    return json.loads(documents[-1].read_text()) if documents else None
+
+
 def check_against_study(run: dict[str, Any], runs: Path = RUNS) -> bool | None:
     """Whether the run's ``trust_region`` values equal the study's committed run of the same task, column,
     seed and batch bit for bit at every budget both record (None: the study has no document of it)."""
-    prefix, samples = run["key"].rsplit("-b", 1)[0], run["key"].rsplit("-n", 1)[1]
-    documents = sorted(runs.glob(f"{prefix}-b*-n{samples}.json"))
-    if not documents:
+    study = committed_run(run["key"], runs)
+    if study is None:
         return None
-    study = json.loads(documents[-1].read_text())
     recorded = dict(zip(study["budgets"], study["values"], strict=True))
     own = dict(zip(run["budgets"], run["values"]["trust_region"], strict=True))
     common = sorted(set(recorded) & set(own))

@@ -40,6 +40,7 @@ import numpy as np
 
 from benchmarks.low_budget import column_replay_main
 from benchmarks.low_budget.columns import Method, method_by_name
+from benchmarks.low_budget.recommenders import RUNS, committed_run
 from benchmarks.low_budget.report import median_range
 from benchmarks.low_budget.study import (
     BUDGETS,
@@ -52,7 +53,6 @@ from benchmarks.study_options import CBO_FIT_PIN
 
 __all__ = ["main", "render", "study_document", "summary", "unpinned", "worse_later"]
 
-RUNS = Path(__file__).resolve().parent / "runs"
 #: Budgets at which both have seen the same data: no refit has seen more than the pin's ``fit_points``.
 SHARED_BUDGETS = tuple(b for b in BUDGETS if b <= dict(CBO_FIT_PIN)["fit_points"])
 
@@ -68,9 +68,7 @@ def study_document(
     task: str, method: str, seed: int, samples: int, runs: Path = RUNS
 ) -> dict[str, Any] | None:
     """The study's committed run of ``task``, ``method``, ``seed`` and batch size, or None."""
-    key = LowBudgetSpec(task, method, seed, samples=samples).key
-    path = runs / f"{key}.json"
-    return json.loads(path.read_text()) if path.is_file() else None
+    return committed_run(LowBudgetSpec(task, method, seed, samples=samples).key, runs)
 
 
 def one(task: str, method: str, seed: int, budget: int) -> dict[str, Any]:

@@ -33,7 +33,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 from benchmarks.baselines import BASELINES
-from benchmarks.ccmaes.report import (
+from benchmarks.ccmaes.columns import (
     BATCH_SWEEP,
     BOUND_COLUMNS,
     COLUMNS,
@@ -44,6 +44,8 @@ from benchmarks.ccmaes.report import (
     SWEEP_FUNCTION,
     YARDSTICK,
     Column,
+)
+from benchmarks.ccmaes.report import (
     bound_table,
     csa_text,
     headline_table,

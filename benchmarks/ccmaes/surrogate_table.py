@@ -12,7 +12,8 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from benchmarks.ccmaes.report import Column, _batch_text, _episodes_text, median_episodes
+from benchmarks.ccmaes.columns import Column
+from benchmarks.ccmaes.report import _batch_text, _episodes_text, median_episodes
 
 __all__ = ["SURROGATE", "SURROGATE_CELLS", "SURROGATE_COLUMNS", "surrogate_table"]
 

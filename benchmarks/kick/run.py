@@ -115,7 +115,8 @@ METHODS = {
 }
 
 
-def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+def _parser() -> argparse.ArgumentParser:
+    """The command line's options (:func:`parse_args` resolves and checks them)."""
     parser = argparse.ArgumentParser(description="Reproduce the paper's kick experiments (Fig. 5c, Fig. 7).")
     mode = parser.add_mutually_exclusive_group()
     mode.add_argument("--quick", action="store_true", help="small budgets (default)")
@@ -162,6 +163,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="optimiser option of every selected method, VALUE in JSON or a string (repeatable); "
         "runs go to results/<mode>-opt-<slug>",
     )
+    return parser
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """The options, with the mode, the checked ``--opt`` options and the results folder resolved."""
+    parser = _parser()
     args = parser.parse_args(argv)
     args.mode = "full" if args.full else "quick"
     args.options = _options(parser, args)

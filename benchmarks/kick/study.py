@@ -298,19 +298,7 @@ def train_run(
         if done["budget_iterations"] == spec.iterations and stored_setting(done, spec.experiment) == setting:
             return done
     base_seed = [seed, spec.key, trial]
-    history = read_json(history_path) if ckpt.exists() and not fresh else {}
-    states = read_json(selector_path) if selector and selector_path.exists() else {}
-    opt = load_run(stem) if stored_setting(history, spec.experiment) == setting else None
-    if opt is not None and selector is not None and str(opt.iteration) not in states:
-        opt = None  # no selector state at the checkpoint: start over
-    if opt is not None and selector is not None:
-        selector.load_state_dict(states[str(opt.iteration)])
-    if opt is None:  # a checkpoint of another setting starts over
-        opt = _new_optimizer(spec, env, int(np.random.SeedSequence(base_seed).generate_state(1)[0]))
-        history = {"setting": setting, "batch": [], "evaluations": []}
-    # The history is written before the checkpoint, so after a kill it may run ahead of it: cut it back.
-    history["batch"] = history["batch"][: opt.iteration]
-    history["evaluations"] = [e for e in history["evaluations"] if e[0] <= opt.iteration]
+    opt, history, states = _resume(spec, env, stem, setting, base_seed, selector, fresh)
     draw_contexts = context_sampler(spec, env) if selector is None else selector.select
     start = time.perf_counter()
     while opt.iteration < spec.iterations and not opt.stop():
@@ -329,7 +317,24 @@ def train_run(
             if selector is not None:
                 states = _selector_states(selector_path, selector, opt.iteration, states)
             opt.save(ckpt)
-    result = {
+    result = _result_document(spec, trial, setting, opt, env, history, start)
+    write_json(result_path, result)
+    return result
+
+
+def _result_document(
+    spec: RunSpec,
+    trial: int,
+    setting: dict[str, Any],
+    opt: Any,
+    env: OffsetParams,
+    history: dict[str, Any],
+    start: float,
+) -> dict[str, Any]:
+    """:func:`train_run`'s result document of a finished run: its setting, budget and progress, the mean
+    policy's metric, the history, the seconds of its last session (since ``time.perf_counter()`` was
+    ``start``) and this session's provenance."""
+    return {
         "experiment": spec.experiment,
         "name": spec.name,
         "setting": setting,
@@ -346,5 +351,33 @@ def train_run(
         "seconds_last_session": time.perf_counter() - start,
         "provenance": provenance(PACKAGES),
     }
-    write_json(result_path, result)
-    return result
+
+
+def _resume(
+    spec: RunSpec,
+    env: OffsetParams,
+    stem: Path,
+    setting: dict[str, Any],
+    base_seed: list[Any],
+    selector: Any,
+    fresh: bool,
+) -> tuple[Any, dict[str, Any], dict[str, Any]]:
+    """:func:`train_run`'s optimiser, history and selector states (by iteration): restored from the run's
+    checkpoint ``<stem>.npz`` when its history is of ``setting`` (and, with a selector, the selector has a
+    state at that iteration), else new (``fresh``: always). The history is written before the checkpoint,
+    so after a kill it may run ahead of it: it is cut back to the checkpoint's iteration."""
+    ckpt, history_path = stem.with_suffix(".npz"), stem.with_suffix(".history.json")
+    selector_path = stem.with_suffix(".selector.json")
+    history = read_json(history_path) if ckpt.exists() and not fresh else {}
+    states = read_json(selector_path) if selector and selector_path.exists() else {}
+    opt = load_run(stem) if stored_setting(history, spec.experiment) == setting else None
+    if opt is not None and selector is not None and str(opt.iteration) not in states:
+        opt = None  # no selector state at the checkpoint: start over
+    if opt is not None and selector is not None:
+        selector.load_state_dict(states[str(opt.iteration)])
+    if opt is None:  # a checkpoint of another setting starts over
+        opt = _new_optimizer(spec, env, int(np.random.SeedSequence(base_seed).generate_state(1)[0]))
+        history = {"setting": setting, "batch": [], "evaluations": []}
+    history["batch"] = history["batch"][: opt.iteration]
+    history["evaluations"] = [e for e in history["evaluations"] if e[0] <= opt.iteration]
+    return opt, history, states

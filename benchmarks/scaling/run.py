@@ -71,8 +71,8 @@ PRESETS = {
 BASELINE_NAMES = ("cma-fixed", "cma-fixed-batch", "cma-regression")
 
 
-def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    """Command-line options; ``--quick``/``--full`` pick the defaults of the others."""
+def _parser() -> argparse.ArgumentParser:
+    """The command line's options (:func:`parse_args` resolves and checks them)."""
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -113,6 +113,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="compute only these methods' missing runs (e.g. c-cma-es); the others' cached runs are rendered",
     )
     add_output_options(parser, HERE, out="heatmaps and table (default docs/results/scaling/<label>)")
+    return parser
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """Command-line options; ``--quick``/``--full`` pick the defaults of the others."""
+    parser = _parser()
     args = parser.parse_args(argv)
     args.mode = args.mode or "full"
     preset = PRESETS[args.mode]

@@ -643,7 +643,7 @@ def test_run_spec_options_reach_the_optimiser(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_ccmaes_study_sweeps_the_batch_size_on_the_sphere_at_z_1(tmp_path: Path) -> None:
-    from benchmarks.ccmaes import report
+    from benchmarks.ccmaes import columns, report
 
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = [
@@ -672,7 +672,7 @@ def test_ccmaes_study_sweeps_the_batch_size_on_the_sphere_at_z_1(tmp_path: Path)
     assert row.startswith("| ") and " | – | – | – | – | ≤ " in row  # N = 20 .. 40 not run
     assert "**Partial: runs cached of 1 seeds: N = 20: 0; N = 24: 0; N = 32: 0; N = 40: 0.**" in section
     # With every column there, the table names the batch sizes that meet the target.
-    runs = {c.name: [{"hit": 100 * c.batch, "spec": {"seed": 0}}] for c in report.BATCH_SWEEP}
+    runs = {c.name: [{"hit": 100 * c.batch, "spec": {"seed": 0}}] for c in columns.BATCH_SWEEP}
     cells = {("Sphere", 1, name): documents for name, documents in runs.items()}
     cells[("Sphere", 1, "cma-fixed")] = [{"hit": 1000, "spec": {"seed": 0}}]
     text = report.sweep_table(cells, 10_000, 1)
@@ -778,9 +778,9 @@ def test_ccmaes_bound_table_sets_faster_step_size_variants_against_both_targets(
 
 
 def test_ccmaes_restricted_columns_run_only_in_their_cells_with_the_headline_seeds() -> None:
-    from benchmarks.ccmaes import report, run
+    from benchmarks.ccmaes import columns, run
 
-    names = [c.name for c in report.BOUND_COLUMNS + report.YARDSTICK] + ["c-cma-es-n12", "c-cma-es-bare"]
+    names = [c.name for c in columns.BOUND_COLUMNS + columns.YARDSTICK] + ["c-cma-es-n12", "c-cma-es-bare"]
     args = run.parse_args(["--full", "--columns", *names, "--seeds", "1", "--headline-seeds", "2"])
     cells = {}
     for column, spec in run.column_specs(args):

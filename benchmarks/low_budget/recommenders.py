@@ -1,14 +1,15 @@
-"""What c-bo should recommend on the robot tasks: Eq. (R1) against Eq. (R2) on the same runs (issue 44).
+"""What c-bo should recommend on the robot tasks: Eqs. (R1), (R2) and (R3) on the same runs (issue 44).
 
 ``recommend`` draws nothing from the optimiser's Generator and changes none of its state, so one run
-measures both rules of ``recommend_over`` (``creps_gym/optimizers/cbo_recommend.py``): ``trust_region``
-(R1, the default: the posterior mean's maximiser within the box of the good neighbours' θ) and
-``observed`` (R2: the told θ with the largest posterior mean at s). Each run is the low-budget study's run
-of the same task, column and seed (the same start, batches, training and test contexts), so its
-``trust_region`` values are that study run's values bit for bit (the script checks it where the study's
-document is in ``runs/``). After each budget, each rule's recommended policy is evaluated on the task's test
-contexts: the study's metric and, on the kicks, how many of the test kicks fall. Writes one JSON document
-with provenance and a Markdown table next to it (``--render-only`` redraws the table).
+measures every rule of ``recommend_over`` (``creps_gym/optimizers/cbo_recommend.py``): ``trust_region``
+(R1, the default: the posterior mean's maximiser within the box of the good neighbours' θ), ``observed``
+(R2: the told θ with the largest posterior mean at s) and ``neighbours`` (R3: the same among the episodes
+with the nearest contexts; documents written before it existed hold the first two). Each run is the
+low-budget study's run of the same task, column and seed (the same start, batches, training and test
+contexts), so its ``trust_region`` values are that study run's values bit for bit (the script checks it
+where the study's document is in ``runs/``). After each budget, each rule's recommended policy is evaluated
+on the task's test contexts: the study's metric and, on the kicks, how many of the test kicks fall. Writes
+one JSON document with provenance and a Markdown table next to it (``--render-only`` redraws the table).
 
     OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.recommenders \\
         --out benchmarks/low_budget/results/recommenders.json
@@ -33,7 +34,7 @@ from benchmarks.low_budget.columns import method_by_name
 from benchmarks.low_budget.report import median_range
 from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
 
-RULES = ("trust_region", "observed")
+RULES = ("trust_region", "observed", "neighbours")
 RUNS = Path(__file__).resolve().parent / "runs"
 
 
@@ -60,7 +61,7 @@ def one_run(task_name: str, method_name: str, seed: int, budget: int) -> dict[st
         run_until(run, target)
         for rule in RULES:
             params = recommend_with(run.optimizer, rule, run.test)
-            value, info = policy_evaluation(run.task, run.model, run.test, params)  # one evaluation for both
+            value, info = policy_evaluation(run.task, run.model, run.test, params)  # one evaluation for all
             values[rule].append(value)
             falls[rule].append(int(np.sum(info["fell"])) if "fell" in info else None)
     spec = run.spec
@@ -88,36 +89,50 @@ def check_against_study(run: dict[str, Any], runs: Path = RUNS) -> bool | None:
     return bool(common) and all(recorded[b] == own[b] for b in common)
 
 
-def _row(group: list[dict[str, Any]], index: int, larger_is_better: bool) -> list[str]:
-    """The cells of one budget's row: each rule's median (min–max over seeds), the seeds where ``observed``
-    is better, and the falls of each rule summed over seeds."""
+def _rules(runs: list[dict[str, Any]]) -> list[str]:
+    """The rules the runs measured, in :data:`RULES`' order (a document written before ``neighbours``
+    existed has the first two)."""
+    return [rule for rule in RULES if rule in runs[0]["values"]]
+
+
+def _header(rules: list[str]) -> list[str]:
+    """The table's header: each rule's median, the seeds where each other rule beats ``trust_region``, the
+    falls of each rule."""
+    cells = [f"{rules[0]}: median (min–max over seeds)"] + [f"{rule}: median (min–max)" for rule in rules[1:]]
+    cells += [f"seeds where {rule} is better" for rule in rules[1:]]
+    cells.append(f"falls ({' / '.join(rules)}, summed over seeds)")
+    return ["| task | column | budget | " + " | ".join(cells) + " |", "|---" * (len(cells) + 3) + "|"]
+
+
+def _row(group: list[dict[str, Any]], index: int, larger_is_better: bool, rules: list[str]) -> list[str]:
+    """The cells of one budget's row: each rule's median (min–max over seeds), the seeds where each other
+    rule is better than ``trust_region``, and the falls of each rule summed over seeds."""
     cells, values = [], {}
-    for rule in RULES:
+    for rule in rules:
         values[rule] = column = np.array([r["values"][rule][index] for r in group])
         cells.append(median_range(column))
     sign = 1.0 if larger_is_better else -1.0
-    better = int(np.sum(sign * (values["observed"] - values["trust_region"]) > 0))
-    cells.append(f"{better} of {len(group)}")
-    fell = [[r["falls"][rule][index] for r in group] for rule in RULES]
+    for rule in rules[1:]:
+        better = int(np.sum(sign * (values[rule] - values["trust_region"]) > 0))
+        cells.append(f"{better} of {len(group)}")
+    fell = [[r["falls"][rule][index] for r in group] for rule in rules]
     tests = len(group) * group[0]["test_contexts"]
-    cells.append("—" if None in fell[0] else f"{sum(fell[0])} / {sum(fell[1])} of {tests}")
+    cells.append("—" if None in fell[0] else " / ".join(str(sum(f)) for f in fell) + f" of {tests}")
     return cells
 
 
 def summary(runs: list[dict[str, Any]]) -> str:
     """A Markdown table per task and budget: each rule's median metric (min–max over seeds), the seeds on
-    which ``observed`` is better, and the test kicks that fall (summed over seeds)."""
-    lines = [
-        "| task | column | budget | trust_region: median (min–max over seeds) | observed: median (min–max) "
-        "| seeds where observed is better | falls (trust_region / observed, summed over seeds) |",
-        "|---|---|---|---|---|---|---|",
-    ]
+    which each other rule is better than ``trust_region``, and the test kicks that fall (summed over
+    seeds)."""
+    rules = _rules(runs)
+    lines = _header(rules)
     for task, method in sorted({(r["task"], r["method"]) for r in runs}):
         group = [r for r in runs if (r["task"], r["method"]) == (task, method)]
         group.sort(key=lambda r: r["seed"])
         larger_is_better = not task_by_name(task).lower_is_better
         for index, budget in enumerate(group[0]["budgets"]):
-            cells = _row(group, index, larger_is_better)
+            cells = _row(group, index, larger_is_better, rules)
             lines.append(f"| {task} | {method} | {budget} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

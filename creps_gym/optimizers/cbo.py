@@ -20,9 +20,10 @@ acquisitions of :mod:`creps_gym.optimizers.acquisitions`):
 the data have grown by ``refit_growth`` since the last fit, and otherwise kept, so an ask costs one Cholesky
 factor and the acquisition's optimisation.
 
-``recommend(contexts)`` follows ``recommend_over``, Eqs. (R1) and (R2) of
+``recommend(contexts)`` follows ``recommend_over``, Eqs. (R1)–(R3) of
 :mod:`creps_gym.optimizers.cbo_recommend`: the posterior mean's maximiser at each s within a trust region of
-the data (the default), or the told θ with the largest posterior mean at s.
+the data (the default), or the told θ with the largest posterior mean at s (of every episode, or of those
+with the nearest contexts).
 :meth:`ContextualBO.mean_policy` distils the recommendation into a
 :class:`~creps_gym.optimizers.policy_file.Policy` (least squares of the maximisers on a context grid) and
 reports the distillation error in ``diagnostics``.
@@ -44,7 +45,7 @@ from creps_gym._validation import check_positive_int
 from creps_gym.optimizers.acquisitions import Acquisition, AcquisitionMaximiser, gumbel_max_values, mes, ucb
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.cbo_config import MAX_COUNTS, CBOConfig
-from creps_gym.optimizers.cbo_recommend import observed_maximiser, trust_region, trust_region_maximiser
+from creps_gym.optimizers.cbo_recommend import told_choice, trust_region, trust_region_maximiser
 from creps_gym.optimizers.cbo_state import GPData, check_kernel_memory, read_gp_data
 from creps_gym.optimizers.ccmaes_config import options_doc, options_signature
 from creps_gym.optimizers.context_value import context_information, utility_thetas
@@ -276,8 +277,9 @@ class ContextualBO(ContextualOptimizer):
     # -- recommend and the policy --------------------------------------------------------------------------
     def recommend(self, contexts: Any) -> Array:
         """At each context, Eq. (R1) (``recommend_over="trust_region"``: the posterior mean's maximiser
-        within the trust region of the data) or Eq. (R2) (``"observed"``: the told θ with the largest
-        posterior mean) of :mod:`~creps_gym.optimizers.cbo_recommend`: shape (n, p).
+        within the trust region of the data), Eq. (R2) (``"observed"``: the told θ with the largest
+        posterior mean) or Eq. (R3) (``"neighbours"``: that of the episodes with the nearest contexts) of
+        :mod:`~creps_gym.optimizers.cbo_recommend`: shape (n, p).
 
         Before the GP exists (fewer than two episodes told) it is the initial mean. Deterministic: the
         candidates come from a fixed seed, so a context gives the same θ alone or in any batch.
@@ -286,10 +288,10 @@ class ContextualBO(ContextualOptimizer):
         if self.model is None:
             return np.tile(self.config.initial_mean, (contexts.shape[0], 1))
         scaled, model = self._scaled_contexts(contexts), self.model
-        if self.config.recommend_over == "observed":
+        if (rule := self.config.recommend_over) != "trust_region":  # the told θ themselves: R2 or R3
             told = np.clip(self._scaled_params(self.params), 0.0, 1.0)
-            chosen = [observed_maximiser(model, row, told) for row in scaled]
-            return np.clip(self.params[chosen], *self.config.param_box)  # the told θ themselves
+            chosen = [told_choice(model, row, told, self._observed_units(row)[1], rule) for row in scaled]
+            return np.clip(self.params[chosen], *self.config.param_box)
         if self._recommend_candidates is None:
             fixed = np.random.default_rng(RECOMMEND_SEED).uniform(
                 size=(self.config.candidates, self.n_params)

@@ -116,7 +116,9 @@ class CBOConfig:
     recommend_over : str            ``"trust_region"``: ``recommend`` maximises the posterior mean over that
         trust region (Eq. R1 of :mod:`~creps_gym.optimizers.cbo_recommend`); ``"observed"``: it returns the
         told θ with the largest posterior mean at s (Eq. R2), never a θ no episode tried (safer where some
-        parameters fail badly, as a kick that falls; it cannot interpolate between the told θ).
+        parameters fail badly, as a kick that falls; it cannot interpolate between the told θ);
+        ``"neighbours"``: the same over the ``candidates // 4`` episodes with the nearest contexts (Eq. R3:
+        a θ tried near s, not one the GP rates at s by extrapolating from a distant context).
     refit_growth : float            the hyperparameters are refitted (maximum likelihood, G3) when the data
         have grown by this factor since the last fit (a geometric schedule); in between only the Cholesky
         factor is updated, so asks stay fast.

@@ -1,4 +1,4 @@
-"""What contextual Bayesian optimisation recommends at a context: the two rules of ``recommend_over``.
+"""What contextual Bayesian optimisation recommends at a context: the three rules of ``recommend_over``.
 
 References: as :mod:`creps_gym.optimizers.cbo`. Everything here works in the scaled units of
 :class:`~creps_gym.optimizers.cbo.ContextualBO`: θ in the unit box of the parameter box, s scaled by the
@@ -22,6 +22,14 @@ to s (the first on ties) and G(s) the best ⌈q k⌉ of them by return (q = ``tr
   the return at zero, R1's maximiser moves onto the fall cliff as the data grow
   (``benchmarks/low_budget/recommenders.py`` measures both rules on the same runs). The price: between the
   told θ it cannot interpolate, so on smooth tasks R1 ends closer to the optimum.
+* ``"neighbours"``: the told θ of the episodes N(s) with the largest posterior mean at s,
+
+      θ̂(s) = θ_{i*},   i* = argmax_{i ∈ N(s)} μ(s, θ_i)                                            (R3)
+
+  (the nearest context first on ties). R2 may pick a θ told at a distant context, which the GP rates at s
+  only by extrapolating across the context; R3 picks one that was tried near s. On the kick flexibility,
+  where R1's recommendations fall more often as the data grow, R3's fall least
+  (``benchmarks/low_budget/results/recommenders_v2.md``).
 """
 
 from __future__ import annotations
@@ -35,10 +43,10 @@ from creps_gym.optimizers.acquisitions import AcquisitionMaximiser
 from creps_gym.optimizers.gp_model import GPModel
 from creps_gym.optimizers.gp_trend import with_trend_maximiser
 
-__all__ = ["RECOMMEND_RULES", "observed_maximiser", "trust_region", "trust_region_maximiser"]
+__all__ = ["RECOMMEND_RULES", "observed_maximiser", "told_choice", "trust_region", "trust_region_maximiser"]
 
 Array = NDArray[np.float64]
-RECOMMEND_RULES = ("trust_region", "observed")
+RECOMMEND_RULES = ("trust_region", "observed", "neighbours")
 
 
 def trust_region(
@@ -89,3 +97,12 @@ def observed_maximiser(model: GPModel, context: Array, units: Array) -> int:
     box) with the largest posterior mean at it (the first on ties)."""
     mean = model.predict(AcquisitionMaximiser.inputs(context, units))[0]  # R2
     return int(np.argmax(mean))
+
+
+def told_choice(model: GPModel, context: Array, told: Array, nearest: Array, rule: str) -> int:
+    """Eq. (R2) (``rule="observed"``) or Eq. (R3) (``"neighbours"``) at one scaled context (z,): the index
+    of the chosen episode among the told θ ``told`` (N, p, in the unit box); ``nearest`` (k,) indexes
+    N(s), the nearest context first."""
+    if rule == "observed":
+        return observed_maximiser(model, context, told)  # R2
+    return int(nearest[observed_maximiser(model, context, told[nearest])])  # R3

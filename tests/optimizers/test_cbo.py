@@ -8,6 +8,7 @@ test_policy.py)."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import math
 
@@ -280,6 +281,28 @@ def test_recommend_over_observed_returns_the_told_theta_with_the_best_posterior_
     assert not np.array_equal(default.recommend(contexts), chosen)  # R1 interpolates between them
 
 
+def test_recommend_over_neighbours_returns_the_best_told_theta_of_the_nearest_contexts():
+    """Eq. (R3): with k = candidates // 4 = 4 of the 20 episodes, each recommended row is the told θ of one
+    of the 4 episodes whose contexts are nearest, and none of the 4 has a larger posterior mean at s; with
+    k ≥ 20 (the default 64) N(s) holds every episode and R3 is R2 bit for bit."""
+    optimizer = _trained(recommend_over="neighbours", candidates=16)
+    contexts = np.linspace(0, 1, 5)[:, None]
+    chosen = optimizer.recommend(contexts)
+    told = np.clip(optimizer._scaled_params(optimizer.params), 0.0, 1.0)
+    for context, row in zip(optimizer._scaled_contexts(contexts), chosen, strict=True):
+        nearest = np.argsort(((optimizer._scaled_contexts(optimizer.contexts) - context) ** 2).sum(1))[:4]
+        index = [i for i in nearest if np.array_equal(optimizer.params[i], row)]
+        assert index  # a told θ of N(s)
+        mean = optimizer.model.predict(np.hstack([np.tile(context, (4, 1)), told[nearest]]))[0]
+        assert mean[list(nearest).index(index[0])] == mean.max()
+    everyone = dataclasses.replace(optimizer.config, recommend_over="observed")
+    optimizer.config = everyone
+    assert not np.array_equal(optimizer.recommend(contexts), chosen)  # R2 reaches farther contexts' θ
+    default_k = _trained(recommend_over="neighbours")
+    observed = _trained(recommend_over="observed")
+    assert default_k.recommend(contexts).tobytes() == observed.recommend(contexts).tobytes()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(("share", "count"), [(1.0 / 3.0, 7), (0.5, 10)])
 def test_recommend_lies_in_the_box_of_the_best_episodes_near_each_context(share, count):
@@ -349,7 +372,7 @@ def test_the_first_asks_draw_the_initial_design_inside_the_box():
         (
             {"recommend_over": "best"},
             ValueError,
-            r"recommend_over: expected one of \('trust_region', 'observed'\), got 'best'",
+            r"recommend_over: expected one of \('trust_region', 'observed', 'neighbours'\), got 'best'",
         ),
     ],
 )

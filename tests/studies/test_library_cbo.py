@@ -109,8 +109,9 @@ def test_the_recommendation_beats_the_start_and_holds_the_posterior_means_best(r
         assert means[0] >= means[1:].max()  # R1 never ends below G(s)'s best θ
 
 
-def test_the_observed_rule_returns_told_parameters(column: str) -> None:
-    observed = driven(_class(column), batches=3, recommend_over="observed")
+@pytest.mark.parametrize("rule", ["observed", "neighbours"])
+def test_the_told_parameter_rules_return_told_parameters(column: str, rule: str) -> None:
+    observed = driven(_class(column), batches=3, recommend_over=rule)
     rows = observed.recommend(np.array([[0.0], [0.4]]))
     assert all(any(np.array_equal(row, told) for told in observed.params) for row in rows)
 

@@ -2,7 +2,7 @@
 ``study.py``, ``report.py``), ``compare.py`` (regret after a fixed episode budget), ``gp_backends.py`` (the
 GP's cost against scikit-learn's), ``active_contexts.py`` (active context choice against uniform draws),
 ``reach.py`` (what the low-dimensional kicks can reach at all), ``strong_kicks.py`` (the v1 kicks'
-columns), ``recommenders.py`` (c-bo's two recommendation rules on the same runs), ``acquisition_choices.py``
+columns), ``recommenders.py`` (c-bo's recommendation rules on the same runs), ``acquisition_choices.py``
 (both acquisitions' choices from the same model), ``refit_data.py`` (c-bo's refit default of 2026-11-30
 beside the study's runs) and ``botorch_cbo.py`` (the study's BoTorch column)."""
 
@@ -66,16 +66,26 @@ def column_replay_main(
     job: Callable[[tuple[str, str, int, int]], dict[str, Any]],
     render: Callable[[Path], str],
     argv: list[str] | None = None,
+    unpinned_flag: bool = False,
 ) -> None:
     """The command line of a replay of the study's c-bo columns: ``--tasks`` (default ``tasks``),
     ``--methods`` (default ``c-bo``), ``--budget`` (500) and :func:`parse_runs_arguments`' options; runs
-    ``job((task, method, seed, budget))`` for each and writes the results (:func:`run_and_write`)."""
+    ``job((task, method, seed, budget))`` for each and writes the results (:func:`run_and_write`). With
+    ``unpinned_flag`` it takes ``--unpinned`` too, and the job gets it: ``(task, method, seed, budget,
+    unpinned)``."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--tasks", nargs="+", default=list(tasks), help="study task names")
     parser.add_argument("--methods", nargs="+", default=["c-bo"], help="the study's c-bo columns")
     parser.add_argument("--budget", type=int, default=500)
+    if unpinned_flag:
+        parser.add_argument(
+            "--unpinned", action="store_true", help="the columns without the study's c-bo refit pin"
+        )
     args = parse_runs_arguments(parser, argv, 10, render)
     if args is None:
         return
-    jobs = [(t, m, s, args.budget) for t in args.tasks for m in args.methods for s in range(args.seeds)]
+    extra = (args.unpinned,) if unpinned_flag else ()
+    jobs = [
+        (t, m, s, args.budget, *extra) for t in args.tasks for m in args.methods for s in range(args.seeds)
+    ]
     run_and_write(job, jobs, args.workers, args.out, render)

@@ -3,6 +3,7 @@ optional context selector, or an optimiser class outside the registry (:attr:`Me
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from dataclasses import dataclass
 from typing import Any
@@ -10,7 +11,7 @@ from typing import Any
 from benchmarks.study_options import C3_PIN, CBO_FIT_PIN
 from creps_gym.optimizers import make_optimizer
 
-__all__ = ["METHODS", "Method", "method_by_name"]
+__all__ = ["METHODS", "Method", "method_by_name", "unpinned"]
 
 
 @dataclass(frozen=True)
@@ -100,3 +101,10 @@ def method_by_name(name: str) -> Method:
         if method.name == name:
             return method
     raise ValueError(f"method: expected one of {[m.name for m in METHODS]}, got {name!r}")
+
+
+def unpinned(method: Method) -> Method:
+    """The c-bo column ``method`` without :data:`~benchmarks.study_options.CBO_FIT_PIN`: c-bo's defaults."""
+    if method.optimizer != "c-bo" or not set(CBO_FIT_PIN) <= set(method.options):
+        raise ValueError(f"method: expected a c-bo column pinned to {CBO_FIT_PIN}, got {method.name!r}")
+    return dataclasses.replace(method, options=tuple(p for p in method.options if p not in CBO_FIT_PIN))

@@ -30,9 +30,10 @@ from typing import Any
 import numpy as np
 
 from benchmarks.low_budget import column_replay_main
-from benchmarks.low_budget.columns import method_by_name
+from benchmarks.low_budget.columns import method_by_name, unpinned
 from benchmarks.low_budget.report import median_range
 from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
+from benchmarks.study_options import CBO_FIT_PIN
 
 RULES = ("trust_region", "observed", "neighbours")
 RUNS = Path(__file__).resolve().parent / "runs"
@@ -48,13 +49,18 @@ def recommend_with(optimizer: Any, rule: str, contexts: np.ndarray) -> np.ndarra
         optimizer.config = config
 
 
-def one_run(task_name: str, method_name: str, seed: int, budget: int) -> dict[str, Any]:
-    """The study's run of ``method_name`` (a c-bo column without a selector) on ``task_name``; at each of
-    its budgets, each rule's metric and falls (None off the kicks) on the test contexts."""
+def one_run(
+    task_name: str, method_name: str, seed: int, budget: int, unpinned_column: bool = False
+) -> dict[str, Any]:
+    """The study's run of ``method_name`` (a c-bo column without a selector) on ``task_name``, or with
+    ``unpinned_column`` the same run with c-bo's own defaults instead of the study's refit pin
+    (:func:`~benchmarks.low_budget.columns.unpinned`); at each of its budgets, each rule's metric and falls
+    (None off the kicks) on the test contexts."""
     method = method_by_name(method_name)
     if method.optimizer != "c-bo":
         raise ValueError(f"method: expected a c-bo column, got {method_name!r} ({method.optimizer})")
-    run = start_run(LowBudgetSpec(task_name, method_name, seed, budget))  # the study's run
+    spec = LowBudgetSpec(task_name, method_name, seed, budget)
+    run = start_run(spec, unpinned(method) if unpinned_column else None)  # None: the study's column
     values: dict[str, list[float]] = {rule: [] for rule in RULES}
     falls: dict[str, list[int | None]] = {rule: [] for rule in RULES}
     for target in run.spec.budgets:
@@ -64,8 +70,8 @@ def one_run(task_name: str, method_name: str, seed: int, budget: int) -> dict[st
             value, info = policy_evaluation(run.task, run.model, run.test, params)  # one evaluation for all
             values[rule].append(value)
             falls[rule].append(int(np.sum(info["fell"])) if "fell" in info else None)
-    spec = run.spec
-    document = {"task": task_name, "method": method_name, "seed": seed, "budgets": list(spec.budgets)}
+    document = {"task": task_name, "method": method_name, "seed": seed, "budgets": list(run.spec.budgets)}
+    document |= {"unpinned": True} if unpinned_column else {}
     return {**document, "key": spec.key, "values": values, "falls": falls, "test_contexts": len(run.test)}
 
 
@@ -79,13 +85,15 @@ def committed_run(key: str, runs: Path = RUNS) -> dict[str, Any] | None:
 
 def check_against_study(run: dict[str, Any], runs: Path = RUNS) -> bool | None:
     """Whether the run's ``trust_region`` values equal the study's committed run of the same task, column,
-    seed and batch bit for bit at every budget both record (None: the study has no document of it)."""
+    seed and batch bit for bit at every budget both record (an unpinned run: at those where both have
+    fitted on the same episodes, up to the pin's ``fit_points``) (None: the study has no document of it)."""
     study = committed_run(run["key"], runs)
     if study is None:
         return None
     recorded = dict(zip(study["budgets"], study["values"], strict=True))
     own = dict(zip(run["budgets"], run["values"]["trust_region"], strict=True))
-    common = sorted(set(recorded) & set(own))
+    shared = dict(CBO_FIT_PIN)["fit_points"] if run.get("unpinned") else max(own)
+    common = sorted(b for b in set(recorded) & set(own) if b <= shared)
     return bool(common) and all(recorded[b] == own[b] for b in common)
 
 
@@ -137,30 +145,47 @@ def summary(runs: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def _agreement(runs: list[dict[str, Any]]) -> str:
+    """The sentence on how many runs agree with the study's (:func:`check_against_study`); for runs of
+    ``--unpinned``, what they are and at which budgets they must agree."""
+    checked = [check_against_study(run) for run in runs]
+    agree = f"{sum(c is True for c in checked)} of {sum(c is not None for c in checked)}"
+    if not any(run.get("unpinned") for run in runs):
+        return (
+            f"The `trust_region` values equal the study's committed runs bit for bit in {agree} runs that "
+            "the study has."
+        )
+    points = dict(CBO_FIT_PIN)["fit_points"]
+    return (
+        "The runs are c-bo's defaults (`--unpinned`), not the study's c-bo columns: a refit sees every "
+        f"episode where the study's saw the {points} most recent (`CBO_FIT_PIN`, "
+        "`benchmarks/study_options.py`). Their `trust_region` values equal the study's committed runs bit "
+        f"for bit at the budgets up to {points} episodes, where both have fitted on the same episodes, in "
+        f"{agree} runs that the study has."
+    )
+
+
 def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text())
     command = " ".join(["python -m benchmarks.low_budget.recommenders", *document["command"][1:]])
-    checked = [check_against_study(run) for run in document["runs"]]
-    agree = f"{sum(c is True for c in checked)} of {sum(c is not None for c in checked)}"
     text = (
         f"{summary(document['runs'])}\n\nThe metric is the study's: the mean regret on a function and the "
         "kick precision's mean error in m (lower is better), the kick flexibility's mean distance in m "
-        "(higher is better). The `trust_region` values "
-        f"equal the study's committed runs bit for bit in {agree} runs that the study has.\n\n"
+        f"(higher is better). {_agreement(document['runs'])}\n\n"
         f"Command: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
     )
     path.with_suffix(".md").write_text(text)
     return text
 
 
-def _job(args: tuple[str, str, int, int]) -> dict[str, Any]:
+def _job(args: tuple[str, str, int, int, bool]) -> dict[str, Any]:
     return one_run(*args)
 
 
 def main(argv: list[str] | None = None) -> None:
     tasks = ["KickFlexibilityLowDim-v1", "KickPrecisionLowDim-v1"]  # the default tasks
-    column_replay_main(__doc__.splitlines()[0], tasks, _job, render, argv)
+    column_replay_main(__doc__.splitlines()[0], tasks, _job, render, argv, unpinned_flag=True)
 
 
 if __name__ == "__main__":

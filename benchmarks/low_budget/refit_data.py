@@ -32,14 +32,13 @@ from pathlib import Path
 if not __package__:  # run by path: the repository root first on sys.path, as `python -m` puts it
     sys.path[0] = str(Path(__file__).resolve().parents[2])
 
-import dataclasses
 import json
 from typing import Any
 
 import numpy as np
 
 from benchmarks.low_budget import column_replay_main
-from benchmarks.low_budget.columns import Method, method_by_name
+from benchmarks.low_budget.columns import method_by_name, unpinned
 from benchmarks.low_budget.recommenders import RUNS, committed_run
 from benchmarks.low_budget.report import median_range
 from benchmarks.low_budget.study import (
@@ -51,17 +50,10 @@ from benchmarks.low_budget.study import (
 )
 from benchmarks.study_options import CBO_FIT_PIN
 
-__all__ = ["main", "render", "study_document", "summary", "unpinned", "worse_later"]
+__all__ = ["main", "render", "study_document", "summary", "worse_later"]
 
 #: Budgets at which both have seen the same data: no refit has seen more than the pin's ``fit_points``.
 SHARED_BUDGETS = tuple(b for b in BUDGETS if b <= dict(CBO_FIT_PIN)["fit_points"])
-
-
-def unpinned(method: Method) -> Method:
-    """The c-bo column ``method`` without :data:`~benchmarks.study_options.CBO_FIT_PIN`: c-bo's defaults."""
-    if method.optimizer != "c-bo" or not set(CBO_FIT_PIN) <= set(method.options):
-        raise ValueError(f"method: expected a c-bo column pinned to {CBO_FIT_PIN}, got {method.name!r}")
-    return dataclasses.replace(method, options=tuple(p for p in method.options if p not in CBO_FIT_PIN))
 
 
 def study_document(

@@ -49,6 +49,29 @@ def test_a_run_needs_a_c_bo_column_and_leaves_the_optimisers_rule_as_it_was():
     assert all((optimizer.params == row).all(axis=1).any() for row in observed)
 
 
+def test_an_unpinned_run_must_agree_with_the_study_only_where_both_fitted_on_the_same_episodes(tmp_path):
+    """c-bo's defaults and the study's pin (the 256 most recent episodes) see the same data up to 256
+    episodes: an ``unpinned`` run agrees if its values at 50, 100 and 200 are the study's, whatever they are
+    at 300 and 500; a pinned run must agree at every budget. The table says which it is."""
+    study = json.loads((recommenders.RUNS / "Rosenbrock-p2-z1-c-bo-s0-b500-n4.json").read_text())
+    values = [*study["values"][:3], study["values"][3] * 0.5, study["values"][4] * 0.5]
+    run = {"key": "Rosenbrock-p2-z1-c-bo-s0-b500-n4", "budgets": study["budgets"]}
+    run |= {"values": {"trust_region": values, "observed": values}, "falls": {"trust_region": [None] * 5}}
+    assert recommenders.check_against_study(run) is False
+    unpinned = {**run, "unpinned": True}
+    assert recommenders.check_against_study(unpinned) is True
+    changed = [values[0] * 2, *values[1:]]
+    assert recommenders.check_against_study({**unpinned, "values": {"trust_region": changed}}) is False
+    runs = [{**unpinned, "task": "Rosenbrock-p2-z1", "method": "c-bo", "seed": 0, "test_contexts": 100}]
+    runs[0]["falls"] = {"trust_region": [None] * 5, "observed": [None] * 5}
+    path = tmp_path / "unpinned.json"
+    path.write_text(json.dumps({"command": ["recommenders.py", "--unpinned"], "runs": runs}))
+    text = recommenders.render(path)
+    assert (
+        "c-bo's defaults (`--unpinned`)" in text and "up to 256 episodes" in text and "in 1 of 1 runs" in text
+    )
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path, name):
     copy = tmp_path / f"{name}.json"

@@ -12,7 +12,7 @@ import pytest
 from helpers import EXTRAS, skip_unless_stack_of
 
 from benchmarks.low_budget import refit_data
-from benchmarks.low_budget.columns import method_by_name
+from benchmarks.low_budget.columns import method_by_name, unpinned
 from benchmarks.study_options import CBO_FIT_PIN
 from creps_gym.optimizers import make_optimizer
 
@@ -22,16 +22,14 @@ NAMES = ["refit_data", "refit_data_functions", "refit_data_columns"]
 
 
 def test_unpinned_is_the_column_with_c_bos_own_defaults():
-    ucb = refit_data.unpinned(method_by_name("c-bo-ucb"))
+    ucb = unpinned(method_by_name("c-bo-ucb"))
     assert ucb.options == (("acquisition", "ucb"),) and ucb.name == "c-bo-ucb"
-    config = make_optimizer(
-        "c-bo", 2, 1, 0, **dict(refit_data.unpinned(method_by_name("c-bo")).options)
-    ).config
+    config = make_optimizer("c-bo", 2, 1, 0, **dict(unpinned(method_by_name("c-bo")).options)).config
     assert (config.fit_points, config.fit_subset) != tuple(dict(CBO_FIT_PIN).values())  # not the pin's
     with pytest.raises(ValueError, match=r"method: expected a c-bo column pinned to .* got 'creps'"):
-        refit_data.unpinned(method_by_name("creps"))
+        unpinned(method_by_name("creps"))
     with pytest.raises(ValueError, match="got 'c-bo-ucb'"):
-        refit_data.unpinned(ucb)  # no pin left to remove
+        unpinned(ucb)  # no pin left to remove
 
 
 @pytest.mark.slow
@@ -84,7 +82,7 @@ def test_every_committed_run_shares_the_study_runs_first_episodes_and_uses_the_n
     runs = document["runs"]
     for run in runs:
         study = refit_data.study_document(run["task"], run["method"], run["seed"], run["samples"])
-        column = dict(refit_data.unpinned(method_by_name(run["method"])).options)
+        column = dict(unpinned(method_by_name(run["method"])).options)
         assert run["options"] == column and run["values"][:3] == study["values"][:3]
     for cell in {(run["task"], run["method"]) for run in runs}:
         assert sorted(run["seed"] for run in runs if (run["task"], run["method"]) == cell) == list(range(10))

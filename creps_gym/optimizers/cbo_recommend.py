@@ -27,9 +27,11 @@ to s (the first on ties) and G(s) the best ⌈q k⌉ of them by return (q = ``tr
       θ̂(s) = θ_{i*},   i* = argmax_{i ∈ N(s)} μ(s, θ_i)                                            (R3)
 
   (the nearest context first on ties). R2 may pick a θ told at a distant context, which the GP rates at s
-  only by extrapolating across the context; R3 picks one that was tried near s. On the kick flexibility,
-  where R1's recommendations fall more often as the data grow, R3's fall least
-  (``benchmarks/low_budget/results/recommenders_v2.md``).
+  only by extrapolating across the context; R3 picks one that was tried near s. On the v2 flexibility kick
+  at 500 episodes it beats R1 on 8 of 10 seeds
+  (``benchmarks/low_budget/results/recommenders_v2_defaults.md``), and with the refits of c-bo's former
+  default, under which R1's kicks fell more often as the data grew, it held 6.04 m where R1 fell back to
+  5.25 m (``recommenders_v2.md``).
 """
 
 from __future__ import annotations

@@ -15,8 +15,15 @@ from helpers import EXTRAS, driven_cbo, skip_unless_stack_of
 from benchmarks.low_budget import recommenders
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
-#: The committed measurements: the v1 kicks, with the quadratic prior mean, the functions, the v2 kicks.
-NAMES = ["recommenders", "recommenders_quadratic", "recommenders_functions", "recommenders_v2"]
+#: The committed measurements: the v1 kicks, with the quadratic prior mean, the functions, the v2 kicks (on
+#: the study's runs and with c-bo's own defaults, ``--unpinned``).
+NAMES = [
+    "recommenders",
+    "recommenders_quadratic",
+    "recommenders_functions",
+    "recommenders_v2",
+    "recommenders_v2_defaults",
+]
 
 
 @pytest.mark.slow

@@ -63,7 +63,7 @@ def run_and_write(
 def column_replay_main(
     description: str,
     tasks: Sequence[str],
-    job: Callable[[tuple[str, str, int, int]], dict[str, Any]],
+    job: Callable[[tuple[Any, ...]], dict[str, Any]],
     render: Callable[[Path], str],
     argv: list[str] | None = None,
     unpinned_flag: bool = False,

@@ -6,7 +6,7 @@ own, written as a BoTorch user would write it. Why the study measures it is in
 
 :class:`BoTorchCBO` subclasses :class:`~benchmarks.low_budget.library_gp.LibraryGPCBO` and keeps everything
 that is not the model (the data, the scaling, the initial design, the transform, the refit schedule, the
-kriging believer, Eq. (R2) and R1's trust region, the distilled policy and the checkpoints' data).
+kriging believer, Eqs. (R2) and (R3) and R1's trust region, the distilled policy and the checkpoints' data).
 What BoTorch does:
 
 - **The model**: ``SingleTaskGP`` with BoTorch's defaults (an RBF kernel with one lengthscale per input and
@@ -18,8 +18,8 @@ What BoTorch does:
   ``FixedFeatureAcquisitionFunction``, maximised over θ's unit box by ``optimize_acqf`` (``raw_samples`` =
   ``candidates``, ``num_restarts`` = ``starts``).
 - **recommend** (R1): ``PosteriorMean`` with the context fixed, maximised by ``optimize_acqf`` over R1's
-  trust region B(s), and the best of G(s)'s θ kept if its posterior mean is larger; R2 is c-bo's own rule
-  on BoTorch's posterior mean.
+  trust region B(s), and the best of G(s)'s θ kept if its posterior mean is larger; R2 and R3 are c-bo's
+  own rules on BoTorch's posterior mean.
 
 Randomness: every torch call runs inside ``torch.random.fork_rng`` seeded from the optimiser's numpy
 Generator (asks) or from c-bo's fixed recommendation seed (``recommend``), so the same seed gives the same
@@ -244,8 +244,8 @@ class BoTorchCBO(LibraryGPCBO):
     # -- recommend -----------------------------------------------------------------------------------------
     def recommend(self, contexts: Any) -> Array:
         """Eq. (R1) with BoTorch's posterior mean and optimiser (see the module docstring), or c-bo's Eq.
-        (R2) on it: shape (n, p). Deterministic (a fixed seed): a context gives the same θ alone or in any
-        batch."""
+        (R2) or (R3) on it: shape (n, p). Deterministic (a fixed seed): a context gives the same θ alone or
+        in any batch."""
         if self.model is None or self.config.recommend_over != "trust_region":
             return super().recommend(contexts)
         contexts = self._check_contexts(contexts, "contexts")

@@ -11,7 +11,7 @@ from typing import Any
 from benchmarks.study_options import C3_PIN, CBO_FIT_PIN
 from creps_gym.optimizers import make_optimizer
 
-__all__ = ["METHODS", "Method", "method_by_name", "unpinned"]
+__all__ = ["METHODS", "PINNED_FIT_POINTS", "Method", "method_by_name", "unpinned"]
 
 
 @dataclass(frozen=True)
@@ -101,6 +101,11 @@ def method_by_name(name: str) -> Method:
         if method.name == name:
             return method
     raise ValueError(f"method: expected one of {[m.name for m in METHODS]}, got {name!r}")
+
+
+#: The episodes a pinned c-bo column's refit sees: up to this many, its runs and the same runs without the
+#: pin (:func:`unpinned`) have fitted on the same episodes, so they agree bit for bit.
+PINNED_FIT_POINTS = dict(CBO_FIT_PIN)["fit_points"]
 
 
 def unpinned(method: Method) -> Method:

@@ -13,6 +13,13 @@ one JSON document with provenance and a Markdown table next to it (``--render-on
 
     OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.recommenders \\
         --out benchmarks/low_budget/results/recommenders.json
+
+``--unpinned`` runs each column with c-bo's own defaults instead of the study's refit pin
+(:func:`~benchmarks.low_budget.columns.unpinned`): the same runs until the first refit past the pin's 256
+episodes, so their values must agree with the study's only up to there.
+
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.low_budget.recommenders --unpinned --workers 2 \\
+        --out benchmarks/low_budget/results/recommenders_defaults.json
 """
 
 from __future__ import annotations
@@ -30,10 +37,9 @@ from typing import Any
 import numpy as np
 
 from benchmarks.low_budget import column_replay_main
-from benchmarks.low_budget.columns import method_by_name, unpinned
+from benchmarks.low_budget.columns import PINNED_FIT_POINTS, method_by_name, unpinned
 from benchmarks.low_budget.report import median_range
 from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
-from benchmarks.study_options import CBO_FIT_PIN
 
 RULES = ("trust_region", "observed", "neighbours")
 RUNS = Path(__file__).resolve().parent / "runs"
@@ -92,7 +98,7 @@ def check_against_study(run: dict[str, Any], runs: Path = RUNS) -> bool | None:
         return None
     recorded = dict(zip(study["budgets"], study["values"], strict=True))
     own = dict(zip(run["budgets"], run["values"]["trust_region"], strict=True))
-    shared = dict(CBO_FIT_PIN)["fit_points"] if run.get("unpinned") else max(own)
+    shared = PINNED_FIT_POINTS if run.get("unpinned") else max(own)
     common = sorted(b for b in set(recorded) & set(own) if b <= shared)
     return bool(common) and all(recorded[b] == own[b] for b in common)
 
@@ -100,7 +106,7 @@ def check_against_study(run: dict[str, Any], runs: Path = RUNS) -> bool | None:
 def _rules(runs: list[dict[str, Any]]) -> list[str]:
     """The rules the runs measured, in :data:`RULES`' order (a document written before ``neighbours``
     existed has the first two)."""
-    return [rule for rule in RULES if rule in runs[0]["values"]]
+    return [rule for rule in RULES if not runs or rule in runs[0]["values"]]
 
 
 def _header(rules: list[str]) -> list[str]:
@@ -155,7 +161,7 @@ def _agreement(runs: list[dict[str, Any]]) -> str:
             f"The `trust_region` values equal the study's committed runs bit for bit in {agree} runs that "
             "the study has."
         )
-    points = dict(CBO_FIT_PIN)["fit_points"]
+    points = PINNED_FIT_POINTS
     return (
         "The runs are c-bo's defaults (`--unpinned`), not the study's c-bo columns: a refit sees every "
         f"episode where the study's saw the {points} most recent (`CBO_FIT_PIN`, "

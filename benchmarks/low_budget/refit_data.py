@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.low_budget import column_replay_main
-from benchmarks.low_budget.columns import method_by_name, unpinned
+from benchmarks.low_budget.columns import PINNED_FIT_POINTS, method_by_name, unpinned
 from benchmarks.low_budget.recommenders import RUNS, committed_run
 from benchmarks.low_budget.report import median_range
 from benchmarks.low_budget.study import (
@@ -48,12 +48,11 @@ from benchmarks.low_budget.study import (
     one_run,
     task_by_name,
 )
-from benchmarks.study_options import CBO_FIT_PIN
 
 __all__ = ["main", "render", "study_document", "summary", "worse_later"]
 
 #: Budgets at which both have seen the same data: no refit has seen more than the pin's ``fit_points``.
-SHARED_BUDGETS = tuple(b for b in BUDGETS if b <= dict(CBO_FIT_PIN)["fit_points"])
+SHARED_BUDGETS = tuple(b for b in BUDGETS if b <= PINNED_FIT_POINTS)
 
 
 def study_document(

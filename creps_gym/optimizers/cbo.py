@@ -290,7 +290,9 @@ class ContextualBO(ContextualOptimizer):
         scaled, model = self._scaled_contexts(contexts), self.model
         if (rule := self.config.recommend_over) != "trust_region":  # the told θ themselves: R2 or R3
             told = np.clip(self._scaled_params(self.params), 0.0, 1.0)
-            chosen = [told_choice(model, row, told, self._observed_units(row)[1], rule) for row in scaled]
+            every = np.arange(told.shape[0])  # R2: every episode; R3: N(s)
+            among = [self._observed_units(row)[1] if rule == "neighbours" else every for row in scaled]
+            chosen = [told_choice(model, row, told, rows) for row, rows in zip(scaled, among, strict=True)]
             return np.clip(self.params[chosen], *self.config.param_box)
         if self._recommend_candidates is None:
             fixed = np.random.default_rng(RECOMMEND_SEED).uniform(

@@ -20,13 +20,14 @@ to s (the first on ties) and G(s) the best ⌈q k⌉ of them by return (q = ``tr
   (the first on ties). It never recommends a θ that no episode has tried, so it cannot combine the
   good episodes' coordinates into one the data has never seen: on the kick flexibility, where a fall ends
   the return at zero, R1's maximiser moves onto the fall cliff as the data grow
-  (``benchmarks/low_budget/recommenders.py`` measures both rules on the same runs). The price: between the
+  (``benchmarks/low_budget/recommenders.py`` measures the rules on the same runs). The price: between the
   told θ it cannot interpolate, so on smooth tasks R1 ends closer to the optimum.
 * ``"neighbours"``: the told θ of the episodes N(s) with the largest posterior mean at s,
 
       θ̂(s) = θ_{i*},   i* = argmax_{i ∈ N(s)} μ(s, θ_i)                                            (R3)
 
-  (the nearest context first on ties). R2 may pick a θ told at a distant context, which the GP rates at s
+  (the first in N(s)'s order on ties: the nearest context, or the first told while N(s) holds every
+  episode, as in R2). R2 may pick a θ told at a distant context, which the GP rates at s
   only by extrapolating across the context; R3 picks one that was tried near s. On the v2 flexibility kick
   at 500 episodes it beats R1 on 8 of 10 seeds
   (``benchmarks/low_budget/results/recommenders_v2_defaults.md``), and with the refits of c-bo's former
@@ -101,10 +102,8 @@ def observed_maximiser(model: GPModel, context: Array, units: Array) -> int:
     return int(np.argmax(mean))
 
 
-def told_choice(model: GPModel, context: Array, told: Array, nearest: Array, rule: str) -> int:
-    """Eq. (R2) (``rule="observed"``) or Eq. (R3) (``"neighbours"``) at one scaled context (z,): the index
-    of the chosen episode among the told θ ``told`` (N, p, in the unit box); ``nearest`` (k,) indexes
-    N(s), the nearest context first."""
-    if rule == "observed":
-        return observed_maximiser(model, context, told)  # R2
-    return int(nearest[observed_maximiser(model, context, told[nearest])])  # R3
+def told_choice(model: GPModel, context: Array, told: Array, among: Array) -> int:
+    """Eq. (R3) at one scaled context (z,), or Eq. (R2) with ``among`` every index: the index of the chosen
+    episode among the told θ ``told`` (N, p, in the unit box); ``among`` (k,) indexes the episodes to choose
+    from (N(s), the nearest context first), the first of them on ties."""
+    return int(among[observed_maximiser(model, context, told[among])])  # R2 / R3

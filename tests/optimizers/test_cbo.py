@@ -295,6 +295,13 @@ def test_recommend_over_neighbours_returns_the_best_told_theta_of_the_nearest_co
         assert index  # a told θ of N(s)
         mean = optimizer.model.predict(np.hstack([np.tile(context, (4, 1)), told[nearest]]))[0]
         assert mean[list(nearest).index(index[0])] == mean.max()
+    assert (
+        optimizer.state_dict()["rng"]
+        == _trained(recommend_over="neighbours", candidates=16).state_dict()["rng"]
+    )
+    restored = ContextualBO.from_state_dict(copy.deepcopy(optimizer.state_dict()))
+    assert restored.config.recommend_over == "neighbours"
+    assert restored.recommend(contexts).tobytes() == chosen.tobytes()
     everyone = dataclasses.replace(optimizer.config, recommend_over="observed")
     optimizer.config = everyone
     assert not np.array_equal(optimizer.recommend(contexts), chosen)  # R2 reaches farther contexts' θ

@@ -111,9 +111,15 @@ def test_the_recommendation_beats_the_start_and_holds_the_posterior_means_best(r
 
 @pytest.mark.parametrize("rule", ["observed", "neighbours"])
 def test_the_told_parameter_rules_return_told_parameters(column: str, rule: str) -> None:
-    observed = driven(_class(column), batches=3, recommend_over=rule)
-    rows = observed.recommend(np.array([[0.0], [0.4]]))
-    assert all(any(np.array_equal(row, told) for told in observed.params) for row in rows)
+    """R2 returns told θ; R3 (with k = candidates // 4 = 4 of the 12 episodes) the told θ of one of the 4
+    episodes with the nearest contexts."""
+    observed = driven(_class(column), batches=3, recommend_over=rule, candidates=16)
+    contexts = np.array([[0.0], [0.4]])
+    rows = observed.recommend(contexts)
+    for context, row in zip(contexts, rows, strict=True):
+        nearest = np.argsort(np.abs(observed.contexts[:, 0] - context[0]))[:4]
+        among = nearest if rule == "neighbours" else slice(None)
+        assert (observed.params[among] == row).all(axis=-1).any()
 
 
 def test_mes_asks_inside_the_box_and_the_batch_spreads(column: str) -> None:

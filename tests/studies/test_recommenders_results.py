@@ -13,6 +13,8 @@ import pytest
 from helpers import EXTRAS, driven_cbo, skip_unless_stack_of
 
 from benchmarks.low_budget import recommenders
+from benchmarks.low_budget.columns import method_by_name
+from benchmarks.study_options import CBO_FIT_PIN
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 #: The committed measurements: the v1 kicks, with the quadratic prior mean, the functions, the v2 kicks (on
@@ -77,6 +79,29 @@ def test_an_unpinned_run_must_agree_with_the_study_only_where_both_fitted_on_the
     assert (
         "c-bo's defaults (`--unpinned`)" in text and "up to 256 episodes" in text and "in 1 of 1 runs" in text
     )
+
+
+def test_unpinned_reaches_the_run_as_the_column_with_c_bos_own_defaults(monkeypatch, tmp_path):
+    """``--unpinned`` gives each job a fifth element, True, and ``one_run`` then starts the study's run
+    with the column's options less the pin (without it: the study's column, None)."""
+    jobs = []
+    monkeypatch.setattr("benchmarks.low_budget.run_and_write", lambda job, todo, *rest: jobs.extend(todo))
+    out = ["--out", str(tmp_path / "r.json"), "--seeds", "1", "--tasks", "Sphere-p2-z1"]
+    recommenders.main(["--unpinned", *out])
+    recommenders.main(out)
+    assert jobs == [("Sphere-p2-z1", "c-bo", 0, 500, True), ("Sphere-p2-z1", "c-bo", 0, 500, False)]
+    started = []
+
+    def spy(spec, method=None):
+        started.append(method)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(recommenders, "start_run", spy)
+    for flag in (True, False):
+        with pytest.raises(RuntimeError, match="stop here"):
+            recommenders.one_run("Sphere-p2-z1", "c-bo", 0, 50, flag)
+    assert started[1] is None and dict(started[0].options) == {}
+    assert dict(method_by_name("c-bo").options) == dict(CBO_FIT_PIN)
 
 
 @pytest.mark.parametrize("name", NAMES)

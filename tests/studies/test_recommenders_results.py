@@ -18,13 +18,14 @@ from benchmarks.study_options import CBO_FIT_PIN
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 #: The committed measurements: the v1 kicks, with the quadratic prior mean, the functions, the v2 kicks (on
-#: the study's runs and with c-bo's own defaults, ``--unpinned``).
+#: the study's runs), and the v2 and v1 kicks with c-bo's own defaults (``--unpinned``).
 NAMES = [
     "recommenders",
     "recommenders_quadratic",
     "recommenders_functions",
     "recommenders_v2",
     "recommenders_v2_defaults",
+    "recommenders_defaults",
 ]
 
 

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.kick.figures import mean_curve
 from benchmarks.kick.spread import COLUMNS, KEYS, mean_and_std
 from benchmarks.kick.study import (
     EVAL_EVERY,
@@ -195,9 +196,7 @@ def episodes_to_stay(curve: list[Any], target: float, samples: int, lower_is_bet
 
 def _mean_curve(curves: list[Any]) -> list[list[float]]:
     """``[[iteration, mean over trials], ...]`` at the iterations where every trial was evaluated."""
-    by_iteration = [dict((int(i), v) for i, v in curve) for curve in curves]
-    common = set.intersection(*(set(c) for c in by_iteration)) if by_iteration else set()
-    return [[i, float(np.mean([c[i] for c in by_iteration]))] for i in sorted(common)]
+    return [[i, value] for i, value in mean_curve(curves).items()]
 
 
 def _episodes(episodes: int | None) -> str:

@@ -39,7 +39,7 @@ from typing import Any
 if not __package__:  # run by path: the repository root first on sys.path (see benchmarks/__init__.py)
     sys.path[0] = str(Path(__file__).resolve().parents[1])
 
-from benchmarks.study_options import options_dict
+from benchmarks.study_options import RESTART_PIN, options_dict
 from benchmarks.study_tools import RunSpec, load_document, store_document
 
 __all__ = [
@@ -58,8 +58,8 @@ __all__ = [
 HERE = Path(__file__).resolve().parent
 METHODS = ("c-cma-es", "c-cma-es-surrogate")
 #: The former defaults of the changed options, as options (``"squared"``: the former None with the squared
-#: baseline loss, the only one the touched runs used).
-FORMER = (("keep_best", False), ("restart_baseline_loss", "squared"))
+#: baseline loss, the only one the touched runs used): ``study_options.RESTART_PIN``, which the studies use.
+FORMER = RESTART_PIN
 STUDIES = ("functions", "ccmaes", "scaling", "contextual_bbo")
 #: The column label of a contextual BBO document pinned to the former defaults.
 FORMER_LABEL = "former-restarts"

@@ -18,6 +18,7 @@ __all__ = [
     "C3_PIN",
     "CBO_FIT_PIN",
     "OWN_OPTIONS",
+    "RESTART_PIN",
     "canonical_options",
     "config_fields",
     "options_dict",
@@ -39,6 +40,11 @@ C3_METHODS = ("c-cma-es", "c-cma-es-surrogate")
 #: (``benchmarks/pin_defaults.py`` wrote the pin into them); ``benchmarks/low_budget/refit_data.py``
 #: measures the new default beside them.
 CBO_FIT_PIN = (("fit_points", 256), ("fit_subset", "recent"))
+#: The ``c-cma-es`` restart defaults before issue 33: ``keep_best=False`` and ``restart_baseline_loss=
+#: "squared"`` (the former None for the squared baseline every such run used). The committed runs that
+#: restarted were computed with them; ``benchmarks/restart_defaults.py`` pins them (its ``FORMER``) and
+#: the studies' "former restarts" columns run with them.
+RESTART_PIN = (("keep_best", False), ("restart_baseline_loss", "squared"))
 
 
 def options_dict(options: Any) -> dict[str, Any]:

@@ -30,9 +30,8 @@ matplotlib.use("Agg")
 from benchmarks.contextual_bbo.problems import PROBLEMS
 from benchmarks.contextual_bbo.protocol import ProtocolSpec, run_protocol
 from benchmarks.contextual_bbo.report import load_published, plot_curves, render
-from benchmarks.restart_defaults import FORMER
 from benchmarks.study_cli import add_mode_options, add_output_options, command_flags
-from benchmarks.study_options import C3_PIN, pin_c3
+from benchmarks.study_options import C3_PIN, RESTART_PIN, pin_c3
 from benchmarks.study_report import invocation_timing, timing_text, update_block
 from benchmarks.study_runner import run_all
 from benchmarks.study_tools import write_text
@@ -62,7 +61,7 @@ C1D_DSIGMA3 = (*C1D, ("d_sigma", 3.0))
 #: ``ridge_centre="old"``, the default since issue 45; ``c-cma-es-c3r`` is that default, with its restarts).
 COLUMNS: tuple[tuple[str, str, tuple[tuple[str, object], ...]], ...] = (
     ("c-cma-es", "c-cma-es", C3_PIN),
-    ("c-cma-es-former-restarts", "c-cma-es", pin_c3("c-cma-es", FORMER)),
+    ("c-cma-es-former-restarts", "c-cma-es", pin_c3("c-cma-es", RESTART_PIN)),
     ("c-cma-es-no-restarts", "c-cma-es", (("restarts", 0), *C3_PIN)),
     ("c-cma-es-c3r", "c-cma-es", (("ridge_centre", "old"),)),
     ("c-cma-es-surrogate", "c-cma-es-surrogate", C3_PIN),

@@ -32,8 +32,7 @@ if not __package__:
 import numpy as np
 
 from benchmarks.provenance import provenance_text
-from benchmarks.restart_defaults import FORMER
-from benchmarks.study_options import pin_c3
+from benchmarks.study_options import RESTART_PIN, pin_c3
 from benchmarks.study_report import update_block
 from benchmarks.study_runner import run_all
 from benchmarks.study_tools import RunSpec
@@ -47,7 +46,7 @@ CELLS = (("DifferentPowers", 3), ("Rosenbrock", 3), ("ShiftedRotatedElliptic", 3
 Cells = tuple[tuple[str, int], ...]
 VARIANTS: tuple[tuple[str, tuple[tuple[str, Any], ...], float | None, Cells | None], ...] = (
     ("default", (), None, None),
-    ("former restarts", FORMER, None, None),
+    ("former restarts", RESTART_PIN, None, None),
     ("default, runner's divergence rule", (), 1000.0, (("DifferentPowers", 3),)),
 )
 SEEDS, BUDGET, DIM, SAMPLES = 20, 200_000, 15, 50

@@ -34,7 +34,6 @@ import matplotlib.lines  # noqa: E402
 matplotlib.use("Agg")
 
 from benchmarks.baselines import BASELINES  # noqa: E402
-from benchmarks.restart_defaults import FORMER  # noqa: E402
 from benchmarks.scaling.report import (  # noqa: E402
     EXTRA_LABELS,
     METHOD,
@@ -45,7 +44,7 @@ from benchmarks.scaling.report import (  # noqa: E402
     plot_heatmaps,
 )
 from benchmarks.study_cli import add_mode_options, add_output_options, resolve_outputs  # noqa: E402
-from benchmarks.study_options import pin_c3  # noqa: E402
+from benchmarks.study_options import RESTART_PIN, pin_c3  # noqa: E402
 from benchmarks.study_report import timing_text  # noqa: E402
 from benchmarks.study_runner import available_methods, run_study  # noqa: E402
 from benchmarks.study_tools import DIVERGENCE_GROWTH, RunSpec  # noqa: E402
@@ -186,7 +185,7 @@ def make_specs(args: argparse.Namespace) -> list[RunSpec]:
 #: best, squared restarts; ``benchmarks/restart_defaults.py``), with which its 440 committed runs were
 #: computed (see the README's "C-CMA-ES's restart options"), and the mean fit's ridge towards 0 (C3, the
 #: default until issue 45; benchmarks/study_options.py).
-PINNED = {"c-cma-es": pin_c3("c-cma-es", FORMER)}
+PINNED = {"c-cma-es": pin_c3("c-cma-es", RESTART_PIN)}
 
 
 def _options(args: argparse.Namespace, method: str) -> tuple[float, bool]:

@@ -1,4 +1,4 @@
-"""What ``creps-gym list`` prints: aligned tables of the envs and optimisers, and "did you mean" hints.
+"""What ``creps-gym list`` prints: aligned tables of the envs and optimisers.
 
 Each env row shows the context space, the parameter space and the initial search distribution the runner
 starts from by default (:func:`initial_hint`: the env-declared initial distribution).
@@ -11,7 +11,6 @@ from the live registry by ``python -m creps_gym.listing --write`` (:func:`live_t
 
 from __future__ import annotations
 
-import difflib
 import importlib.util
 import re
 import sys
@@ -25,7 +24,6 @@ __all__ = [
     "available_env_rows",
     "box_text",
     "deprecated_ids",
-    "did_you_mean",
     "env_listing",
     "env_rows",
     "initial_hint",
@@ -181,19 +179,6 @@ def env_listing(rows: Sequence[Sequence[str]], width: int = LIST_WIDTH) -> str:
             description = f"(deprecated: use {deprecated[env_id]}) {description}"
         lines += textwrap.wrap(description, width, initial_indent=" " * 6, subsequent_indent=" " * 6)
     return "\n".join(lines)
-
-
-def did_you_mean(text: str, choices: Sequence[str]) -> str:
-    """`` (did you mean 'x'?)`` for the closest choices (ids also match without their namespace), or ''."""
-    by_key = {choice: choice for choice in choices}
-    by_key.update({choice.split("/", 1)[1]: choice for choice in choices if "/" in choice})
-    matches = difflib.get_close_matches(text, list(by_key), n=3, cutoff=0.6)
-    if not matches and "/" in text:
-        matches = difflib.get_close_matches(text.split("/", 1)[1], list(by_key), n=3, cutoff=0.6)
-    suggestions = list(dict.fromkeys(by_key[m] for m in matches))
-    if not suggestions:
-        return ""
-    return " (did you mean " + " or ".join(repr(s) for s in suggestions) + "?)"
 
 
 # -- the static table of the fast commands --------------------------------------------------------------

@@ -120,7 +120,7 @@ def _unknown_env(env_id: str) -> str:
     import textwrap
 
     import creps_gym
-    from creps_gym.listing import did_you_mean
+    from creps_gym._suggest import did_you_mean
 
     ids = creps_gym.registered_ids()
     listing = textwrap.fill(", ".join(ids), width=100, initial_indent="  ", subsequent_indent="  ")
@@ -131,7 +131,7 @@ def _unknown_env(env_id: str) -> str:
 
 
 def _registered_optimizer(name: str) -> None:
-    from creps_gym.listing import did_you_mean
+    from creps_gym._suggest import did_you_mean
     from creps_gym.optimizers.registry import optimizer_names
 
     names = optimizer_names()
@@ -214,7 +214,7 @@ def selector_name(text: str) -> str:
     from creps_gym.selectors.registry import selector_names
 
     if text not in selector_names():
-        from creps_gym.listing import did_you_mean
+        from creps_gym._suggest import did_you_mean
 
         names = selector_names()
         raise argparse.ArgumentTypeError(f"expected one of {names}, got {text!r}{did_you_mean(text, names)}")

@@ -62,7 +62,7 @@ def make_env(env_id: str, kwargs: dict[str, Any]) -> gym.Env:
 def _unknown_keyword(env_id: str, key: str, refused_by: str) -> str:
     """The message for an unknown env keyword: the keywords of the creator and of the class (in its
     MRO) that refused ``key``, with the closest ones."""
-    from creps_gym.listing import did_you_mean
+    from creps_gym._suggest import did_you_mean
 
     creator = gym.spec(env_id).entry_point
     if isinstance(creator, str):

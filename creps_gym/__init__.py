@@ -94,13 +94,13 @@ class _RegisterAfterGymnasium(importlib.abc.MetaPathFinder, importlib.abc.Loader
 
 
 def _register_ids(gymnasium: Any) -> None:
-    """Register every ``creps_gym/`` id from :data:`creps_gym.cli.table.REGISTRATIONS`.
+    """Register every ``creps_gym/`` id from :data:`creps_gym._table.REGISTRATIONS`.
 
     The table holds only data (entry points are ``"module:Class"`` strings), so this imports no env
     module: Gymnasium may be imported for the first time *by* one of them (``import creps_gym.wrappers``),
     which registering through :mod:`creps_gym.envs` would import again half-initialised.
     """
-    from creps_gym.cli import table
+    from creps_gym import _table as table
 
     for entry in getattr(table, "REGISTRATIONS", ()):  # none while `listing --write` makes the table
         if entry["id"] not in gymnasium.registry:

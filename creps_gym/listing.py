@@ -4,7 +4,7 @@ Each env row shows the context space, the parameter space and the initial search
 starts from by default (:func:`initial_hint`: the env-declared initial distribution).
 
 ``creps-gym list`` and ``creps-gym --help`` must start fast, so they print a static table,
-:mod:`creps_gym.cli.table`, instead of importing numpy, Gymnasium and every env. That module is generated
+:mod:`creps_gym._table`, instead of importing numpy, Gymnasium and every env. That module is generated
 from the live registry by ``python -m creps_gym.listing --write`` (:func:`live_table`), and
 ``python -m creps_gym.listing --check`` (run by ``tests/cli/test_cli_startup.py``) fails when they disagree.
 """
@@ -212,7 +212,7 @@ def _needed_modules(env_ids: Sequence[str]) -> dict[str, list[str]]:
 
 
 def live_table() -> dict[str, Any]:
-    """What :mod:`creps_gym.cli.table` holds, computed from the registries and ``RunConfig``."""
+    """What :mod:`creps_gym._table` holds, computed from the registries and ``RunConfig``."""
     from dataclasses import MISSING, fields
 
     import creps_gym
@@ -234,7 +234,7 @@ def live_table() -> dict[str, Any]:
 
 
 def table_source(data: dict[str, Any]) -> str:
-    """The Python source of :mod:`creps_gym.cli.table` holding ``data``."""
+    """The Python source of :mod:`creps_gym._table` holding ``data``."""
     import pprint
 
     lines = [
@@ -270,14 +270,14 @@ def available_env_rows(envs: Sequence[Sequence[Any]]) -> list[list[str]]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m creps_gym.listing --write | --check``: regenerate or check :mod:`creps_gym.cli.table`."""
+    """``python -m creps_gym.listing --write | --check``: regenerate or check :mod:`creps_gym._table`."""
     from pathlib import Path
 
     args = list(sys.argv[1:] if argv is None else argv)
     if args not in (["--write"], ["--check"]):
         print("usage: python -m creps_gym.listing --write | --check", file=sys.stderr)
         return 2
-    path = Path(__file__).with_name("cli") / "table.py"
+    path = Path(__file__).with_name("_table.py")
     source = table_source(live_table())
     if args == ["--write"]:
         path.write_text(source, encoding="utf-8")

@@ -1,6 +1,6 @@
 """The ``creps-gym`` commands that read: ``list`` (envs and optimisers), ``plot`` and ``export`` (results).
 
-``list`` prints the static table :mod:`creps_gym.cli.table` (generated from the registries), so it starts
+``list`` prints the static table :mod:`creps_gym._table` (generated from the registries), so it starts
 without importing numpy, Gymnasium or any env. ``plot`` and ``export`` group their run directories by
 setting (:mod:`creps_gym.runner.results.groups`: everything fingerprinted but the seed) and take ``--label``.
 """
@@ -61,7 +61,7 @@ def _runs_command(commands: Any, name: str, summary: str, description: str, outp
 
 
 def _cmd_list(_: argparse.Namespace) -> int:
-    from creps_gym.cli.table import ENVS, OPTIMIZERS
+    from creps_gym._table import ENVS, OPTIMIZERS
     from creps_gym.listing import OPTIMIZER_HEADER, available_env_rows, env_listing, table_wrapped
 
     print("Environments: id, context space, parameter space θ, initial search distribution by default")

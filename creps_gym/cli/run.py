@@ -1,6 +1,6 @@
 """``creps-gym run`` and ``creps-gym resume``: their arguments and handlers.
 
-Building the parsers imports neither numpy nor Gymnasium: the defaults come from :mod:`creps_gym.cli.table`.
+Building the parsers imports neither numpy nor Gymnasium: the defaults come from :mod:`creps_gym._table`.
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ def add_progress(parser: argparse.ArgumentParser) -> None:
 def _add_run(commands: Any) -> None:
     """The ``run`` command's parser: the required flags, where episodes run, budgets and evaluation, the
     search's start and the optimiser's, env's and selector's options."""
-    from creps_gym.cli.table import RUN_DEFAULTS  # RunConfig's (listing checks they agree): no numpy
+    from creps_gym._table import RUN_DEFAULTS  # RunConfig's (listing checks they agree): no numpy
 
     run = commands.add_parser(
         "run", help="run an optimiser on an env", description="Run an optimiser on an env."
@@ -92,7 +92,7 @@ def _add_required(run: argparse.ArgumentParser) -> None:
 
 
 def _add_backend(run: argparse.ArgumentParser, defaults: dict[str, Any]) -> None:
-    from creps_gym.cli.table import BACKENDS, VECTOR_MODES
+    from creps_gym._table import BACKENDS, VECTOR_MODES
 
     run.add_argument(
         "--backend",

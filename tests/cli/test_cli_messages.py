@@ -260,7 +260,7 @@ def test_a_deprecated_id_warns_once_without_terminal_escapes(tmp_path, capsys):
 
 
 def test_list_fits_in_100_columns_and_marks_the_deprecated_ids(capsys):
-    from creps_gym.cli.table import ENVS
+    from creps_gym._table import ENVS
     from creps_gym.listing import deprecated_ids
 
     assert main(["list"]) == 0

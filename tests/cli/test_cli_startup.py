@@ -64,6 +64,7 @@ def test_importing_the_package_registers_the_ids_when_gymnasium_is_imported_in_e
         import creps_gym
         assert "gymnasium" not in sys.modules and "numpy" not in sys.modules
         import gymnasium as gym
+        assert not [name for name in sys.modules if name.startswith("creps_gym.cli")]  # the table alone
         assert gym.make("creps_gym/Sphere-v0").unwrapped.spec.id == "creps_gym/Sphere-v0"
         assert gym.__loader__.__class__.__name__ == "SourceFileLoader"  # Gymnasium's own loader is kept
         print(len(creps_gym.registered_ids()), creps_gym.envs.__name__, creps_gym.__version__ != "")
@@ -86,7 +87,7 @@ def test_the_static_table_agrees_with_the_registries_and_run_config():
 
 
 def test_list_prints_every_row_of_the_static_table():
-    from creps_gym.cli.table import ENVS, OPTIMIZERS
+    from creps_gym._table import ENVS, OPTIMIZERS
 
     listed = subprocess.run(cli_command("list"), capture_output=True, text=True, timeout=60)
     ids = [line.split()[0] for line in listed.stdout.splitlines() if re.match(r"  \S", line)]
@@ -101,7 +102,7 @@ def test_list_prints_every_row_of_the_static_table():
 def test_a_subpackage_that_imports_gymnasium_first_registers_every_id(module):
     """Gymnasium imported for the first time *by* a creps_gym module: the ids are registered from the
     static table (before: registering imported that module's package again, half-initialised)."""
-    from creps_gym.cli.table import REGISTRATIONS
+    from creps_gym._table import REGISTRATIONS
 
     result = _python(
         f"""

@@ -284,8 +284,8 @@ def train_run(
     """
     folder.mkdir(parents=True, exist_ok=True)
     stem = folder / f"{spec.name}-trial{trial}"
-    result_path, ckpt, history_path = (stem.with_suffix(s) for s in (".json", ".npz", ".history.json"))
-    selector, selector_path = context_selector(spec, env), stem.with_suffix(".selector.json")
+    result_path, ckpt, history_path, selector_path = _run_files(stem)
+    selector = context_selector(spec, env)
     setting = {
         "env": ENV_IDS[spec.experiment],
         "contexts": spec.contexts,
@@ -353,6 +353,12 @@ def _result_document(
     }
 
 
+def _run_files(stem: Path) -> tuple[Path, ...]:
+    """The files of the run ``stem``: its result ``.json``, checkpoint ``.npz``, ``.history.json`` and
+    ``.selector.json``."""
+    return tuple(stem.with_suffix(suffix) for suffix in (".json", ".npz", ".history.json", ".selector.json"))
+
+
 def _resume(
     spec: RunSpec,
     env: OffsetParams,
@@ -366,8 +372,7 @@ def _resume(
     checkpoint ``<stem>.npz`` when its history is of ``setting`` (and, with a selector, the selector has a
     state at that iteration), else new (``fresh``: always). The history is written before the checkpoint,
     so after a kill it may run ahead of it: it is cut back to the checkpoint's iteration."""
-    ckpt, history_path = stem.with_suffix(".npz"), stem.with_suffix(".history.json")
-    selector_path = stem.with_suffix(".selector.json")
+    _, ckpt, history_path, selector_path = _run_files(stem)
     history = read_json(history_path) if ckpt.exists() and not fresh else {}
     states = read_json(selector_path) if selector and selector_path.exists() else {}
     opt = load_run(stem) if stored_setting(history, spec.experiment) == setting else None

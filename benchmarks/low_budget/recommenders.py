@@ -73,7 +73,7 @@ def one_run(
         run_until(run, target)
         for rule in RULES:
             params = recommend_with(run.optimizer, rule, run.test)
-            value, info = policy_evaluation(run.task, run.model, run.test, params)  # one evaluation for all
+            value, info = policy_evaluation(run.task, run.model, run.test, params)  # the metric and the falls
             values[rule].append(value)
             falls[rule].append(int(np.sum(info["fell"])) if "fell" in info else None)
     document = {"task": task_name, "method": method_name, "seed": seed, "budgets": list(run.spec.budgets)}

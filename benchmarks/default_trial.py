@@ -50,6 +50,7 @@ from typing import Any
 if not __package__:  # run by path: the repository root first on sys.path (see benchmarks/__init__.py)
     sys.path[0] = str(Path(__file__).resolve().parents[1])
 
+from benchmarks.study_cli import json_object
 from benchmarks.study_options import options_dict
 from benchmarks.study_tools import RunSpec, load_document, store_document, write_text
 
@@ -260,25 +261,15 @@ def _render(study: str, options: dict[str, Any], base: dict[str, Any], out: Path
     return out / f"{study}-{label}.md"
 
 
-def _options(text: str) -> dict[str, Any]:
-    try:
-        options = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r} ({error})") from None
-    if not isinstance(options, dict):
-        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}")
-    return options
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Run or render a trial of a candidate default."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("action", choices=("run", "render"))
     parser.add_argument("--study", required=True, choices=STUDIES)
-    parser.add_argument("--options", required=True, type=_options, help="the candidate's options (JSON)")
+    parser.add_argument("--options", required=True, type=json_object, help="the candidate's options (JSON)")
     parser.add_argument(
         "--base-options",
-        type=_options,
+        type=json_object,
         default={},
         help="the column the trial is measured against, by its options (JSON; {}: the default column)",
     )

@@ -9,11 +9,32 @@ quote as the command that computed them.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
-__all__ = ["NEUTRAL_OPTIONS", "add_mode_options", "add_output_options", "command_flags", "resolve_outputs"]
+__all__ = [
+    "NEUTRAL_OPTIONS",
+    "add_mode_options",
+    "add_output_options",
+    "command_flags",
+    "json_object",
+    "resolve_outputs",
+]
+
+
+def json_object(text: str) -> dict[str, Any]:
+    """An argument that holds a JSON object (options), else ``argparse.ArgumentTypeError``, which argparse
+    reports naming the argument."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r} ({error})") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}")
+    return value
 
 
 def add_mode_options(parser: argparse.ArgumentParser, quick: str, full: str) -> None:

@@ -16,6 +16,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from benchmarks.study_cli import json_object
+
 
 def add_output_arguments(parser: argparse.ArgumentParser) -> None:
     """``--out`` (the results' JSON) and ``--render-only`` (redraw the table from it), as both take."""
@@ -71,8 +73,8 @@ def column_replay_main(
     """The command line of a replay of the study's c-bo columns: ``--tasks`` (default ``tasks``),
     ``--methods`` (default ``c-bo``), ``--budget`` (500) and :func:`parse_runs_arguments`' options; runs
     ``job((task, method, seed, budget))`` for each and writes the results (:func:`run_and_write`). With
-    ``unpinned_flag`` it takes ``--unpinned`` too, and the job gets it: ``(task, method, seed, budget,
-    unpinned)``."""
+    ``unpinned_flag`` it takes ``--unpinned`` and ``--options`` (a JSON object of c-bo options the columns
+    add) too, and the job gets them: ``(task, method, seed, budget, unpinned, options)``."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--tasks", nargs="+", default=list(tasks), help="study task names")
     parser.add_argument("--methods", nargs="+", default=["c-bo"], help="the study's c-bo columns")
@@ -81,10 +83,13 @@ def column_replay_main(
         parser.add_argument(
             "--unpinned", action="store_true", help="the columns without the study's c-bo refit pin"
         )
+        parser.add_argument(
+            "--options", type=json_object, default={}, help="c-bo options the columns add (a JSON object)"
+        )
     args = parse_runs_arguments(parser, argv, 10, render)
     if args is None:
         return
-    extra = (args.unpinned,) if unpinned_flag else ()
+    extra = (args.unpinned, args.options) if unpinned_flag else ()
     jobs = [
         (t, m, s, args.budget, *extra) for t in args.tasks for m in args.methods for s in range(args.seeds)
     ]

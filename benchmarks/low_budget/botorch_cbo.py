@@ -42,8 +42,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from benchmarks.low_budget.library_gp import SEEDS, LibraryGPCBO, LibraryGPConfig
-from creps_gym.optimizers.cbo import RECOMMEND_SEED
 from creps_gym.optimizers.cbo_config import CBOConfig, _bounded_int
+from creps_gym.optimizers.cbo_recommend import RECOMMEND_SEED
 
 __all__ = ["BoTorchCBO", "BoTorchConfig", "TorchGP"]
 

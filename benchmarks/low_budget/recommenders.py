@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.low_budget import column_replay_main
-from benchmarks.low_budget.columns import PINNED_FIT_POINTS, method_by_name, unpinned
+from benchmarks.low_budget.columns import PINNED_FIT_POINTS, Method, method_by_name, unpinned
 from benchmarks.low_budget.report import median_range
 from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
 
@@ -55,18 +55,35 @@ def recommend_with(optimizer: Any, rule: str, contexts: np.ndarray) -> np.ndarra
         optimizer.config = config
 
 
-def one_run(
-    task_name: str, method_name: str, seed: int, budget: int, unpinned_column: bool = False
-) -> dict[str, Any]:
-    """The study's run of ``method_name`` (a c-bo column without a selector) on ``task_name``, or with
-    ``unpinned_column`` the same run with c-bo's own defaults instead of the study's refit pin
-    (:func:`~benchmarks.low_budget.columns.unpinned`); at each of its budgets, each rule's metric and falls
-    (None off the kicks) on the test contexts."""
+def _column(method_name: str, unpinned_column: bool, options: dict[str, Any]) -> Method | None:
+    """The c-bo column ``method_name``, unpinned and with ``options`` added where asked; None: the study's
+    column as it is."""
     method = method_by_name(method_name)
     if method.optimizer != "c-bo":
         raise ValueError(f"method: expected a c-bo column, got {method_name!r} ({method.optimizer})")
+    if not (unpinned_column or options):
+        return None
+    method = unpinned(method) if unpinned_column else method
+    added = tuple((name, tuple(v) if isinstance(v, list) else v) for name, v in sorted(options.items()))
+    return dataclasses.replace(method, options=method.options + added)
+
+
+def one_run(
+    task_name: str,
+    method_name: str,
+    seed: int,
+    budget: int,
+    unpinned_column: bool = False,
+    options: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The study's run of ``method_name`` (a c-bo column without a selector) on ``task_name``, or with
+    ``unpinned_column`` the same run with c-bo's own defaults instead of the study's refit pin
+    (:func:`~benchmarks.low_budget.columns.unpinned`), and with ``options`` (c-bo options the column adds,
+    e.g. ``{"symmetric_contexts": [1]}``); at each of its budgets, each rule's metric and falls (None off
+    the kicks) on the test contexts."""
+    options = dict(options or {})
     spec = LowBudgetSpec(task_name, method_name, seed, budget)
-    run = start_run(spec, unpinned(method) if unpinned_column else None)  # None: the study's column
+    run = start_run(spec, _column(method_name, unpinned_column, options))  # None: the study's column
     values: dict[str, list[float]] = {rule: [] for rule in RULES}
     falls: dict[str, list[int | None]] = {rule: [] for rule in RULES}
     for target in run.spec.budgets:
@@ -78,6 +95,7 @@ def one_run(
             falls[rule].append(int(np.sum(info["fell"])) if "fell" in info else None)
     document = {"task": task_name, "method": method_name, "seed": seed, "budgets": list(run.spec.budgets)}
     document |= {"unpinned": True} if unpinned_column else {}
+    document |= {"options": options} if options else {}
     return {**document, "key": spec.key, "values": values, "falls": falls, "test_contexts": len(run.test)}
 
 
@@ -92,9 +110,10 @@ def committed_run(key: str, runs: Path = RUNS) -> dict[str, Any] | None:
 def check_against_study(run: dict[str, Any], runs: Path = RUNS) -> bool | None:
     """Whether the run's ``trust_region`` values equal the study's committed run of the same task, column,
     seed and batch bit for bit at every budget both record (an unpinned run: at those where both have
-    fitted on the same episodes, up to the pin's ``fit_points``) (None: the study has no document of it)."""
+    fitted on the same episodes, up to the pin's ``fit_points``) (None: the study has no document of it,
+    or the run added options to the column)."""
     study = committed_run(run["key"], runs)
-    if study is None:
+    if study is None or run.get("options"):
         return None
     recorded = dict(zip(study["budgets"], study["values"], strict=True))
     own = dict(zip(run["budgets"], run["values"]["trust_region"], strict=True))
@@ -153,7 +172,14 @@ def summary(runs: list[dict[str, Any]]) -> str:
 
 def _agreement(runs: list[dict[str, Any]]) -> str:
     """The sentence on how many runs agree with the study's (:func:`check_against_study`); for runs of
-    ``--unpinned``, what they are and at which budgets they must agree."""
+    ``--unpinned``, what they are and at which budgets they must agree; for runs of ``--options``, which."""
+    added = sorted({json.dumps(run["options"], sort_keys=True) for run in runs if run.get("options")})
+    if added:
+        pinned = "c-bo's defaults (`--unpinned`)" if runs[0].get("unpinned") else "the study's c-bo columns"
+        return (
+            f"The runs are {pinned} with the options {', '.join(f'`{a}`' for a in added)} added "
+            "(`--options`): not the study's runs, so none is compared with them."
+        )
     checked = [check_against_study(run) for run in runs]
     agree = f"{sum(c is True for c in checked)} of {sum(c is not None for c in checked)}"
     if not any(run.get("unpinned") for run in runs):
@@ -185,7 +211,7 @@ def render(path: Path) -> str:
     return text
 
 
-def _job(args: tuple[str, str, int, int, bool]) -> dict[str, Any]:
+def _job(args: tuple[str, str, int, int, bool, dict[str, Any]]) -> dict[str, Any]:
     return one_run(*args)
 
 

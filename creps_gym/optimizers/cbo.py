@@ -44,8 +44,14 @@ from numpy.typing import NDArray
 from creps_gym._validation import check_positive_int
 from creps_gym.optimizers.acquisitions import Acquisition, AcquisitionMaximiser, gumbel_max_values, mes, ucb
 from creps_gym.optimizers.base import ContextualOptimizer
-from creps_gym.optimizers.cbo_config import MAX_COUNTS, CBOConfig
-from creps_gym.optimizers.cbo_recommend import told_choice, trust_region, trust_region_maximiser
+from creps_gym.optimizers.cbo_config import MAX_COUNTS, CBOConfig, fold_contexts
+from creps_gym.optimizers.cbo_recommend import (
+    RECOMMEND_SEED,
+    distillation_grid,
+    told_choice,
+    trust_region,
+    trust_region_maximiser,
+)
 from creps_gym.optimizers.cbo_state import GPData, check_kernel_memory, read_gp_data
 from creps_gym.optimizers.ccmaes_config import options_doc, options_signature
 from creps_gym.optimizers.context_value import context_information, utility_thetas
@@ -64,8 +70,6 @@ from creps_gym.optimizers.policy_file import Policy
 __all__ = ["ContextualBO"]
 
 Array = NDArray[np.float64]
-#: Seed of the fixed candidate set of ``recommend`` (which must not draw from the optimiser's Generator).
-RECOMMEND_SEED = 20_150_901
 #: ``stop()`` looks at the model only from this many told episodes on, and reports ``no_signal`` when the
 #: fitted noise holds at least this share of the model's variance.
 STOP_EPISODES, NOISE_SHARE = 50, 0.95
@@ -115,7 +119,7 @@ class ContextualBO(ContextualOptimizer):
         p, z = self.n_params, self.n_context_dims
         self.contexts, self.params, self.returns = np.zeros((0, z)), np.zeros((0, p)), np.zeros(0)
         self.log_hyper = default_start(p + z)
-        box = config.context_box
+        box = config.scaling_box
         self.context_scale = (np.zeros(z), np.ones(z)) if box is None else (box[0].copy(), box[1].copy())
         self.fitted_at = 0
         self.model: GPModel | None = None
@@ -127,8 +131,9 @@ class ContextualBO(ContextualOptimizer):
 
     # -- scaling -------------------------------------------------------------------------------------------
     def _scaled_contexts(self, contexts: Array, scale: tuple[Array, Array] | None = None) -> Array:
+        """The GP's contexts: folded (``symmetric_contexts``), then scaled by the context scaling."""
         low, high = self.context_scale if scale is None else scale
-        return (contexts - low) / (high - low)
+        return (fold_contexts(contexts, self.config.symmetric_contexts) - low) / (high - low)
 
     def _scaled_params(self, params: Array) -> Array:
         low, high = self.config.param_box
@@ -139,11 +144,12 @@ class ContextualBO(ContextualOptimizer):
         return low + unit * (high - low)
 
     def _fit_scale(self, contexts: Array) -> tuple[Array, Array]:
-        """The context box of the GP's scaling: the configured one, else the told contexts' range (a
-        degenerate dimension gets a width of 1 around its value)."""
+        """The context box of the GP's scaling: the configured one, else the told (folded) contexts' range
+        (a degenerate dimension gets a width of 1 around its value)."""
         if self.config.context_box is not None:
             return self.context_scale
-        low, high = contexts.min(axis=0), contexts.max(axis=0)
+        folded = fold_contexts(contexts, self.config.symmetric_contexts)
+        low, high = folded.min(axis=0), folded.max(axis=0)
         flat = high - low <= 1e-12 * np.maximum(np.abs(low), 1.0)
         return np.where(flat, low - 0.5, low), np.where(flat, low + 0.5, high)
 
@@ -340,11 +346,7 @@ class ContextualBO(ContextualOptimizer):
             low, high = self.contexts.min(axis=0), self.contexts.max(axis=0)
         else:
             return np.zeros((1, z))
-        if self.config.grid_points**z > MAX_COUNTS["grid"]:  # many context dimensions: a fixed random design
-            unit = np.random.default_rng(RECOMMEND_SEED).uniform(size=(MAX_COUNTS["grid"] // 10, z))
-            return low + unit * (high - low)
-        axes = [np.linspace(a, b, self.config.grid_points) for a, b in zip(low, high, strict=True)]
-        return np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1).reshape(-1, z)
+        return distillation_grid(low, high, self.config.grid_points, MAX_COUNTS["grid"])
 
     def mean_policy(self) -> Policy:
         """``recommend`` distilled into a :class:`Policy` with the ``mean_features`` map: the least-squares

@@ -21,7 +21,7 @@ from creps_gym.optimizers.features import FeatureMap, make_features
 from creps_gym.optimizers.gp_model import FIT_SUBSETS
 from creps_gym.optimizers.policies import initial_covariance
 
-__all__ = ["CBOConfig"]
+__all__ = ["CBOConfig", "fold_box", "fold_contexts"]
 
 Array = NDArray[np.float64]
 #: Largest counts the options may set (each sizes arrays or loops of every ask, refit or distillation; a
@@ -74,6 +74,42 @@ def _bounded_int(value: Any, name: str, minimum: int, maximum: int) -> int:
     return number
 
 
+def fold_contexts(contexts: Array, dims: tuple[int, ...]) -> Array:
+    """The contexts (n, z) with the dimensions ``dims`` replaced by their absolute values: the GP's
+    contexts under ``symmetric_contexts`` (a copy; the contexts themselves when ``dims`` is empty)."""
+    if not dims:
+        return contexts
+    folded = np.array(contexts, dtype=np.float64)
+    folded[:, list(dims)] = np.abs(folded[:, list(dims)])
+    return folded
+
+
+def fold_box(low: Array, high: Array, dims: tuple[int, ...]) -> tuple[Array, Array]:
+    """The box (low (z,), high (z,)) that :func:`fold_contexts` maps [low, high] onto: in a folded dimension
+    [0, max(|low|, |high|)] when the box holds 0, else [min(|low|, |high|), max(|low|, |high|)]."""
+    low, high = low.copy(), high.copy()
+    for i in dims:
+        ends = sorted((abs(low[i]), abs(high[i])))
+        low[i], high[i] = (0.0 if low[i] < 0.0 < high[i] else ends[0]), ends[1]
+    return low, high
+
+
+def _context_dims(value: Any, z: int) -> tuple[int, ...]:
+    """``symmetric_contexts`` as a sorted tuple of distinct integers in [0, z)."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+        raise TypeError(f"symmetric_contexts: expected a sequence of integers, got {type(value).__name__}")
+    dims = []
+    for item in value:
+        if isinstance(item, bool) or not isinstance(item, (int, np.integer)):
+            raise TypeError(f"symmetric_contexts: expected integers, got {item!r}")
+        if not 0 <= int(item) < z:
+            raise ValueError(f"symmetric_contexts: expected context dimensions in [0, {z}), got {int(item)}")
+        dims.append(int(item))
+    if len(set(dims)) != len(dims):
+        raise ValueError(f"symmetric_contexts: expected distinct dimensions, got {dims}")
+    return tuple(sorted(dims))
+
+
 @dataclass(frozen=True, eq=False)
 class CBOConfig:
     """Configuration of :class:`ContextualBO`; validates itself on construction.
@@ -119,6 +155,12 @@ class CBOConfig:
         parameters fail badly, as a kick that falls; it cannot interpolate between the told θ);
         ``"neighbours"``: the same over the ``candidates // 4`` episodes with the nearest contexts (Eq. R3:
         a θ tried near s, not one the GP rates at s by extrapolating from a distant context).
+    symmetric_contexts : sequence of int   the context dimensions i in which the return is even about 0,
+        R(…, s_i, …; θ) = R(…, −s_i, …; θ) for every θ: the GP models the return over |s_i| (its scaling,
+        neighbours and selector utilities too), so the episodes on both sides inform each other. Task
+        knowledge the user gives, e.g. ``(1,)`` on a kick that the env mirrors for a ball on the other side
+        (``creps_gym/KickFlexibility*``: y_B); on a task where it is false the model is wrong. Default ():
+        none.
     refit_growth : float            the hyperparameters are refitted (maximum likelihood, G3) when the data
         have grown by this factor since the last fit (a geometric schedule); in between only the Cholesky
         factor is updated, so asks stay fast.
@@ -157,6 +199,7 @@ class CBOConfig:
     starts: int = 3
     trust_share: float | None = 1.0 / 3.0
     recommend_over: str = "trust_region"
+    symmetric_contexts: Any = ()
     refit_growth: float = 1.2
     hyper_restarts: int = 1
     fit_points: int = 1024
@@ -200,6 +243,7 @@ class CBOConfig:
         if self.trust_share is not None:
             set_(self, "trust_share", check_real_in_range(self.trust_share, "trust_share", 0.0, 1.0))
         set_(self, "seed", check_seed(self.seed))
+        set_(self, "symmetric_contexts", _context_dims(self.symmetric_contexts, z))
         mean = as_float_array(self.initial_mean, "initial_mean")
         if mean.ndim == 0:
             mean = np.full(p, float(mean))
@@ -220,6 +264,12 @@ class CBOConfig:
             _optional_box(self.context_low, self.context_high, ("context_low", "context_high"), z),
         )
         set_(self, "mean_map", make_features(self.mean_features, z, "mean_features"))
+
+    @property
+    def scaling_box(self) -> tuple[Array, Array] | None:
+        """The configured context box as the GP sees it (:func:`fold_box` of ``symmetric_contexts``)."""
+        box = self.context_box
+        return None if box is None else fold_box(box[0], box[1], self.symmetric_contexts)
 
     @property
     def n_initial(self) -> int:

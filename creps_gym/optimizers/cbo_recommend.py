@@ -46,10 +46,33 @@ from creps_gym.optimizers.acquisitions import AcquisitionMaximiser
 from creps_gym.optimizers.gp_model import GPModel
 from creps_gym.optimizers.gp_trend import with_trend_maximiser
 
-__all__ = ["RECOMMEND_RULES", "observed_maximiser", "told_choice", "trust_region", "trust_region_maximiser"]
+__all__ = [
+    "RECOMMEND_RULES",
+    "RECOMMEND_SEED",
+    "distillation_grid",
+    "observed_maximiser",
+    "told_choice",
+    "trust_region",
+    "trust_region_maximiser",
+]
 
 Array = NDArray[np.float64]
 RECOMMEND_RULES = ("trust_region", "observed", "neighbours")
+#: Seed of ``recommend``'s fixed candidates and of a random distillation design (neither may draw from the
+#: optimiser's Generator).
+RECOMMEND_SEED = 20_150_901
+
+
+def distillation_grid(low: Array, high: Array, points: int, limit: int) -> Array:
+    """The contexts ``mean_policy`` distils ``recommend`` on, shape (g, z): ``points`` per dimension of the
+    box [low, high] (z,); where that grid would exceed ``limit`` contexts, ``limit // 10`` uniform ones from
+    a fixed seed."""
+    z = low.shape[0]
+    if points**z > limit:  # many context dimensions: a fixed random design
+        unit = np.random.default_rng(RECOMMEND_SEED).uniform(size=(limit // 10, z))
+        return low + unit * (high - low)
+    axes = [np.linspace(a, b, points) for a, b in zip(low, high, strict=True)]
+    return np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1).reshape(-1, z)
 
 
 def trust_region(

@@ -82,15 +82,23 @@ def test_an_unpinned_run_must_agree_with_the_study_only_where_both_fitted_on_the
     )
 
 
-def test_unpinned_reaches_the_run_as_the_column_with_c_bos_own_defaults(monkeypatch, tmp_path):
-    """``--unpinned`` gives each job a fifth element, True, and ``one_run`` then starts the study's run
-    with the column's options less the pin (without it: the study's column, None)."""
+def test_unpinned_and_options_reach_the_run_as_the_column_they_describe(monkeypatch, tmp_path):
+    """``--unpinned`` and ``--options`` give each job a fifth and a sixth element, and ``one_run`` then
+    starts the study's run with the column's options less the pin, plus the added ones (with neither: the
+    study's column, None)."""
     jobs = []
     monkeypatch.setattr("benchmarks.low_budget.run_and_write", lambda job, todo, *rest: jobs.extend(todo))
     out = ["--out", str(tmp_path / "r.json"), "--seeds", "1", "--tasks", "Sphere-p2-z1"]
     recommenders.main(["--unpinned", *out])
     recommenders.main(out)
-    assert jobs == [("Sphere-p2-z1", "c-bo", 0, 500, True), ("Sphere-p2-z1", "c-bo", 0, 500, False)]
+    recommenders.main(["--options", '{"symmetric_contexts": [0]}', *out])
+    assert jobs == [
+        ("Sphere-p2-z1", "c-bo", 0, 500, True, {}),
+        ("Sphere-p2-z1", "c-bo", 0, 500, False, {}),
+        ("Sphere-p2-z1", "c-bo", 0, 500, False, {"symmetric_contexts": [0]}),
+    ]
+    with pytest.raises(SystemExit):
+        recommenders.main(["--options", "[1]", *out])
     started = []
 
     def spy(spec, method=None):
@@ -98,10 +106,11 @@ def test_unpinned_reaches_the_run_as_the_column_with_c_bos_own_defaults(monkeypa
         raise RuntimeError("stop here")
 
     monkeypatch.setattr(recommenders, "start_run", spy)
-    for flag in (True, False):
+    for flag, options in ((True, None), (False, None), (True, {"symmetric_contexts": [1]})):
         with pytest.raises(RuntimeError, match="stop here"):
-            recommenders.one_run("Sphere-p2-z1", "c-bo", 0, 50, flag)
+            recommenders.one_run("Sphere-p2-z1", "c-bo", 0, 50, flag, options)
     assert started[1] is None and dict(started[0].options) == {}
+    assert dict(started[2].options) == {"symmetric_contexts": (1,)}
     assert dict(method_by_name("c-bo").options) == dict(CBO_FIT_PIN)
 
 

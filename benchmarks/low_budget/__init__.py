@@ -71,7 +71,8 @@ def column_replay_main(
     unpinned_flag: bool = False,
 ) -> None:
     """The command line of a replay of the study's c-bo columns: ``--tasks`` (default ``tasks``),
-    ``--methods`` (default ``c-bo``), ``--budget`` (500) and :func:`parse_runs_arguments`' options; runs
+    ``--methods`` (default ``c-bo``), ``--budget`` (500), ``--first-seed`` (0: the study's seeds; held-out
+    ones from 10) and :func:`parse_runs_arguments`' options; runs
     ``job((task, method, seed, budget))`` for each and writes the results (:func:`run_and_write`). With
     ``unpinned_flag`` it takes ``--unpinned`` and ``--options`` (a JSON object of c-bo options the columns
     add) too, and the job gets them: ``(task, method, seed, budget, unpinned, options)``."""
@@ -79,6 +80,9 @@ def column_replay_main(
     parser.add_argument("--tasks", nargs="+", default=list(tasks), help="study task names")
     parser.add_argument("--methods", nargs="+", default=["c-bo"], help="the study's c-bo columns")
     parser.add_argument("--budget", type=int, default=500)
+    parser.add_argument(
+        "--first-seed", type=int, default=0, help="seeds first-seed, …, first-seed + seeds - 1 (default 0)"
+    )
     if unpinned_flag:
         parser.add_argument(
             "--unpinned", action="store_true", help="the columns without the study's c-bo refit pin"
@@ -91,6 +95,9 @@ def column_replay_main(
         return
     extra = (args.unpinned, args.options) if unpinned_flag else ()
     jobs = [
-        (t, m, s, args.budget, *extra) for t in args.tasks for m in args.methods for s in range(args.seeds)
+        (t, m, s, args.budget, *extra)
+        for t in args.tasks
+        for m in args.methods
+        for s in range(args.first_seed, args.first_seed + args.seeds)
     ]
     run_and_write(job, jobs, args.workers, args.out, render)

@@ -193,6 +193,20 @@ def test_mirroring_for_left_balls(flexibility):
     assert returns[0] == pytest.approx(right[0] ** 2 - right[1] ** 2)
 
 
+def test_the_flexibility_return_is_even_in_the_balls_sideways_position():
+    """What c-bo's ``symmetric_contexts=(1,)`` assumes of the flexibility kick (its docstring): for any θ
+    the ball at (x_B, y_B) and at (x_B, -y_B) give the same return (mirror-image kicks; to all digits on
+    x86-64 Linux), for kicks that stand, fall or miss alike."""
+    env = gym.make("creps_gym/KickFlexibilityLowDim-v2").unwrapped
+    rng = np.random.default_rng(4)
+    contexts = np.column_stack([rng.uniform(0.15, 0.3, 6), rng.uniform(0.01, 0.15, 6)])
+    params = rng.normal(0.0, 0.5, (6, 4))
+    right, info = env.evaluate(contexts * [1.0, -1.0], params)
+    left, _ = env.evaluate(contexts, params)
+    assert info["fell"].any() and not info["fell"].all()
+    np.testing.assert_allclose(left, right, rtol=0.0, atol=1e-6)
+
+
 def test_ball_only_roll_matches_full_simulation():
     """Phase 2 on the ball-only model agrees with simulating the full model to rest within 2 cm."""
     models = load_models()

@@ -83,19 +83,19 @@ def test_an_unpinned_run_must_agree_with_the_study_only_where_both_fitted_on_the
 
 
 def test_unpinned_and_options_reach_the_run_as_the_column_they_describe(monkeypatch, tmp_path):
-    """``--unpinned`` and ``--options`` give each job a fifth and a sixth element, and ``one_run`` then
-    starts the study's run with the column's options less the pin, plus the added ones (with neither: the
-    study's column, None)."""
+    """``--first-seed`` shifts the seeds; ``--unpinned`` and ``--options`` give each job a fifth and a sixth
+    element, and ``one_run`` then starts the study's run with the column's options less the pin, plus the
+    added ones (with neither: the study's column, None)."""
     jobs = []
     monkeypatch.setattr("benchmarks.low_budget.run_and_write", lambda job, todo, *rest: jobs.extend(todo))
     out = ["--out", str(tmp_path / "r.json"), "--seeds", "1", "--tasks", "Sphere-p2-z1"]
     recommenders.main(["--unpinned", *out])
     recommenders.main(out)
-    recommenders.main(["--options", '{"symmetric_contexts": [0]}', *out])
+    recommenders.main(["--options", '{"symmetric_contexts": [0]}', "--first-seed", "10", *out])
     assert jobs == [
         ("Sphere-p2-z1", "c-bo", 0, 500, True, {}),
         ("Sphere-p2-z1", "c-bo", 0, 500, False, {}),
-        ("Sphere-p2-z1", "c-bo", 0, 500, False, {"symmetric_contexts": [0]}),
+        ("Sphere-p2-z1", "c-bo", 10, 500, False, {"symmetric_contexts": [0]}),
     ]
     with pytest.raises(SystemExit):
         recommenders.main(["--options", "[1]", *out])

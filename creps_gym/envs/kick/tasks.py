@@ -152,7 +152,8 @@ class KickFlexibilityEnv(KickEnv):
     θ describes a right-leg kick. As in the paper ("mirror the joints"), for balls on the left
     (``y_B > 0``) the env swaps the right- and left-leg blocks of θ, so the left leg performs the
     mirror-image kick; ``info["mirrored"]`` says when. The legs' joint axes are mirror images, so a ball
-    at (x_B, y_B) and θ give the mirror image of the kick of the ball at (x_B, -y_B).""",
+    at (x_B, y_B) and θ give the mirror image of the kick of the ball at (x_B, -y_B), and the same return:
+    the return is even in y_B, which a model of it may use (c-bo's ``symmetric_contexts=(1,)``).""",
         """    ``Box([0.15, -0.15], [0.30, 0.15], (2,), float64)``: the ball position (x_B, y_B) in metres
     relative to the torso (x forward, y left), the paper's box; uniform by default. The reference kick
     reaches balls up to x_B = 0.20 m; how far a search from it reaches is measured per ball position by

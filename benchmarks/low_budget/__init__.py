@@ -46,10 +46,11 @@ def run_and_write(
     workers: int,
     out: Path,
     render: Callable[[Path], str],
+    extra: dict[str, Any] | None = None,
 ) -> None:
     """Run ``job`` on each of ``jobs`` in ``workers`` processes, print each result as a JSON line in the
-    jobs' order, write the document ``{"command", "runs", "provenance"}`` to ``out`` and print
-    ``render(out)``."""
+    jobs' order, write the document ``{"command", "runs", "provenance"}`` (and the entries of ``extra``) to
+    ``out`` and print ``render(out)``."""
     from benchmarks.provenance import provenance
 
     with ProcessPoolExecutor(workers) as pool:
@@ -57,7 +58,7 @@ def run_and_write(
         for result in pool.map(job, jobs):
             runs.append(result)
             print(json.dumps(result), flush=True)
-    document = {"command": sys.argv, "runs": runs, "provenance": provenance()}
+    document = {"command": sys.argv, "runs": runs, "provenance": provenance(), **(extra or {})}
     out.write_text(json.dumps(document, indent=1) + "\n")
     print(render(out))
 
@@ -75,7 +76,8 @@ def column_replay_main(
     ones from 10) and :func:`parse_runs_arguments`' options; runs
     ``job((task, method, seed, budget))`` for each and writes the results (:func:`run_and_write`). With
     ``unpinned_flag`` it takes ``--unpinned`` and ``--options`` (a JSON object of c-bo options the columns
-    add) too, and the job gets them: ``(task, method, seed, budget, unpinned, options)``."""
+    add) too, and the job gets them: ``(task, method, seed, budget, unpinned, options)``; and ``--against``,
+    another replay's results that the document names (``"against"``) for ``render`` to compare with."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--tasks", nargs="+", default=list(tasks), help="study task names")
     parser.add_argument("--methods", nargs="+", default=["c-bo"], help="the study's c-bo columns")
@@ -90,6 +92,9 @@ def column_replay_main(
         parser.add_argument(
             "--options", type=json_object, default={}, help="c-bo options the columns add (a JSON object)"
         )
+        parser.add_argument(
+            "--against", help="a replay's results (JSON, from the repository root) to compare seed by seed"
+        )
     args = parse_runs_arguments(parser, argv, 10, render)
     if args is None:
         return
@@ -100,4 +105,5 @@ def column_replay_main(
         for m in args.methods
         for s in range(args.first_seed, args.first_seed + args.seeds)
     ]
-    run_and_write(job, jobs, args.workers, args.out, render)
+    against = {"against": args.against} if unpinned_flag and args.against else {}
+    run_and_write(job, jobs, args.workers, args.out, render, against)

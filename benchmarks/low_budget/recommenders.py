@@ -32,6 +32,7 @@ if not __package__:  # run by path: the repository root first on sys.path, as `p
 
 import dataclasses
 import json
+import shlex
 from typing import Any
 
 import numpy as np
@@ -43,6 +44,7 @@ from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_un
 
 RULES = ("trust_region", "observed", "neighbours")
 RUNS = Path(__file__).resolve().parent / "runs"
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def recommend_with(optimizer: Any, rule: str, contexts: np.ndarray) -> np.ndarray:
@@ -197,14 +199,51 @@ def _agreement(runs: list[dict[str, Any]]) -> str:
     )
 
 
+def versus(runs: list[dict[str, Any]], baseline: list[dict[str, Any]]) -> str:
+    """A Markdown table per task, column, budget and rule: the median of ``runs`` and of ``baseline`` (another
+    replay's runs) over the seeds both have, and on how many of them ``runs`` is the better."""
+    lines = [
+        "| task | column | budget | rule | these runs: median | against: median | seeds where these are "
+        "better |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    by_key = {(r["task"], r["method"], r["seed"]): r for r in baseline}
+    for task, method in sorted({(r["task"], r["method"]) for r in runs}):
+        pairs = [(r, by_key[k]) for r in runs if (k := (task, method, r["seed"])) in by_key]
+        if not pairs:
+            continue
+        sign = -1.0 if task_by_name(task).lower_is_better else 1.0
+        rules = [rule for rule in _rules([r for r, _ in pairs]) if rule in pairs[0][1]["values"]]
+        for index, budget in enumerate(pairs[0][0]["budgets"]):
+            for rule in rules:
+                own = np.array([r["values"][rule][index] for r, _ in pairs])
+                other = np.array([b["values"][rule][index] for _, b in pairs])
+                better = int(np.sum(sign * (own - other) > 0))
+                cells = [f"{np.median(own):.3g}", f"{np.median(other):.3g}", f"{better} of {len(pairs)}"]
+                lines.append(f"| {task} | {method} | {budget} | {rule} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _against(document: dict[str, Any]) -> str:
+    """The paragraph comparing the runs with the replay the document names (``--against``), or ""."""
+    if not document.get("against"):
+        return ""
+    path = Path(document["against"])
+    baseline = json.loads((path if path.is_absolute() else ROOT / path).read_text())["runs"]
+    return (
+        f"Seed by seed against `{document['against']}` (the same tasks, columns and seeds):\n\n"
+        f"{versus(document['runs'], baseline)}\n\n"
+    )
+
+
 def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text())
-    command = " ".join(["python -m benchmarks.low_budget.recommenders", *document["command"][1:]])
+    command = "python -m benchmarks.low_budget.recommenders " + shlex.join(document["command"][1:])
     text = (
         f"{summary(document['runs'])}\n\nThe metric is the study's: the mean regret on a function and the "
         "kick precision's mean error in m (lower is better), the kick flexibility's mean distance in m "
-        f"(higher is better). {_agreement(document['runs'])}\n\n"
+        f"(higher is better). {_agreement(document['runs'])}\n\n{_against(document)}"
         f"Command: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
     )
     path.with_suffix(".md").write_text(text)

@@ -19,7 +19,7 @@ from benchmarks.study_options import CBO_FIT_PIN
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 #: The committed measurements: the v1 kicks, with the quadratic prior mean, the functions, the v2 kicks (on
 #: the study's runs), and the v2 and v1 kicks with c-bo's own defaults (``--unpinned``).
-NAMES = [
+STUDY_NAMES = [
     "recommenders",
     "recommenders_quadratic",
     "recommenders_functions",
@@ -27,6 +27,14 @@ NAMES = [
     "recommenders_v2_defaults",
     "recommenders_defaults",
 ]
+#: The flexibility kicks with ``symmetric_contexts=(1,)`` added (``--options``), each against the replay
+#: without it (``--against``): the v2 kick on the study's seeds and on held-out seeds 10-19, v1 and v0.
+OPTION_NAMES = [
+    "recommenders_v2_mirror",
+    "recommenders_v2_mirror_heldout",
+    "recommenders_mirror",
+]
+NAMES = STUDY_NAMES + OPTION_NAMES + ["recommenders_v2_defaults_heldout"]
 
 
 @pytest.mark.slow
@@ -91,7 +99,9 @@ def test_unpinned_and_options_reach_the_run_as_the_column_they_describe(monkeypa
     out = ["--out", str(tmp_path / "r.json"), "--seeds", "1", "--tasks", "Sphere-p2-z1"]
     recommenders.main(["--unpinned", *out])
     recommenders.main(out)
-    recommenders.main(["--options", '{"symmetric_contexts": [0]}', "--first-seed", "10", *out])
+    recommenders.main(
+        ["--options", '{"symmetric_contexts": [0]}', "--first-seed", "10", "--against", "a", *out]
+    )
     assert jobs == [
         ("Sphere-p2-z1", "c-bo", 0, 500, True, {}),
         ("Sphere-p2-z1", "c-bo", 0, 500, False, {}),
@@ -121,7 +131,7 @@ def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path,
     assert recommenders.render(copy) == (RESULTS / f"{name}.md").read_text(encoding="utf-8")
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", STUDY_NAMES)
 def test_every_committed_run_is_the_study_run_of_its_task_column_and_seed(name):
     """Each run's default-rule values equal the study's committed document bit for bit, at every budget,
     for 10 seeds of each task, and the kicks count their falls."""
@@ -132,6 +142,39 @@ def test_every_committed_run_is_the_study_run_of_its_task_column_and_seed(name):
     for task in {run["task"] for run in runs}:
         assert sorted(run["seed"] for run in runs if run["task"] == task) == list(range(10))
     assert all(None not in run["falls"]["observed"] for run in runs if run["task"].startswith("Kick"))
+
+
+@pytest.mark.parametrize("name", OPTION_NAMES)
+def test_a_replay_with_added_options_names_them_and_its_baseline_has_the_same_seeds(name):
+    """Every run of the replay carries the added option and ten consecutive seeds per task; the replay it
+    is compared with (``--against``) is committed, without options, on the same tasks and seeds."""
+    document = json.loads((RESULTS / f"{name}.json").read_text(encoding="utf-8"))
+    runs = document["runs"]
+    assert all(run["options"] == {"symmetric_contexts": [1]} and run["unpinned"] for run in runs)
+    assert all(recommenders.check_against_study(run) is None for run in runs)
+    baseline = json.loads((recommenders.ROOT / document["against"]).read_text(encoding="utf-8"))["runs"]
+    assert not any(run.get("options") for run in baseline)
+    for task in {run["task"] for run in runs}:
+        seeds = sorted(run["seed"] for run in runs if run["task"] == task)
+        assert seeds == list(range(seeds[0], seeds[0] + 10))
+        assert seeds == sorted(run["seed"] for run in baseline if run["task"] == task)
+
+
+def test_versus_counts_the_seeds_where_the_runs_beat_their_baseline():
+    """Medians over the seeds both replays have, and the wins by the task's direction (the flexibility's
+    distance: larger is better)."""
+
+    def run(seed, value):
+        values = {rule: [value, value + 1.0] for rule in recommenders.RULES}
+        task = {"task": "KickFlexibilityLowDim-v2", "method": "c-bo", "seed": seed, "budgets": [50, 100]}
+        return {**task, "values": values}
+
+    runs = [run(0, 6.0), run(1, 5.0), run(2, 7.0), run(3, 1.0)]  # seed 3: not in the baseline
+    baseline = [run(0, 5.0), run(1, 5.5), run(2, 6.0)]
+    table = recommenders.versus(runs, baseline).splitlines()
+    assert "| KickFlexibilityLowDim-v2 | c-bo | 50 | trust_region | 6 | 5.5 | 2 of 3 |" in table
+    assert "| KickFlexibilityLowDim-v2 | c-bo | 100 | neighbours | 7 | 6.5 | 2 of 3 |" in table
+    assert len(table) == 2 + 2 * len(recommenders.RULES)
 
 
 def test_the_side_studies_parse_their_runs_arguments_and_render_only_when_asked(tmp_path, capsys):

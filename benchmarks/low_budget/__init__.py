@@ -18,6 +18,9 @@ from typing import Any
 
 from benchmarks.study_cli import json_object
 
+#: The repository root, where the replays run (``--against`` paths are relative to it).
+ROOT = Path(__file__).resolve().parents[2]
+
 
 def add_output_arguments(parser: argparse.ArgumentParser) -> None:
     """``--out`` (the results' JSON) and ``--render-only`` (redraw the table from it), as both take."""
@@ -63,47 +66,61 @@ def run_and_write(
     print(render(out))
 
 
+def _results_file(text: str) -> str:
+    """``--against``: a results file (JSON) that exists, as given (from the repository root, where the
+    replays run), else ``argparse.ArgumentTypeError``."""
+    path = Path(text)
+    if not (path if path.is_absolute() else ROOT / path).is_file():
+        raise argparse.ArgumentTypeError(
+            f"expected a replay's results file (JSON), got {text!r}: no such file"
+        )
+    return text
+
+
+def _add_variant_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--unpinned``, ``--options``, ``--first-seed`` and ``--against`` (see :func:`column_replay_main`)."""
+    parser.add_argument(
+        "--unpinned", action="store_true", help="the columns without the study's c-bo refit pin"
+    )
+    parser.add_argument(
+        "--options", type=json_object, default={}, help="c-bo options the columns add (a JSON object)"
+    )
+    parser.add_argument(
+        "--first-seed", type=int, default=0, help="seeds first-seed, …, first-seed + seeds - 1 (default 0)"
+    )
+    parser.add_argument(
+        "--against", type=_results_file, help="a replay's results (JSON, from the repository root) to compare"
+    )
+
+
 def column_replay_main(
     description: str,
     tasks: Sequence[str],
     job: Callable[[tuple[Any, ...]], dict[str, Any]],
     render: Callable[[Path], str],
     argv: list[str] | None = None,
-    unpinned_flag: bool = False,
+    variant_flags: bool = False,
 ) -> None:
     """The command line of a replay of the study's c-bo columns: ``--tasks`` (default ``tasks``),
-    ``--methods`` (default ``c-bo``), ``--budget`` (500), ``--first-seed`` (0: the study's seeds; held-out
-    ones from 10) and :func:`parse_runs_arguments`' options; runs
-    ``job((task, method, seed, budget))`` for each and writes the results (:func:`run_and_write`). With
-    ``unpinned_flag`` it takes ``--unpinned`` and ``--options`` (a JSON object of c-bo options the columns
-    add) too, and the job gets them: ``(task, method, seed, budget, unpinned, options)``; and ``--against``,
-    another replay's results that the document names (``"against"``) for ``render`` to compare with."""
+    ``--methods`` (default ``c-bo``), ``--budget`` (500) and :func:`parse_runs_arguments`' options; runs
+    ``job((task, method, seed, budget))`` for each of the study's seeds and writes the results
+    (:func:`run_and_write`). With ``variant_flags`` it takes the flags of a variant of the columns too:
+    ``--unpinned`` and ``--options`` (a JSON object of c-bo options the columns add), which the job gets,
+    ``(task, method, seed, budget, unpinned, options)``; ``--first-seed`` (0: the study's seeds; 10: seeds
+    beyond them); and ``--against``, another replay's results that the document names (``"against"``) for
+    ``render`` to compare with."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--tasks", nargs="+", default=list(tasks), help="study task names")
     parser.add_argument("--methods", nargs="+", default=["c-bo"], help="the study's c-bo columns")
     parser.add_argument("--budget", type=int, default=500)
-    parser.add_argument(
-        "--first-seed", type=int, default=0, help="seeds first-seed, …, first-seed + seeds - 1 (default 0)"
-    )
-    if unpinned_flag:
-        parser.add_argument(
-            "--unpinned", action="store_true", help="the columns without the study's c-bo refit pin"
-        )
-        parser.add_argument(
-            "--options", type=json_object, default={}, help="c-bo options the columns add (a JSON object)"
-        )
-        parser.add_argument(
-            "--against", help="a replay's results (JSON, from the repository root) to compare seed by seed"
-        )
+    if variant_flags:
+        _add_variant_arguments(parser)
     args = parse_runs_arguments(parser, argv, 10, render)
     if args is None:
         return
-    extra = (args.unpinned, args.options) if unpinned_flag else ()
-    jobs = [
-        (t, m, s, args.budget, *extra)
-        for t in args.tasks
-        for m in args.methods
-        for s in range(args.first_seed, args.first_seed + args.seeds)
-    ]
-    against = {"against": args.against} if unpinned_flag and args.against else {}
+    extra = (args.unpinned, args.options) if variant_flags else ()
+    first = args.first_seed if variant_flags else 0
+    seeds = range(first, first + args.seeds)
+    jobs = [(t, m, s, args.budget, *extra) for t in args.tasks for m in args.methods for s in seeds]
+    against = {"against": args.against} if variant_flags and args.against else {}
     run_and_write(job, jobs, args.workers, args.out, render, against)

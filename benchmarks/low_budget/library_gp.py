@@ -131,7 +131,7 @@ class LibraryGPCBO(ContextualBO):
         return {**state, "log_hyper": np.clip(self.log_hyper, low, high)}
 
     def _restore_data(self, state: Mapping[str, Any]) -> None:
-        data = read_gp_data(state, self.n_params, self.n_context_dims)
+        data = read_gp_data(state, self.n_params, self.n_context_dims, self.config.scaling_box)
         names, hyper = state["hyper_names"], np.asarray(state["hyper"])
         if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
             raise TypeError(f"state['hyper_names']: expected a list of strings, got {names!r}")

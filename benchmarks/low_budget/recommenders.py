@@ -37,14 +37,13 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.low_budget import column_replay_main
+from benchmarks.low_budget import ROOT, column_replay_main
 from benchmarks.low_budget.columns import PINNED_FIT_POINTS, Method, method_by_name, unpinned
 from benchmarks.low_budget.report import median_range
 from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
 
 RULES = ("trust_region", "observed", "neighbours")
 RUNS = Path(__file__).resolve().parent / "runs"
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def recommend_with(optimizer: Any, rule: str, contexts: np.ndarray) -> np.ndarray:
@@ -66,8 +65,9 @@ def _column(method_name: str, unpinned_column: bool, options: dict[str, Any]) ->
     if not (unpinned_column or options):
         return None
     method = unpinned(method) if unpinned_column else method
-    added = tuple((name, tuple(v) if isinstance(v, list) else v) for name, v in sorted(options.items()))
-    return dataclasses.replace(method, options=method.options + added)
+    added = {name: tuple(v) if isinstance(v, list) else v for name, v in options.items()}
+    kept = tuple((name, value) for name, value in method.options if name not in added)
+    return dataclasses.replace(method, options=kept + tuple(sorted(added.items())))
 
 
 def one_run(
@@ -139,6 +139,12 @@ def _header(rules: list[str]) -> list[str]:
     return ["| task | column | budget | " + " | ".join(cells) + " |", "|---" * (len(cells) + 3) + "|"]
 
 
+def _wins(values: np.ndarray, others: np.ndarray, larger_is_better: bool) -> str:
+    """ "k of n": on how many of the n seeds ``values`` (n,) beat ``others`` (n,), seed by seed."""
+    sign = 1.0 if larger_is_better else -1.0
+    return f"{int(np.sum(sign * (values - others) > 0))} of {values.shape[0]}"
+
+
 def _row(group: list[dict[str, Any]], index: int, larger_is_better: bool, rules: list[str]) -> list[str]:
     """The cells of one budget's row: each rule's median (min–max over seeds), the seeds where each other
     rule is better than ``trust_region``, and the falls of each rule summed over seeds."""
@@ -146,10 +152,8 @@ def _row(group: list[dict[str, Any]], index: int, larger_is_better: bool, rules:
     for rule in rules:
         values[rule] = column = np.array([r["values"][rule][index] for r in group])
         cells.append(median_range(column))
-    sign = 1.0 if larger_is_better else -1.0
     for rule in rules[1:]:
-        better = int(np.sum(sign * (values[rule] - values["trust_region"]) > 0))
-        cells.append(f"{better} of {len(group)}")
+        cells.append(_wins(values[rule], values["trust_region"], larger_is_better))
     fell = [[r["falls"][rule][index] for r in group] for rule in rules]
     tests = len(group) * group[0]["test_contexts"]
     cells.append("—" if None in fell[0] else " / ".join(str(sum(f)) for f in fell) + f" of {tests}")
@@ -174,34 +178,44 @@ def summary(runs: list[dict[str, Any]]) -> str:
 
 def _agreement(runs: list[dict[str, Any]]) -> str:
     """The sentence on how many runs agree with the study's (:func:`check_against_study`); for runs of
-    ``--unpinned``, what they are and at which budgets they must agree; for runs of ``--options``, which."""
+    ``--unpinned``, what they are and at which budgets they must agree; for runs of ``--options``, which;
+    for seeds the study does not have, that."""
     added = sorted({json.dumps(run["options"], sort_keys=True) for run in runs if run.get("options")})
+    unpinned = any(run.get("unpinned") for run in runs)
     if added:
-        pinned = "c-bo's defaults (`--unpinned`)" if runs[0].get("unpinned") else "the study's c-bo columns"
+        pinned = "c-bo's defaults (`--unpinned`)" if unpinned else "the study's c-bo columns"
         return (
             f"The runs are {pinned} with the options {', '.join(f'`{a}`' for a in added)} added "
             "(`--options`): not the study's runs, so none is compared with them."
         )
     checked = [check_against_study(run) for run in runs]
-    agree = f"{sum(c is True for c in checked)} of {sum(c is not None for c in checked)}"
-    if not any(run.get("unpinned") for run in runs):
+    compared = sum(c is not None for c in checked)
+    agree = f"{sum(c is True for c in checked)} of {compared}"
+    points = PINNED_FIT_POINTS
+    what = (
+        "The runs are c-bo's defaults (`--unpinned`), not the study's c-bo columns: a refit sees every "
+        f"episode where the study's saw the {points} most recent (`CBO_FIT_PIN`, "
+        "`benchmarks/study_options.py`). "
+    )
+    if not compared:
+        seeds = sorted({run["seed"] for run in runs})
+        return f"{what if unpinned else ''}The study has no run of these seeds ({seeds[0]}–{seeds[-1]})."
+    if not unpinned:
         return (
             f"The `trust_region` values equal the study's committed runs bit for bit in {agree} runs that "
             "the study has."
         )
-    points = PINNED_FIT_POINTS
     return (
-        "The runs are c-bo's defaults (`--unpinned`), not the study's c-bo columns: a refit sees every "
-        f"episode where the study's saw the {points} most recent (`CBO_FIT_PIN`, "
-        "`benchmarks/study_options.py`). Their `trust_region` values equal the study's committed runs bit "
-        f"for bit at the budgets up to {points} episodes, where both have fitted on the same episodes, in "
-        f"{agree} runs that the study has."
+        f"{what}Their `trust_region` values equal the study's committed runs bit for bit at the budgets up "
+        f"to {points} episodes, where both have fitted on the same episodes, in {agree} runs that the study "
+        "has."
     )
 
 
 def versus(runs: list[dict[str, Any]], baseline: list[dict[str, Any]]) -> str:
     """A Markdown table per task, column, budget and rule: the median of ``runs`` and of ``baseline`` (another
-    replay's runs) over the seeds both have, and on how many of them ``runs`` is the better."""
+    replay's runs) over the seeds both have, at the budgets both record, and on how many of those seeds
+    ``runs`` is the better."""
     lines = [
         "| task | column | budget | rule | these runs: median | against: median | seeds where these are "
         "better |",
@@ -212,14 +226,21 @@ def versus(runs: list[dict[str, Any]], baseline: list[dict[str, Any]]) -> str:
         pairs = [(r, by_key[k]) for r in runs if (k := (task, method, r["seed"])) in by_key]
         if not pairs:
             continue
-        sign = -1.0 if task_by_name(task).lower_is_better else 1.0
+        larger_is_better = not task_by_name(task).lower_is_better
         rules = [rule for rule in _rules([r for r, _ in pairs]) if rule in pairs[0][1]["values"]]
-        for index, budget in enumerate(pairs[0][0]["budgets"]):
+        for budget in pairs[0][0]["budgets"]:
+            if not all(budget in r["budgets"] and budget in b["budgets"] for r, b in pairs):
+                continue
             for rule in rules:
-                own = np.array([r["values"][rule][index] for r, _ in pairs])
-                other = np.array([b["values"][rule][index] for _, b in pairs])
-                better = int(np.sum(sign * (own - other) > 0))
-                cells = [f"{np.median(own):.3g}", f"{np.median(other):.3g}", f"{better} of {len(pairs)}"]
+                own, other = (
+                    np.array([d["values"][rule][d["budgets"].index(budget)] for d in side])
+                    for side in zip(*pairs, strict=True)
+                )
+                cells = [
+                    f"{np.median(own):.3g}",
+                    f"{np.median(other):.3g}",
+                    _wins(own, other, larger_is_better),
+                ]
                 lines.append(f"| {task} | {method} | {budget} | {rule} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -231,8 +252,8 @@ def _against(document: dict[str, Any]) -> str:
     path = Path(document["against"])
     baseline = json.loads((path if path.is_absolute() else ROOT / path).read_text())["runs"]
     return (
-        f"Seed by seed against `{document['against']}` (the same tasks, columns and seeds):\n\n"
-        f"{versus(document['runs'], baseline)}\n\n"
+        f"Seed by seed against `{document['against']}` (the same tasks and columns; the seeds and budgets "
+        f"both have):\n\n{versus(document['runs'], baseline)}\n\n"
     )
 
 
@@ -256,7 +277,7 @@ def _job(args: tuple[str, str, int, int, bool, dict[str, Any]]) -> dict[str, Any
 
 def main(argv: list[str] | None = None) -> None:
     tasks = ["KickFlexibilityLowDim-v1", "KickPrecisionLowDim-v1"]  # the default tasks
-    column_replay_main(__doc__.splitlines()[0], tasks, _job, render, argv, unpinned_flag=True)
+    column_replay_main(__doc__.splitlines()[0], tasks, _job, render, argv, variant_flags=True)
 
 
 if __name__ == "__main__":

@@ -387,7 +387,7 @@ class ContextualBO(ContextualOptimizer):
         return optimizer
 
     def _restore_data(self, state: Mapping[str, Any]) -> None:
-        data = read_gp_data(state, self.n_params, self.n_context_dims)
+        data = read_gp_data(state, self.n_params, self.n_context_dims, self.config.scaling_box)
         self.contexts, self.params, self.returns = data.contexts, data.params, data.returns
         self.log_hyper, self.context_scale, self.fitted_at = data.log_hyper, data.scale, data.fitted_at
         if self.returns.shape[0] >= 1 and self.fitted_at > 0:

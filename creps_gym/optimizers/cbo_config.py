@@ -17,7 +17,7 @@ from creps_gym._validation import (
 )
 from creps_gym.optimizers.acquisitions import ACQUISITIONS
 from creps_gym.optimizers.cbo_recommend import RECOMMEND_RULES
-from creps_gym.optimizers.features import FeatureMap, make_features
+from creps_gym.optimizers.features import AffineFeatures, FeatureMap, make_features
 from creps_gym.optimizers.gp_model import FIT_SUBSETS
 from creps_gym.optimizers.policies import initial_covariance
 
@@ -95,18 +95,23 @@ def fold_box(low: Array, high: Array, dims: tuple[int, ...]) -> tuple[Array, Arr
 
 
 def _context_dims(value: Any, z: int) -> tuple[int, ...]:
-    """``symmetric_contexts`` as a sorted tuple of distinct integers in [0, z)."""
-    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
-        raise TypeError(f"symmetric_contexts: expected a sequence of integers, got {type(value).__name__}")
-    dims = []
+    """``symmetric_contexts`` (a list, tuple, range or 1-D integer array) as a sorted tuple of distinct
+    integers in [0, z)."""
+    if isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind in "iu":
+        value = value.tolist()
+    if not isinstance(value, (list, tuple, range)):
+        raise TypeError(
+            f"symmetric_contexts: expected a list, tuple or range of integers, got {type(value).__name__}"
+        )
+    dims: list[int] = []
     for item in value:
         if isinstance(item, bool) or not isinstance(item, (int, np.integer)):
             raise TypeError(f"symmetric_contexts: expected integers, got {item!r}")
         if not 0 <= int(item) < z:
             raise ValueError(f"symmetric_contexts: expected context dimensions in [0, {z}), got {int(item)}")
+        if int(item) in dims:
+            raise ValueError(f"symmetric_contexts: expected distinct dimensions, got {int(item)} twice")
         dims.append(int(item))
-    if len(set(dims)) != len(dims):
-        raise ValueError(f"symmetric_contexts: expected distinct dimensions, got {dims}")
     return tuple(sorted(dims))
 
 
@@ -159,8 +164,9 @@ class CBOConfig:
         R(…, s_i, …; θ) = R(…, −s_i, …; θ) for every θ: the GP models the return over |s_i| (its scaling,
         neighbours and selector utilities too), so the episodes on both sides inform each other. Task
         knowledge the user gives, e.g. ``(1,)`` on a kick that the env mirrors for a ball on the other side
-        (``creps_gym/KickFlexibility*``: y_B); on a task where it is false the model is wrong. Default ():
-        none.
+        (``creps_gym/KickFlexibility*``: y_B); on a task where it is false the model is wrong. The
+        recommendations are then even in s_i, so ``mean_features`` must hold even functions: the affine
+        map is refused with it (``"quadratic"`` does). Default (): none.
     refit_growth : float            the hyperparameters are refitted (maximum likelihood, G3) when the data
         have grown by this factor since the last fit (a geometric schedule); in between only the Cholesky
         factor is updated, so asks stay fast.
@@ -264,6 +270,12 @@ class CBOConfig:
             _optional_box(self.context_low, self.context_high, ("context_low", "context_high"), z),
         )
         set_(self, "mean_map", make_features(self.mean_features, z, "mean_features"))
+        if self.symmetric_contexts and isinstance(self.mean_map, AffineFeatures):
+            raise ValueError(
+                "mean_features: with symmetric_contexts the recommendations are even in those contexts, "
+                "which an affine map cannot fit (the distilled policy would ignore them); expected a map "
+                "that holds even functions, e.g. 'quadratic', got 'affine'"
+            )
 
     @property
     def scaling_box(self) -> tuple[Array, Array] | None:

@@ -57,9 +57,10 @@ def check_kernel_memory(n: int, p: int, z: int, name: str) -> None:
     )
 
 
-def read_gp_data(state: Mapping[str, Any], p: int, z: int) -> GPData:
+def read_gp_data(state: Mapping[str, Any], p: int, z: int, box: tuple[Array, Array] | None = None) -> GPData:
     """The :class:`GPData` of a checkpoint ``state`` of an optimiser with p parameters and z context
-    dimensions; ``TypeError``/``ValueError`` naming the entry when one is malformed or out of bounds."""
+    dimensions; ``TypeError``/``ValueError`` naming the entry when one is malformed or out of bounds, or
+    when a configured context ``box`` (the GP's, low (z,), high (z,)) is not the stored scaling."""
     contexts = as_float_array(state["data_contexts"], "state['data_contexts']", (None, z)).copy()
     n = contexts.shape[0]
     params = as_float_array(state["data_params"], "state['data_params']", (n, p)).copy()
@@ -74,6 +75,11 @@ def read_gp_data(state: Mapping[str, Any], p: int, z: int) -> GPData:
     scale = tuple(as_float_array(state[k], f"state['{k}']", (z,)).copy() for k in ("scale_low", "scale_high"))
     if not (scale[0] < scale[1]).all():
         raise ValueError(f"state['scale_low'], state['scale_high']: expected low < high, got {scale}")
+    if box is not None and not all(np.array_equal(a, b) for a, b in zip(scale, box, strict=True)):
+        raise ValueError(
+            f"state['scale_low'], state['scale_high']: expected the configured context box "
+            f"{[b.tolist() for b in box]}, got {[a.tolist() for a in scale]}"
+        )
     fitted_at = check_positive_int(state["fitted_at"], "state['fitted_at']", minimum=0)
     if fitted_at > n:
         raise ValueError(f"state['fitted_at']: expected at most the {n} stored episodes, got {fitted_at}")

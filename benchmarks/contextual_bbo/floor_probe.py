@@ -39,6 +39,7 @@ from scipy.stats import kendalltau
 from benchmarks.contextual_bbo.problems import GENERATION, N_PARAMS, PROBLEMS, draw_run
 from benchmarks.contextual_bbo.protocol import ProtocolSpec, run_protocol
 from benchmarks.provenance import provenance
+from benchmarks.study_cli import json_object
 from creps_gym.optimizers import make_optimizer
 
 __all__ = [
@@ -225,14 +226,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=3, help="cells: n seeds, from --first-seed on")
     parser.add_argument("--first-seed", type=int, default=0, help="cells: the first seed (default 0)")
     parser.add_argument("--seed", type=int, default=0, help="advantages: the run")
-    parser.add_argument("--options", default="{}", help="the optimiser's options, a JSON object")
+    parser.add_argument("--options", type=json_object, default={}, help="the optimiser's options (JSON)")
     parser.add_argument("--every", type=int, default=50, help="advantages: generations between rows")
     parser.add_argument("--draws", type=int, default=400, help="advantages: Monte Carlo draws per context")
     parser.add_argument("--out", type=Path, help="write the rows and the provenance here (JSON)")
     args = parser.parse_args(argv)
-    options = json.loads(args.options)
-    if not isinstance(options, dict):
-        parser.error(f"--options: expected a JSON object, got {args.options!r}")
+    options = args.options
     if args.what == "cells":
         rows = cell_rows(args.functions, args.method, args.seeds, options, args.first_seed)
         for function in args.functions:

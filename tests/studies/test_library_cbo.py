@@ -122,6 +122,17 @@ def test_the_told_parameter_rules_return_told_parameters(column: str, rule: str)
         assert (observed.params[among] == row).all(axis=-1).any()
 
 
+def test_symmetric_contexts_reach_the_librarys_gp_and_its_checkpoint(column: str) -> None:
+    """With c-bo's ``symmetric_contexts`` the library's GP sees |s| too: the same recommendation at s and
+    at −s, and a restored optimiser asks the same."""
+    optimizer = driven(_class(column), batches=3, symmetric_contexts=[0], mean_features="quadratic")
+    probe = np.array([[0.1], [0.3]])
+    assert np.array_equal(optimizer.recommend(probe), optimizer.recommend(-probe))
+    restored = type(optimizer).from_state_dict(optimizer.state_dict())
+    assert restored.config.symmetric_contexts == (0,)
+    assert np.array_equal(restored.ask(-probe), optimizer.ask(-probe))
+
+
 def test_mes_asks_inside_the_box_and_the_batch_spreads(column: str) -> None:
     optimizer = driven(_class(column), batches=3, acquisition="mes")
     asked = optimizer.ask(np.zeros((4, 1)))  # the kriging believer: four different θ at one context

@@ -28,7 +28,7 @@ STUDY_NAMES = [
     "recommenders_defaults",
 ]
 #: The flexibility kicks with ``symmetric_contexts=(1,)`` added (``--options``), each against the replay
-#: without it (``--against``): the v2 kick on the study's seeds and on held-out seeds 10-19, v1 and v0.
+#: without it (``--against``): the v2 kick on the study's seeds and on seeds 10-19, and the v1 kick.
 OPTION_NAMES = [
     "recommenders_v2_mirror",
     "recommenders_v2_mirror_heldout",
@@ -99,16 +99,17 @@ def test_unpinned_and_options_reach_the_run_as_the_column_they_describe(monkeypa
     out = ["--out", str(tmp_path / "r.json"), "--seeds", "1", "--tasks", "Sphere-p2-z1"]
     recommenders.main(["--unpinned", *out])
     recommenders.main(out)
-    recommenders.main(
-        ["--options", '{"symmetric_contexts": [0]}', "--first-seed", "10", "--against", "a", *out]
-    )
+    against = ["--against", "benchmarks/low_budget/results/recommenders_v2_defaults.json"]
+    recommenders.main(["--options", '{"symmetric_contexts": [0]}', "--first-seed", "10", *against, *out])
     assert jobs == [
         ("Sphere-p2-z1", "c-bo", 0, 500, True, {}),
         ("Sphere-p2-z1", "c-bo", 0, 500, False, {}),
         ("Sphere-p2-z1", "c-bo", 10, 500, False, {"symmetric_contexts": [0]}),
     ]
-    with pytest.raises(SystemExit):
-        recommenders.main(["--options", "[1]", *out])
+    for bad in (["--options", "[1]"], ["--against", "benchmarks/low_budget/results/missing.json"]):
+        with pytest.raises(SystemExit):  # argparse names the argument, before anything runs
+            recommenders.main([*bad, *out])
+    assert len(jobs) == 3
     started = []
 
     def spy(spec, method=None):
@@ -150,10 +151,11 @@ def test_a_replay_with_added_options_names_them_and_its_baseline_has_the_same_se
     is compared with (``--against``) is committed, without options, on the same tasks and seeds."""
     document = json.loads((RESULTS / f"{name}.json").read_text(encoding="utf-8"))
     runs = document["runs"]
-    assert all(run["options"] == {"symmetric_contexts": [1]} and run["unpinned"] for run in runs)
-    assert all(recommenders.check_against_study(run) is None for run in runs)
+    options = {"symmetric_contexts": [1], "mean_features": "quadratic"}
+    assert all(run["options"] == options and run["unpinned"] for run in runs)
     baseline = json.loads((recommenders.ROOT / document["against"]).read_text(encoding="utf-8"))["runs"]
-    assert not any(run.get("options") for run in baseline)
+    assert all(not run.get("options") and run["unpinned"] for run in baseline)
+    assert {tuple(run["budgets"]) for run in runs + baseline} == {(50, 100, 200, 300, 500)}
     for task in {run["task"] for run in runs}:
         seeds = sorted(run["seed"] for run in runs if run["task"] == task)
         assert seeds == list(range(seeds[0], seeds[0] + 10))

@@ -75,8 +75,9 @@ def _bounded_int(value: Any, name: str, minimum: int, maximum: int) -> int:
 
 
 def fold_contexts(contexts: Array, dims: tuple[int, ...]) -> Array:
-    """The contexts (n, z) with the dimensions ``dims`` replaced by their absolute values: the GP's
-    contexts under ``symmetric_contexts`` (a copy; the contexts themselves when ``dims`` is empty)."""
+    """The contexts (n, z) with the dimensions ``dims`` (indices in [0, z), as :class:`CBOConfig` validates
+    them) replaced by their absolute values: the GP's contexts under ``symmetric_contexts`` (a copy; the
+    contexts themselves when ``dims`` is empty)."""
     if not dims:
         return contexts
     folded = np.array(contexts, dtype=np.float64)

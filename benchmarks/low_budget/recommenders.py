@@ -140,7 +140,7 @@ def _header(rules: list[str]) -> list[str]:
 
 
 def _wins(values: np.ndarray, others: np.ndarray, larger_is_better: bool) -> str:
-    """ "k of n": on how many of the n seeds ``values`` (n,) beat ``others`` (n,), seed by seed."""
+    """On how many of the n seeds ``values`` (n,) beat ``others`` (n,), seed by seed, as "k of n"."""
     sign = 1.0 if larger_is_better else -1.0
     return f"{int(np.sum(sign * (values - others) > 0))} of {values.shape[0]}"
 

@@ -231,20 +231,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--draws", type=int, default=400, help="advantages: Monte Carlo draws per context")
     parser.add_argument("--out", type=Path, help="write the rows and the provenance here (JSON)")
     args = parser.parse_args(argv)
-    options = args.options
     if args.what == "cells":
-        rows = cell_rows(args.functions, args.method, args.seeds, options, args.first_seed)
+        rows = cell_rows(args.functions, args.method, args.seeds, args.options, args.first_seed)
         for function in args.functions:
             values = [r["protocol_last"] for r in rows if r["function"] == function]
             print(
                 f"{function}: mean {np.mean(values):.2e}, median {np.median(values):.2e} ({len(values)} runs)"
             )
     else:
-        rows = advantage_rows(args.function, args.seed, options, args.every, args.draws, args.method)
+        rows = advantage_rows(args.function, args.seed, args.options, args.every, args.draws, args.method)
     if args.out is not None:
         document = {
             "command": " ".join(["floor_probe.py", *(argv if argv is not None else sys.argv[1:])]),
-            "options": options,
+            "options": args.options,
             "method": args.method,
             "rows": rows,
             "provenance": provenance(),

@@ -66,11 +66,17 @@ def run_and_write(
     print(render(out))
 
 
-def _results_file(text: str) -> str:
-    """``--against``: a results file (JSON) that exists, as given (from the repository root, where the
-    replays run), else ``argparse.ArgumentTypeError``."""
+def replay_results_path(text: str) -> Path:
+    """Where ``--against``'s results file ``text`` is: as given when absolute, else from the repository
+    root, where the replays run."""
     path = Path(text)
-    if not (path if path.is_absolute() else ROOT / path).is_file():
+    return path if path.is_absolute() else ROOT / path
+
+
+def _results_file(text: str) -> str:
+    """``--against``: a results file (JSON) that exists (:func:`replay_results_path`), kept as given, else
+    ``argparse.ArgumentTypeError``."""
+    if not replay_results_path(text).is_file():
         raise argparse.ArgumentTypeError(
             f"expected a replay's results file (JSON), got {text!r}: no such file"
         )

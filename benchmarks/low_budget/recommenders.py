@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.low_budget import ROOT, column_replay_main
+from benchmarks.low_budget import column_replay_main, replay_results_path
 from benchmarks.low_budget.columns import PINNED_FIT_POINTS, Method, method_by_name, unpinned
 from benchmarks.low_budget.report import median_range
 from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
@@ -249,8 +249,7 @@ def _against(document: dict[str, Any]) -> str:
     """The paragraph comparing the runs with the replay the document names (``--against``), or ""."""
     if not document.get("against"):
         return ""
-    path = Path(document["against"])
-    baseline = json.loads((path if path.is_absolute() else ROOT / path).read_text())["runs"]
+    baseline = json.loads(replay_results_path(document["against"]).read_text())["runs"]
     return (
         f"Seed by seed against `{document['against']}` (the same tasks and columns; the seeds and budgets "
         f"both have):\n\n{versus(document['runs'], baseline)}\n\n"

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from helpers import EXTRAS, driven_cbo, skip_unless_stack_of
 
-from benchmarks.low_budget import recommenders
+from benchmarks.low_budget import recommenders, replay_results_path
 from benchmarks.low_budget.columns import method_by_name
 from benchmarks.study_options import CBO_FIT_PIN
 
@@ -153,7 +153,7 @@ def test_a_replay_with_added_options_names_them_and_its_baseline_has_the_same_se
     runs = document["runs"]
     options = {"symmetric_contexts": [1], "mean_features": "quadratic"}
     assert all(run["options"] == options and run["unpinned"] for run in runs)
-    baseline = json.loads((recommenders.ROOT / document["against"]).read_text(encoding="utf-8"))["runs"]
+    baseline = json.loads(replay_results_path(document["against"]).read_text(encoding="utf-8"))["runs"]
     assert all(not run.get("options") and run["unpinned"] for run in baseline)
     assert {tuple(run["budgets"]) for run in runs + baseline} == {(50, 100, 200, 300, 500)}
     for task in {run["task"] for run in runs}:

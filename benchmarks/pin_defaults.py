@@ -1,6 +1,6 @@
-r"""Carry the committed runs over two default changes: issue 45's ``ridge_centre`` "zero" → "old" of
-``c-cma-es``, and c-bo's refit data (2026-11-30: ``fit_points`` 256 → 1024, ``fit_subset`` "recent" →
-"spread").
+r"""Carry the committed runs over three default changes: issue 45's ``ridge_centre`` "zero" → "old" of
+``c-cma-es``, c-bo's refit data (2026-11-30: ``fit_points`` 256 → 1024, ``fit_subset`` "recent" →
+"spread") and c-bo's log transform scale (2026-11-30: ``log_quantile`` 0.5 → 0.25).
 
 Every committed run of ``c-cma-es`` or ``c-cma-es-surrogate`` that does not set ``ridge_centre`` was
 computed with C3, the default until issue 45. The studies pin those columns to ``ridge_centre="zero"``
@@ -9,8 +9,9 @@ the runs of their specs and render as before; the new default's runs are measure
 (``benchmarks/default_trial.py``, and the C3r columns of the
 contextual BBO and contexts studies). Likewise every committed ``c-bo`` run (the low-budget study's c-bo
 columns, on its own GP and on the libraries') was computed with the refits on the 256 most recent
-episodes: its columns carry :data:`~benchmarks.study_options.CBO_FIT_PIN`, and
-``benchmarks/low_budget/refit_data.py`` measures the new default beside them.
+episodes and the log transform's scale at the median gap: its columns carry
+:data:`~benchmarks.study_options.CBO_PINS`; ``benchmarks/low_budget/refit_data.py`` and
+``benchmarks/low_budget/recommenders.py --options`` measure the new defaults beside them.
 This script writes the pin into each such document:
 
     python benchmarks/pin_defaults.py            # list what it would change
@@ -40,17 +41,17 @@ from typing import Any
 if not __package__:  # run by path: the repository root first on sys.path (see benchmarks/__init__.py)
     sys.path[0] = str(Path(__file__).resolve().parents[1])
 
-from benchmarks.study_options import C3_METHODS, C3_PIN, CBO_FIT_PIN, options_dict, pin_c3
+from benchmarks.study_options import C3_METHODS, C3_PIN, CBO_PINS, options_dict, pin_c3
 from benchmarks.study_tools import RunSpec, load_document, store_document
 
 __all__ = ["main", "pinned", "plan"]
 
 HERE = Path(__file__).resolve().parent
 KEYED_BY_OPTIONS = ("functions", "ccmaes", "scaling")
-#: The low-budget study's pins by optimiser: C3 for C-CMA-ES and ``CBO_FIT_PIN`` for c-bo (its columns on
+#: The low-budget study's pins by optimiser: C3 for C-CMA-ES and ``CBO_PINS`` for c-bo (its columns on
 #: BoTorch's and scikit-learn's GP too), each added where the run's options do not set all of it (an option
 #: the run sets keeps its value).
-LOW_BUDGET_PINS = {**{name: C3_PIN for name in C3_METHODS}, "c-bo": CBO_FIT_PIN}
+LOW_BUDGET_PINS = {**{name: C3_PIN for name in C3_METHODS}, "c-bo": CBO_PINS}
 
 
 def _documents(folder: Path) -> Iterator[Path]:

@@ -17,6 +17,8 @@ __all__ = [
     "C3_METHODS",
     "C3_PIN",
     "CBO_FIT_PIN",
+    "CBO_LOG_PIN",
+    "CBO_PINS",
     "OWN_OPTIONS",
     "RESTART_PIN",
     "canonical_options",
@@ -40,6 +42,13 @@ C3_METHODS = ("c-cma-es", "c-cma-es-surrogate")
 #: (``benchmarks/pin_defaults.py`` wrote the pin into them); ``benchmarks/low_budget/refit_data.py``
 #: measures the new default beside them.
 CBO_FIT_PIN = (("fit_points", 256), ("fit_subset", "recent"))
+#: The committed ``c-bo`` runs were computed with the log transform's scale at the median gap, c-bo's
+#: default until 2026-11-30 (now the lower quartile: ``log_quantile``, Eq. G6 of
+#: ``creps_gym/optimizers/gp_trend.py``). Every c-bo column carries it beside :data:`CBO_FIT_PIN`
+#: (:data:`CBO_PINS`); ``benchmarks/low_budget/recommenders.py --options`` measures the new default.
+CBO_LOG_PIN = (("log_quantile", 0.5),)
+#: Both pins of every c-bo column.
+CBO_PINS = (*CBO_FIT_PIN, *CBO_LOG_PIN)
 #: The ``c-cma-es`` restart defaults before issue 33: ``keep_best=False`` and ``restart_baseline_loss=
 #: "squared"`` (the former None for the squared baseline every such run used). The committed runs that
 #: restarted were computed with them; ``benchmarks/restart_defaults.py`` pins them (its ``FORMER``) and

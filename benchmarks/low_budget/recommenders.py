@@ -39,10 +39,12 @@ import numpy as np
 
 from benchmarks.low_budget import column_replay_main, replay_results_path
 from benchmarks.low_budget.columns import PINNED_FIT_POINTS, Method, method_by_name, unpinned
-from benchmarks.low_budget.report import median_range
+from benchmarks.low_budget.report import cells, median_at, median_range, ratio_text
 from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
 
 RULES = ("trust_region", "observed", "neighbours")
+#: The budget of issue 44's function target (c-bo ≤ 0.5 × the best other method's regret).
+TARGET_BUDGET = 200
 RUNS = Path(__file__).resolve().parent / "runs"
 
 
@@ -223,7 +225,8 @@ def versus(runs: list[dict[str, Any]], baseline: list[dict[str, Any]]) -> str:
     ]
     by_key = {(r["task"], r["method"], r["seed"]): r for r in baseline}
     for task, method in sorted({(r["task"], r["method"]) for r in runs}):
-        pairs = [(r, by_key[k]) for r in runs if (k := (task, method, r["seed"])) in by_key]
+        mine = [r for r in runs if (r["task"], r["method"]) == (task, method)]
+        pairs = [(r, by_key[k]) for r in mine if (k := (task, method, r["seed"])) in by_key]
         if not pairs:
             continue
         larger_is_better = not task_by_name(task).lower_is_better
@@ -256,6 +259,65 @@ def _against(document: dict[str, Any]) -> str:
     )
 
 
+def study_medians(task: str, budget: int, runs: Path = RUNS) -> dict[str, float]:
+    """The study's committed runs of ``task``: each column's median over its seeds at ``budget``."""
+    documents = [json.loads(path.read_text()) for path in sorted(runs.glob(f"{task}-*-s*-b*-n*.json"))]
+    grouped = cells([d for d in documents if d["spec"]["task"] == task])
+    medians = {method: median_at(docs, budget) for (_, method), docs in grouped.items()}
+    return {method: value for method, value in medians.items() if value is not None}
+
+
+def _value_at(run: dict[str, Any], budget: int) -> float:
+    """A replay's default-rule value, or a study document's value, at ``budget``."""
+    values = run["values"]
+    row = values["trust_region"] if isinstance(values, dict) else values
+    return float(row[run["budgets"].index(budget)])
+
+
+def _target_row(task: str, group: list[dict[str, Any]], budget: int, study: Path) -> tuple[str, list[bool]]:
+    """One task's row of :func:`targets`, and whether the runs and the study's ``c-bo`` meet ≤ 0.5."""
+    lower = task_by_name(task).lower_is_better
+    medians = study_medians(task, budget, study)
+    rivals = {m: v for m, v in medians.items() if not m.startswith("c-bo")}
+    best = (min if lower else max)(rivals, key=rivals.get)
+    ours = float(np.median([_value_at(r, budget) for r in group]))
+    paired = [(r, d) for r in group if (d := committed_run(r["key"], study)) is not None]
+    mine = np.array([_value_at(r, budget) for r, _ in paired])
+    theirs = np.array([_value_at(d, budget) for _, d in paired])
+    ratios = [ratio_text(value, rivals[best], lower) for value in (ours, medians.get("c-bo"))]
+    cells_ = [f"{ours:.3g}", f"{medians.get('c-bo', float('nan')):.3g}", f"{rivals[best]:.3g} (`{best}`)"]
+    row = f"| {task} | " + " | ".join([*cells_, *ratios, _wins(mine, theirs, not lower)]) + " |"
+    return row, [text != "—" and float(text) <= 0.5 for text in ratios]
+
+
+def targets(runs: list[dict[str, Any]], budget: int = TARGET_BUDGET, study: Path = RUNS) -> str:
+    """Issue 44's function target at ``budget``: per function task of ``runs``, their median (the default
+    rule), the study's ``c-bo`` column's and its best column that is not c-bo's, each ratio to it (the
+    target: ≤ 0.5), and on how many seeds the runs beat the study's ``c-bo`` run of the same seed; "" when
+    no run is on a function or has the budget."""
+    lines = [
+        "| task | these runs | the study's `c-bo` | best other (method) | these ÷ best other "
+        "| `c-bo` ÷ best other | seeds where these beat `c-bo` |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    met = np.zeros(2, dtype=int)
+    for task in sorted({r["task"] for r in runs if not r["task"].startswith(("Kick", "Planar"))}):
+        group = [r for r in runs if r["task"] == task and budget in r["budgets"]]
+        if group:
+            row, meets = _target_row(task, group, budget, study)
+            lines.append(row)
+            met += meets
+    if len(lines) == 2:
+        return ""
+    return (
+        f"At {budget} episodes against the study's committed columns (medians over seeds; the study's `c-bo` "
+        "has the former log scale, and it has seen the same episodes as the unpinned column up to 256):\n\n"
+        + "\n".join(lines)
+        + f"\n\nThe target's ≤ 0.5 holds on {met[0]} of {len(lines) - 2} tasks for these runs and on "
+        f"{met[1]} for the study's `c-bo`.\n\n"
+    )
+
+
 def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text())
@@ -264,6 +326,7 @@ def render(path: Path) -> str:
         f"{summary(document['runs'])}\n\nThe metric is the study's: the mean regret on a function and the "
         "kick precision's mean error in m (lower is better), the kick flexibility's mean distance in m "
         f"(higher is better). {_agreement(document['runs'])}\n\n{_against(document)}"
+        f"{targets(document['runs']) if document['runs'][0].get('options') else ''}"
         f"Command: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
     )
     path.with_suffix(".md").write_text(text)

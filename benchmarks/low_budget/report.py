@@ -25,9 +25,11 @@ __all__ = [
     "cost_text",
     "grouped_tasks",
     "library_table",
+    "median_at",
     "median_range",
     "paired_table",
     "plot_curves",
+    "ratio_text",
     "sign_test",
     "targets_table",
     "task_table",
@@ -90,7 +92,8 @@ def median_range(values: np.ndarray, seeds: int | None = None) -> str:
     return text + (f" [{values.size}/{seeds}]" if seeds is not None and values.size < seeds else "")
 
 
-def _median(runs: Sequence[dict[str, Any]] | None, budget: int) -> float | None:
+def median_at(runs: Sequence[dict[str, Any]] | None, budget: int) -> float | None:
+    """The median over the study documents ``runs`` of their values at ``budget`` (None: none has it)."""
     values = _values(runs or [], budget)
     return float(np.median(values)) if values.size else None
 
@@ -129,15 +132,15 @@ def targets_table(grouped: Cells, tasks: Sequence[str], methods: Sequence[Any], 
     others = [m.name for m in methods if not m.name.startswith("c-bo")]
     for task in tasks:
         lower = task_by_name(task).lower_is_better
-        ours, ucb, quadratic = (_median(grouped.get((task, m)), budget) for m in CBO_COLUMNS)
-        rivals = {m: v for m in others if (v := _median(grouped.get((task, m)), budget)) is not None}
+        ours, ucb, quadratic = (median_at(grouped.get((task, m)), budget) for m in CBO_COLUMNS)
+        rivals = {m: v for m in others if (v := median_at(grouped.get((task, m)), budget)) is not None}
         best = (min if lower else max)(rivals, key=rivals.get) if rivals else None
         surrogate = rivals.get("c-cma-es-surrogate")
         lines.append(
             f"| {task} | {_g(ours)} | {_g(ucb)} | {_g(quadratic)} | "
             + (f"{_g(rivals[best])} (`{best}`)" if best else "—")
-            + f" | {_ratio(ours, rivals.get(best), lower)} | {_ratio(ours, surrogate, lower)} "
-            + f"| {_ratio(quadratic, surrogate, lower)} |"
+            + f" | {ratio_text(ours, rivals.get(best), lower)} | {ratio_text(ours, surrogate, lower)} "
+            + f"| {ratio_text(quadratic, surrogate, lower)} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -217,7 +220,9 @@ def _g(value: float | None) -> str:
     return "—" if value is None else f"{value:.3g}"
 
 
-def _ratio(ours: float | None, other: float | None, lower: bool) -> str:
+def ratio_text(ours: float | None, other: float | None, lower: bool) -> str:
+    """``ours`` over ``other`` for a lower-is-better metric, else ``other`` over ``ours`` (≤ 1: ours is as
+    good or better); "—" where either is missing."""
     if ours is None or other is None:
         return "—"
     top, bottom = (ours, other) if lower else (other, ours)

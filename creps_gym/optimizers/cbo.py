@@ -158,12 +158,13 @@ class ContextualBO(ContextualOptimizer):
         likelihood of a refit (a constant-mean GP: the pessimistic shift is no signal to explain);
         ``transform`` None: the one in use (``"auto"``'s choice at the last tell)."""
         centre = self.config.prior_mean if prior_mean is None else prior_mean
-        return transformed_returns(returns, self._transform if transform is None else transform, centre)
+        return transformed_returns(returns, transform or self._transform, centre, self.config.log_quantile)
 
     def _chosen_transform(self, inputs: Array, returns: Array) -> str:
         """The configured transform, or ``"auto"``'s choice on these scaled inputs and returns, Eq. (G5)."""
         auto = self.config.transform == "auto"
-        return chosen_transform(inputs, returns, self._trend) if auto else self.config.transform
+        quantile = self.config.log_quantile
+        return chosen_transform(inputs, returns, self._trend, quantile) if auto else self.config.transform
 
     def _inputs(self, contexts: Array, params: Array, scale: tuple[Array, Array] | None = None) -> Array:
         return np.hstack([self._scaled_contexts(contexts, scale), self._scaled_params(params)])

@@ -19,6 +19,7 @@ from creps_gym.optimizers.acquisitions import ACQUISITIONS
 from creps_gym.optimizers.cbo_recommend import RECOMMEND_RULES
 from creps_gym.optimizers.features import AffineFeatures, FeatureMap, make_features
 from creps_gym.optimizers.gp_model import FIT_SUBSETS
+from creps_gym.optimizers.gp_trend import LOG_QUANTILE
 from creps_gym.optimizers.policies import initial_covariance
 
 __all__ = ["CBOConfig", "fold_box", "fold_contexts"]
@@ -134,11 +135,16 @@ class CBOConfig:
     acquisition : str               ``"mes"`` (max-value entropy search, A2) or ``"ucb"`` (A1).
     beta : float                    UCB's β: α = μ + √β σ.
     transform : str                 the returns' transform before the GP, order-preserving: ``"log"``
-        (−log(1 + (R_max − R)/c), c the median gap to the best return; it compresses long tails of bad
-        returns), ``"none"`` or ``"rank"`` (the Gaussian copula of the ranks); see
-        :func:`~creps_gym.optimizers.cbo.transformed_returns`; ``"auto"``: ``"none"`` or ``"log"`` at
-        every tell, whichever the prior mean (see ``trend``) fits with the larger profile likelihood,
-        Eq. (G5) of :mod:`~creps_gym.optimizers.gp_trend`.
+        (−log(1 + (R_max − R)/c), c a low quantile of the gaps to the best return, ``log_quantile``; it
+        compresses long tails of bad returns), ``"none"`` or ``"rank"`` (the Gaussian copula of the
+        ranks); see :func:`~creps_gym.optimizers.cbo.transformed_returns`; ``"auto"``: ``"none"`` or
+        ``"log"`` at every tell, whichever the prior mean (see ``trend``) fits with the larger profile
+        likelihood, Eq. (G5) of :mod:`~creps_gym.optimizers.gp_trend`.
+    log_quantile : float            q in (0, 1] of the log transform's scale c, the q-quantile of the gaps
+        R_max − R over the told returns (Eq. G6 of :mod:`~creps_gym.optimizers.gp_trend`): the GP resolves
+        the returns within about c of the best and compresses the rest. Before 2026-11-30 the median (0.5),
+        which on a run whose early asks are far worse than its best sets c by the bad ones: a checkpoint
+        that does not name it resumes with 0.5. Default 0.25.
     prior_mean : str                the GP's constant prior mean: the smallest transformed return seen
         (``"min"``, pessimistic: unexplored θ are not recommended for their prior) or their mean (``"mean"``).
     trend : str                     ``"constant"`` (that prior mean alone) or ``"quadratic"``: a quadratic in
@@ -198,6 +204,7 @@ class CBOConfig:
     acquisition: str = "mes"
     beta: float = 4.0
     transform: str = "log"
+    log_quantile: float = LOG_QUANTILE
     prior_mean: str = "min"
     trend: str = "constant"
     mes_samples: int = 10
@@ -246,6 +253,7 @@ class CBOConfig:
             if not isinstance(value, str) or value not in choices:
                 raise ValueError(f"{name}: expected one of {choices}, got {value!r}")
         set_(self, "beta", check_real_in_range(self.beta, "beta", 0.0, 1e6))
+        set_(self, "log_quantile", check_real_in_range(self.log_quantile, "log_quantile", 0.0, 1.0))
         set_(self, "refit_growth", check_real_in_range(self.refit_growth, "refit_growth", 1.0, 1e6))
         if self.trust_share is not None:
             set_(self, "trust_share", check_real_in_range(self.trust_share, "trust_share", 0.0, 1.0))
@@ -320,7 +328,8 @@ class CBOConfig:
     def from_state(cls, state: Any) -> CBOConfig:
         """Rebuild the configuration from a checkpoint's ``config`` document and arrays."""
         document = dict(state["config"])
-        document.setdefault("fit_subset", "recent")  # written before the option existed: that rule
+        document.setdefault("fit_subset", "recent")  # written before the options existed: their rules
+        document.setdefault("log_quantile", 0.5)
         has_param, has_context = document.pop("has_param_box", False), document.pop("has_context_box", False)
         arrays = {
             "initial_mean": np.asarray(state["initial_mean"]),

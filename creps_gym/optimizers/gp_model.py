@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from scipy import linalg, special
 from scipy.linalg.lapack import dtrtrs
 
-from creps_gym.optimizers.gp_trend import detrend, log_transform, trend_and_gradient
+from creps_gym.optimizers.gp_trend import LOG_QUANTILE, detrend, log_transform, trend_and_gradient
 
 __all__ = [
     "FIT_SUBSETS",
@@ -370,16 +370,18 @@ def mean_ranks(values: Array) -> Array:
     return ranks
 
 
-def transformed_returns(returns: Array, transform: str, prior_mean: str = "min") -> Array:
+def transformed_returns(
+    returns: Array, transform: str, prior_mean: str = "min", quantile: float = LOG_QUANTILE
+) -> Array:
     """The GP's targets: returns after ``transform``, standardised (see :func:`_standardised`).
 
-    ``"none"``: the returns. ``"log"``: −log(1 + (R_max − R)/c) with c the median of R_max − R over the data
-    (at least 1e-12 times their largest), which compresses a long tail of bad returns (Rosenbrock's valley
-    walls) while keeping the order. ``"rank"``: Φ⁻¹((rank − 1/2)/n), the Gaussian copula of the ranks (ties
-    share their mean rank).
+    ``"none"``: the returns. ``"log"``: −log(1 + (R_max − R)/c) with c the ``quantile`` of R_max − R over
+    the data (at least 1e-12 times their largest; Eq. G6 of :mod:`~creps_gym.optimizers.gp_trend`), which
+    compresses a long tail of bad returns (Rosenbrock's valley walls) while keeping the order.
+    ``"rank"``: Φ⁻¹((rank − 1/2)/n), the Gaussian copula of the ranks (ties share their mean rank).
     """
     if transform == "log":
-        values = log_transform(returns)[0]
+        values = log_transform(returns, quantile)[0]
     elif transform == "rank":
         values = special.ndtri((mean_ranks(returns) - 0.5) / returns.shape[0])
     else:

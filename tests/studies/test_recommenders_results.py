@@ -14,7 +14,7 @@ from helpers import EXTRAS, driven_cbo, skip_unless_stack_of
 
 from benchmarks.low_budget import recommenders, replay_results_path
 from benchmarks.low_budget.columns import method_by_name
-from benchmarks.study_options import CBO_FIT_PIN
+from benchmarks.study_options import CBO_LOG_PIN, CBO_PINS
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 #: The committed measurements: the v1 kicks, with the quadratic prior mean, the functions, the v2 kicks (on
@@ -27,14 +27,22 @@ STUDY_NAMES = [
     "recommenders_v2_defaults",
     "recommenders_defaults",
 ]
-#: The flexibility kicks with ``symmetric_contexts=(1,)`` added (``--options``), each against the replay
-#: without it (``--against``): the v2 kick on the study's seeds and on seeds 10-19, and the v1 kick.
-OPTION_NAMES = [
-    "recommenders_v2_mirror",
-    "recommenders_v2_mirror_heldout",
-    "recommenders_mirror",
-]
-NAMES = STUDY_NAMES + OPTION_NAMES + ["recommenders_v2_defaults_heldout"]
+MIRROR = {"symmetric_contexts": [1], "mean_features": "quadratic"}
+SCALE = {"log_quantile": 0.25}
+#: The replays with options added (``--options``), by name: (their options, those of the replay they are
+#: compared with (``--against``; None: none), their budgets). The flexibility kicks with the mirror
+#: symmetry against the replay without it (the v2 kick on the study's seeds and on seeds 10-19, the v1
+#: kick); c-bo's log scale of 2026-11-30 on the functions (to 300 episodes), and on the v2 kicks against the
+#: former scale, with and without the mirror.
+OPTION_NAMES = {
+    "recommenders_v2_mirror": (MIRROR, {}, (50, 100, 200, 300, 500)),
+    "recommenders_v2_mirror_heldout": (MIRROR, {}, (50, 100, 200, 300, 500)),
+    "recommenders_mirror": (MIRROR, {}, (50, 100, 200, 300, 500)),
+    "recommenders_log_quantile": (SCALE, None, (50, 100, 200, 300)),
+    "recommenders_v2_log_quantile": (SCALE, {}, (50, 100, 200, 300, 500)),
+    "recommenders_v2_mirror_log_quantile": ({**MIRROR, **SCALE}, MIRROR, (50, 100, 200, 300, 500)),
+}
+NAMES = STUDY_NAMES + list(OPTION_NAMES) + ["recommenders_v2_defaults_heldout"]
 
 
 @pytest.mark.slow
@@ -92,8 +100,9 @@ def test_an_unpinned_run_must_agree_with_the_study_only_where_both_fitted_on_the
 
 def test_unpinned_and_options_reach_the_run_as_the_column_they_describe(monkeypatch, tmp_path):
     """``--first-seed`` shifts the seeds; ``--unpinned`` and ``--options`` give each job a fifth and a sixth
-    element, and ``one_run`` then starts the study's run with the column's options less the pin, plus the
-    added ones (with neither: the study's column, None)."""
+    element, and ``one_run`` then starts the study's run with the column's options less the refit pin (the
+    log pin stays: the unpinned runs were measured before the log scale's default changed), plus the added
+    ones (with neither: the study's column, None)."""
     jobs = []
     monkeypatch.setattr("benchmarks.low_budget.run_and_write", lambda job, todo, *rest: jobs.extend(todo))
     out = ["--out", str(tmp_path / "r.json"), "--seeds", "1", "--tasks", "Sphere-p2-z1"]
@@ -120,9 +129,9 @@ def test_unpinned_and_options_reach_the_run_as_the_column_they_describe(monkeypa
     for flag, options in ((True, None), (False, None), (True, {"symmetric_contexts": [1]})):
         with pytest.raises(RuntimeError, match="stop here"):
             recommenders.one_run("Sphere-p2-z1", "c-bo", 0, 50, flag, options)
-    assert started[1] is None and dict(started[0].options) == {}
-    assert dict(started[2].options) == {"symmetric_contexts": (1,)}
-    assert dict(method_by_name("c-bo").options) == dict(CBO_FIT_PIN)
+    assert started[1] is None and dict(started[0].options) == dict(CBO_LOG_PIN)
+    assert dict(started[2].options) == {**dict(CBO_LOG_PIN), "symmetric_contexts": (1,)}
+    assert dict(method_by_name("c-bo").options) == dict(CBO_PINS)
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -147,36 +156,70 @@ def test_every_committed_run_is_the_study_run_of_its_task_column_and_seed(name):
 
 @pytest.mark.parametrize("name", OPTION_NAMES)
 def test_a_replay_with_added_options_names_them_and_its_baseline_has_the_same_seeds(name):
-    """Every run of the replay carries the added option and ten consecutive seeds per task; the replay it
-    is compared with (``--against``) is committed, without options, on the same tasks and seeds."""
+    """Every run of the replay carries the added options and ten consecutive seeds per task; the replay it
+    is compared with (``--against``) is committed, with its own options, on the same tasks and seeds."""
+    options, baseline_options, budgets = OPTION_NAMES[name]
     document = json.loads((RESULTS / f"{name}.json").read_text(encoding="utf-8"))
     runs = document["runs"]
-    options = {"symmetric_contexts": [1], "mean_features": "quadratic"}
     assert all(run["options"] == options and run["unpinned"] for run in runs)
-    baseline = json.loads(replay_results_path(document["against"]).read_text(encoding="utf-8"))["runs"]
-    assert all(not run.get("options") and run["unpinned"] for run in baseline)
-    assert {tuple(run["budgets"]) for run in runs + baseline} == {(50, 100, 200, 300, 500)}
+    assert {tuple(run["budgets"]) for run in runs} == {budgets}
+    if baseline_options is None:
+        assert "against" not in document
+        baseline = runs
+    else:
+        baseline = json.loads(replay_results_path(document["against"]).read_text(encoding="utf-8"))["runs"]
+        assert all(run.get("options", {}) == baseline_options and run["unpinned"] for run in baseline)
+        assert {tuple(run["budgets"]) for run in baseline} == {(50, 100, 200, 300, 500)}
     for task in {run["task"] for run in runs}:
         seeds = sorted(run["seed"] for run in runs if run["task"] == task)
         assert seeds == list(range(seeds[0], seeds[0] + 10))
         assert seeds == sorted(run["seed"] for run in baseline if run["task"] == task)
 
 
-def test_versus_counts_the_seeds_where_the_runs_beat_their_baseline():
-    """Medians over the seeds both replays have, and the wins by the task's direction (the flexibility's
-    distance: larger is better)."""
+def test_targets_sets_the_runs_beside_the_studys_c_bo_and_best_other_column_at_200(tmp_path):
+    """The ratio to the best column that is not c-bo's (here ``creps``; ``c-bo-ucb`` is c-bo's), the
+    study's ``c-bo`` ratio, the seeds where the runs beat the study's ``c-bo`` run of the same seed, and
+    the count of tasks where ≤ 0.5 holds; robot tasks and runs without the budget are left out."""
+    task = "Rosenbrock-p2-z1"
+    study = {"c-bo": [4.0, 2.0, 3.0], "c-bo-ucb": [0.1, 0.1, 0.1], "creps": [10.0, 8.0, 6.0]}
+    for method, values in study.items():
+        for seed, value in enumerate(values):
+            spec = {"task": task, "method": method, "seed": seed}
+            document = {"spec": spec, "budgets": [100, 200], "values": [99.0, value]}
+            (tmp_path / f"{task}-{method}-s{seed}-b500-n4.json").write_text(json.dumps(document))
 
-    def run(seed, value):
+    def run(seed, value, name=task, budgets=(100, 200)):
+        values = {rule: [99.0, value] for rule in recommenders.RULES}
+        key = f"{name}-c-bo-s{seed}-b500-n4"
+        cell = {"task": name, "method": "c-bo", "seed": seed, "key": key}
+        return {**cell, "budgets": list(budgets), "values": values}
+
+    runs = [run(0, 1.0), run(1, 3.0), run(2, 2.0), run(0, 0.3, "KickPrecisionLowDim-v2")]
+    text = recommenders.targets(runs, study=tmp_path)
+    assert f"| {task} | 2 | 3 | 8 (`creps`) | 0.25 | 0.375 | 2 of 3 |" in text.splitlines()
+    assert "holds on 1 of 1 tasks for these runs and on 1 for the study's `c-bo`" in text
+    assert "KickPrecision" not in text
+    assert recommenders.targets([run(0, 1.0, budgets=(50, 100))], study=tmp_path) == ""
+
+
+def test_versus_counts_the_seeds_where_the_runs_beat_their_baseline():
+    """Medians over the seeds both replays have, task by task, and the wins by the task's direction (the
+    flexibility's distance: larger is better; the precision's error: smaller)."""
+
+    def run(seed, value, task="KickFlexibilityLowDim-v2"):
         values = {rule: [value, value + 1.0] for rule in recommenders.RULES}
-        task = {"task": "KickFlexibilityLowDim-v2", "method": "c-bo", "seed": seed, "budgets": [50, 100]}
-        return {**task, "values": values}
+        return {"task": task, "method": "c-bo", "seed": seed, "budgets": [50, 100], "values": values}
 
     runs = [run(0, 6.0), run(1, 5.0), run(2, 7.0), run(3, 1.0)]  # seed 3: not in the baseline
     baseline = [run(0, 5.0), run(1, 5.5), run(2, 6.0)]
+    precision = "KickPrecisionLowDim-v2"  # a second task's runs pair with its own baseline alone
+    runs += [run(0, 0.2, precision), run(1, 0.4, precision)]
+    baseline += [run(0, 0.3, precision), run(1, 0.3, precision)]
     table = recommenders.versus(runs, baseline).splitlines()
     assert "| KickFlexibilityLowDim-v2 | c-bo | 50 | trust_region | 6 | 5.5 | 2 of 3 |" in table
     assert "| KickFlexibilityLowDim-v2 | c-bo | 100 | neighbours | 7 | 6.5 | 2 of 3 |" in table
-    assert len(table) == 2 + 2 * len(recommenders.RULES)
+    assert "| KickPrecisionLowDim-v2 | c-bo | 50 | trust_region | 0.3 | 0.3 | 1 of 2 |" in table
+    assert len(table) == 2 + 4 * len(recommenders.RULES)
 
 
 def test_the_side_studies_parse_their_runs_arguments_and_render_only_when_asked(tmp_path, capsys):

@@ -23,8 +23,7 @@ factor and the acquisition's optimisation.
 ``recommend(contexts)`` follows ``recommend_over``, Eqs. (R1)–(R3) of
 :mod:`creps_gym.optimizers.cbo_recommend`: the posterior mean's maximiser at each s within a trust region of
 the data (the default), or the told θ with the largest posterior mean at s (of every episode, or of those
-with the nearest contexts).
-:meth:`ContextualBO.mean_policy` distils the recommendation into a
+with the nearest contexts). :meth:`ContextualBO.mean_policy` distils the recommendation into a
 :class:`~creps_gym.optimizers.policy_file.Policy` (least squares of the maximisers on a context grid) and
 reports the distillation error in ``diagnostics``.
 

@@ -137,7 +137,7 @@ class CBOConfig:
     transform : str                 the returns' transform before the GP, order-preserving: ``"log"``
         (−log(1 + (R_max − R)/c), c a low quantile of the gaps to the best return, ``log_quantile``; it
         compresses long tails of bad returns), ``"none"`` or ``"rank"`` (the Gaussian copula of the
-        ranks); see :func:`~creps_gym.optimizers.cbo.transformed_returns`; ``"auto"``: ``"none"`` or
+        ranks); see :func:`~creps_gym.optimizers.gp_model.transformed_returns`; ``"auto"``: ``"none"`` or
         ``"log"`` at every tell, whichever the prior mean (see ``trend``) fits with the larger profile
         likelihood, Eq. (G5) of :mod:`~creps_gym.optimizers.gp_trend`.
     log_quantile : float            q in (0, 1] of the log transform's scale c, the q-quantile of the gaps

@@ -283,6 +283,16 @@ def test_list_fits_in_100_columns_and_marks_the_deprecated_ids(capsys):
 
 
 # -- item 8: a Ctrl-C after the last iteration ------------------------------------------------------------
+@pytest.fixture
+def python_sigint():
+    """Python's own SIGINT handler for the test: a process started in the background by a shell without job
+    control (``nohup ... &``, some CI runners) inherits SIGINT ignored, which the run rightly leaves alone,
+    so the Ctrl-C these tests simulate would never arrive."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 def _interrupt_first(function):
     def interrupted(*args, **kwargs):
         signal.raise_signal(signal.SIGINT)  # as a Ctrl-C arriving while this runs
@@ -291,6 +301,7 @@ def _interrupt_first(function):
     return interrupted
 
 
+@pytest.mark.usefixtures("python_sigint")
 def test_ctrl_c_while_the_results_are_written_lets_the_run_finish(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(RunDir, "write_results", _interrupt_first(RunDir.write_results))
     assert main(run_args(tmp_path / "r")) == 0
@@ -300,6 +311,7 @@ def test_ctrl_c_while_the_results_are_written_lets_the_run_finish(tmp_path, caps
 
 @EXTRAS  # the plot needs matplotlib
 @pytest.mark.slow
+@pytest.mark.usefixtures("python_sigint")
 def test_ctrl_c_while_the_plot_is_drawn_exits_0_with_the_plot(tmp_path, capsys, monkeypatch):
     from creps_gym.runner.results import plots
 

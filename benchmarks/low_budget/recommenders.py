@@ -279,13 +279,15 @@ def _target_row(task: str, group: list[dict[str, Any]], budget: int, study: Path
     lower = task_by_name(task).lower_is_better
     medians = study_medians(task, budget, study)
     rivals = {m: v for m, v in medians.items() if not m.startswith("c-bo")}
-    best = (min if lower else max)(rivals, key=rivals.get)
+    best = (min if lower else max)(rivals, key=rivals.get) if rivals else None
     ours = float(np.median([_value_at(r, budget) for r in group]))
     paired = [(r, d) for r in group if (d := committed_run(r["key"], study)) is not None]
     mine = np.array([_value_at(r, budget) for r, _ in paired])
     theirs = np.array([_value_at(d, budget) for _, d in paired])
-    ratios = [ratio_text(value, rivals[best], lower) for value in (ours, medians.get("c-bo"))]
-    cells_ = [f"{ours:.3g}", f"{medians.get('c-bo', float('nan')):.3g}", f"{rivals[best]:.3g} (`{best}`)"]
+    ratios = [ratio_text(value, rivals.get(best), lower) for value in (ours, medians.get("c-bo"))]
+    other = f"{rivals[best]:.3g} (`{best}`)" if best else "—"
+    study_cbo = f"{medians['c-bo']:.3g}" if "c-bo" in medians else "—"
+    cells_ = [f"{ours:.3g}", study_cbo, other]
     row = f"| {task} | " + " | ".join([*cells_, *ratios, _wins(mine, theirs, not lower)]) + " |"
     return row, [text != "—" and float(text) <= 0.5 for text in ratios]
 
@@ -326,7 +328,7 @@ def render(path: Path) -> str:
         f"{summary(document['runs'])}\n\nThe metric is the study's: the mean regret on a function and the "
         "kick precision's mean error in m (lower is better), the kick flexibility's mean distance in m "
         f"(higher is better). {_agreement(document['runs'])}\n\n{_against(document)}"
-        f"{targets(document['runs']) if document['runs'][0].get('options') else ''}"
+        f"{targets(document['runs']) if any(run.get('options') for run in document['runs']) else ''}"
         f"Command: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
     )
     path.with_suffix(".md").write_text(text)

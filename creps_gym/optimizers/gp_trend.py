@@ -25,7 +25,7 @@ is near linear in the gaps below c and logarithmic above: it resolves the return
 and compresses the rest. q = 1/4 (:data:`LOG_QUANTILE`, c-bo's ``log_quantile``). The median (q = 1/2),
 the default until 2026-11-30, lets a run's bad early episodes set c where most are far worse than the
 best, and the differences among the good ones then shrink below the GP's noise: on Different Powers at
-p = 8, z = 1 c-bo's regret at 200 episodes was 28 times `creps`' in the low-budget study, and is 0.015
+p = 8, z = 1 c-bo's regret at 200 episodes was 28 times ``creps``' in the low-budget study, and is 0.015
 times it with the lower quartile (``benchmarks/low_budget/README.md``, "c-bo's log scale").
 """
 

@@ -200,6 +200,8 @@ def test_targets_sets_the_runs_beside_the_studys_c_bo_and_best_other_column_at_2
     assert "holds on 1 of 1 tasks for these runs and on 1 for the study's `c-bo`" in text
     assert "KickPrecision" not in text
     assert recommenders.targets([run(0, 1.0, budgets=(50, 100))], study=tmp_path) == ""
+    elsewhere = recommenders.targets([run(0, 1.0, "Sphere-p2-z1")], study=tmp_path)  # no study runs there
+    assert "| Sphere-p2-z1 | 1 | — | — | — | — | 0 of 0 |" in elsewhere.splitlines()
 
 
 def test_versus_counts_the_seeds_where_the_runs_beat_their_baseline():

@@ -39,7 +39,7 @@ import numpy as np
 
 from benchmarks.low_budget import column_replay_main, replay_results_path
 from benchmarks.low_budget.columns import PINNED_FIT_POINTS, Method, method_by_name, unpinned
-from benchmarks.low_budget.report import cells, median_at, median_range, ratio_text
+from benchmarks.low_budget.report import cells, median_at, median_range, ratio_text, values_by_seed
 from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
 
 RULES = ("trust_region", "observed", "neighbours")
@@ -259,36 +259,30 @@ def _against(document: dict[str, Any]) -> str:
     )
 
 
-def study_medians(task: str, budget: int, runs: Path = RUNS) -> dict[str, float]:
-    """The study's committed runs of ``task``: each column's median over its seeds at ``budget``."""
+def _study_cells(task: str, runs: Path) -> dict[str, list[dict[str, Any]]]:
+    """The study's committed documents of ``task``, by column."""
     documents = [json.loads(path.read_text()) for path in sorted(runs.glob(f"{task}-*-s*-b*-n*.json"))]
     grouped = cells([d for d in documents if d["spec"]["task"] == task])
-    medians = {method: median_at(docs, budget) for (_, method), docs in grouped.items()}
-    return {method: value for method, value in medians.items() if value is not None}
-
-
-def _value_at(run: dict[str, Any], budget: int) -> float:
-    """A replay's default-rule value, or a study document's value, at ``budget``."""
-    values = run["values"]
-    row = values["trust_region"] if isinstance(values, dict) else values
-    return float(row[run["budgets"].index(budget)])
+    return {method: docs for (_, method), docs in grouped.items()}
 
 
 def _target_row(task: str, group: list[dict[str, Any]], budget: int, study: Path) -> tuple[str, list[bool]]:
     """One task's row of :func:`targets`, and whether the runs and the study's ``c-bo`` meet ≤ 0.5."""
     lower = task_by_name(task).lower_is_better
-    medians = study_medians(task, budget, study)
+    columns = _study_cells(task, study)
+    medians = {m: v for m, docs in columns.items() if (v := median_at(docs, budget)) is not None}
     rivals = {m: v for m, v in medians.items() if not m.startswith("c-bo")}
     best = (min if lower else max)(rivals, key=rivals.get) if rivals else None
-    ours = float(np.median([_value_at(r, budget) for r in group]))
-    paired = [(r, d) for r in group if (d := committed_run(r["key"], study)) is not None]
-    mine = np.array([_value_at(r, budget) for r, _ in paired])
-    theirs = np.array([_value_at(d, budget) for _, d in paired])
+    own = {r["seed"]: r["values"]["trust_region"][r["budgets"].index(budget)] for r in group}
+    study_cbo = values_by_seed(columns.get("c-bo"), budget)
+    seeds = sorted(set(own) & set(study_cbo))
+    mine, theirs = (np.array([side[s] for s in seeds], dtype=float) for side in (own, study_cbo))
+    ours = float(np.median(list(own.values())))
     ratios = [ratio_text(value, rivals.get(best), lower) for value in (ours, medians.get("c-bo"))]
     other = f"{rivals[best]:.3g} (`{best}`)" if best else "—"
-    study_cbo = f"{medians['c-bo']:.3g}" if "c-bo" in medians else "—"
-    cells_ = [f"{ours:.3g}", study_cbo, other]
-    row = f"| {task} | " + " | ".join([*cells_, *ratios, _wins(mine, theirs, not lower)]) + " |"
+    cbo = f"{medians['c-bo']:.3g}" if "c-bo" in medians else "—"
+    cells_ = [f"{ours:.3g}", cbo, other, *ratios, _wins(mine, theirs, not lower)]
+    row = f"| {task} | " + " | ".join(cells_) + " |"
     return row, [text != "—" and float(text) <= 0.5 for text in ratios]
 
 

@@ -34,6 +34,7 @@ __all__ = [
     "targets_table",
     "task_table",
     "timing_table",
+    "values_by_seed",
 ]
 
 Cells = dict[tuple[str, str], list[dict[str, Any]]]
@@ -71,10 +72,12 @@ def cells(documents: Sequence[dict[str, Any]]) -> Cells:
 
 def _values(runs: Sequence[dict[str, Any]], budget: int, field: str = "values") -> np.ndarray:
     """The runs' ``field`` at ``budget`` (the runs that recorded it, finite ones), in the runs' order."""
-    return np.asarray(list(_by_seed(runs, budget, field).values()), dtype=np.float64)
+    return np.asarray(list(values_by_seed(runs, budget, field).values()), dtype=np.float64)
 
 
-def _by_seed(runs: Sequence[dict[str, Any]] | None, budget: int, field: str = "values") -> dict[int, float]:
+def values_by_seed(
+    runs: Sequence[dict[str, Any]] | None, budget: int, field: str = "values"
+) -> dict[int, float]:
     """Each run's ``field`` at ``budget`` by its seed (the runs that recorded it)."""
     found = {}
     for run in runs or []:
@@ -174,7 +177,7 @@ def paired_table(
 def _paired_cell(ours: Any, theirs: Any, budget: int, lower: bool) -> str:
     """``k/n (p …)``: the seeds where ``ours`` ends better than ``theirs`` at ``budget``, of the n seeds both
     finished without a tie, and the sign test's p-value; ``—`` with no such seed."""
-    first, second = _by_seed(ours, budget), _by_seed(theirs, budget)
+    first, second = values_by_seed(ours, budget), values_by_seed(theirs, budget)
     pairs = [(first[s], second[s]) for s in sorted(set(first) & set(second)) if first[s] != second[s]]
     wins = sum((a < b) == lower for a, b in pairs)
     return f"{wins}/{len(pairs)} (p {sign_test(wins, len(pairs)):.2g})" if pairs else "—"

@@ -1,6 +1,7 @@
-r"""Carry the committed runs over three default changes: issue 45's ``ridge_centre`` "zero" → "old" of
+r"""Carry the committed runs over four default changes: issue 45's ``ridge_centre`` "zero" → "old" of
 ``c-cma-es``, c-bo's refit data (2026-11-30: ``fit_points`` 256 → 1024, ``fit_subset`` "recent" →
-"spread") and c-bo's log transform scale (2026-11-30: ``log_quantile`` 0.5 → 0.25).
+"spread"), c-bo's log transform scale (2026-11-30: ``log_quantile`` 0.5 → 0.25) and MES's floor
+(2026-11-30: ``mes_floor`` "candidates" → "believed").
 
 Every committed run of ``c-cma-es`` or ``c-cma-es-surrogate`` that does not set ``ridge_centre`` was
 computed with C3, the default until issue 45. The studies pin those columns to ``ridge_centre="zero"``
@@ -9,7 +10,7 @@ the runs of their specs and render as before; the new default's runs are measure
 (``benchmarks/default_trial.py``, and the C3r columns of the
 contextual BBO and contexts studies). Likewise every committed ``c-bo`` run (the low-budget study's c-bo
 columns, on its own GP and on the libraries') was computed with the refits on the 256 most recent
-episodes and the log transform's scale at the median gap: its columns carry
+episodes, the log transform's scale at the median gap and MES's floor over the candidates: its columns carry
 :data:`~benchmarks.study_options.CBO_PINS`; ``benchmarks/low_budget/refit_data.py`` and
 ``benchmarks/low_budget/recommenders.py --options`` measure the new defaults beside them.
 This script writes the pin into each such document:

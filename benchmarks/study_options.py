@@ -17,6 +17,8 @@ __all__ = [
     "C3_METHODS",
     "C3_PIN",
     "CBO_FIT_PIN",
+    "CBO_FLOOR_PIN",
+    "CBO_KEPT_PINS",
     "CBO_LOG_PIN",
     "CBO_PINS",
     "OWN_OPTIONS",
@@ -47,8 +49,17 @@ CBO_FIT_PIN = (("fit_points", 256), ("fit_subset", "recent"))
 #: ``creps_gym/optimizers/gp_trend.py``). Every c-bo column carries it beside :data:`CBO_FIT_PIN`
 #: (:data:`CBO_PINS`); ``benchmarks/low_budget/recommenders.py --options`` measures the new default.
 CBO_LOG_PIN = (("log_quantile", 0.5),)
-#: Both pins of every c-bo column.
-CBO_PINS = (*CBO_FIT_PIN, *CBO_LOG_PIN)
+#: The committed ``c-bo`` runs were computed with MES's sampled maxima floored at the candidates' largest
+#: posterior mean, c-bo's rule until 2026-11-30 (now with the batch's fantasies and five noise standard
+#: deviations above them: ``mes_floor``, Eq. A4 of ``creps_gym/optimizers/acquisitions.py``). Every c-bo
+#: column carries it too; ``benchmarks/low_budget/recommenders.py --options`` measures the new default.
+CBO_FLOOR_PIN = (("mes_floor", "candidates"),)
+#: The pins of every c-bo column.
+CBO_PINS = (*CBO_FIT_PIN, *CBO_LOG_PIN, *CBO_FLOOR_PIN)
+#: The pins a replay of a c-bo column with c-bo's refit defaults keeps
+#: (``benchmarks/low_budget/columns.py``'s ``unpinned``): those replays were measured before these defaults
+#: changed, and their documents do not name them.
+CBO_KEPT_PINS = (*CBO_LOG_PIN, *CBO_FLOOR_PIN)
 #: The ``c-cma-es`` restart defaults before issue 33: ``keep_best=False`` and ``restart_baseline_loss=
 #: "squared"`` (the former None for the squared baseline every such run used). The committed runs that
 #: restarted were computed with them; ``benchmarks/restart_defaults.py`` pins them (its ``FORMER``) and

@@ -237,16 +237,17 @@ def check_posterior_gradients(model: Any, x: Any, step: float = 1e-6, variance_a
         )
 
 
-# -- a c-bo with a GP: p = 2, z = 1, four batches of 4 on a contextual sphere whose optimum is θ = (s, s)
-def driven_cbo(seed: int = 0) -> Any:
-    """``c-bo`` after four seeded asks and tells (contexts uniform on [0, 1), returns −|θ − s|²)."""
+# -- a c-bo with a GP: p = 2, z = 1, batches of 4 on a contextual sphere whose optimum is θ = (s, s)
+def driven_cbo(seed: int = 0, batches: int = 4, **options: Any) -> Any:
+    """``c-bo`` (with ``options``) after ``batches`` seeded asks and tells of 4 episodes (contexts uniform on
+    [0, 1), returns −|θ − s|²)."""
     import numpy as np
 
     from creps_gym.optimizers import make_optimizer
 
-    optimizer = make_optimizer("c-bo", 2, 1, seed)
+    optimizer = make_optimizer("c-bo", 2, 1, seed, **options)
     rng = np.random.default_rng(0)
-    for _ in range(4):
+    for _ in range(batches):
         contexts = rng.uniform(size=(4, 1))
         params = optimizer.ask(contexts)
         optimizer.tell(contexts, params, -((params - contexts) ** 2).sum(axis=1))

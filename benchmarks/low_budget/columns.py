@@ -47,7 +47,7 @@ class Method:
 
 
 #: The study's methods (columns), in the order of the tables. The committed runs of the c-bo columns were
-#: computed with the refits and the log transform's scale of c-bo's defaults before 2026-11-30
+#: computed with the refits, the log transform's scale and MES's floor of c-bo's defaults before 2026-11-30
 #: (``CBO_PINS``, study_options.py).
 METHODS = (
     Method("c-bo", "c-bo", CBO_PINS, note="max-value entropy search (c-bo's default acquisition)"),
@@ -111,8 +111,9 @@ PINNED_FIT_POINTS = dict(CBO_FIT_PIN)["fit_points"]
 
 def unpinned(method: Method) -> Method:
     """The c-bo column ``method`` without :data:`~benchmarks.study_options.CBO_FIT_PIN`: c-bo's refit
-    defaults. The log pin (``CBO_LOG_PIN``) stays: the replays of the unpinned columns were measured before
-    the log scale's default changed; ``--options '{"log_quantile": 0.25}'`` adds the new one."""
+    defaults. The log and floor pins stay (``CBO_KEPT_PINS``): the replays of the unpinned columns were
+    measured before those defaults changed; ``--options '{"log_quantile": 0.25, "mes_floor": "believed"}'``
+    adds the new ones."""
     if method.optimizer != "c-bo" or not set(CBO_FIT_PIN) <= set(method.options):
         raise ValueError(f"method: expected a c-bo column pinned to {CBO_FIT_PIN}, got {method.name!r}")
     return dataclasses.replace(method, options=tuple(p for p in method.options if p not in CBO_FIT_PIN))

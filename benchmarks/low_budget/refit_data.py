@@ -22,8 +22,9 @@ in how many runs they do). Writes one JSON document with provenance and a Markdo
 
 Within the study's 500 episodes the new default fits every episode, so these runs measure "every episode"
 against "the 256 most recent"; the spread beyond 1024 episodes is not measured here. Both keep the log
-transform's former scale (``CBO_LOG_PIN``: the committed runs were measured before it changed, and
-their documents do not name it); ``recommenders.py --options`` measures the new one.
+transform's former scale and MES's former floor (``CBO_KEPT_PINS``: the committed runs were measured
+before they changed, and their documents do not name them); ``recommenders.py --options`` measures the
+new ones.
 """
 
 from __future__ import annotations

@@ -104,6 +104,11 @@ class SklearnGP:
         scale = scale if scale > 0.0 else 1.0  # scikit-learn's normalize_y leaves a constant target unscaled
         self._noise = float(gp.kernel_.k2.noise_level) * scale**2
 
+    @property
+    def observation_noise(self) -> float:
+        """The ``WhiteKernel``'s noise variance in the units of :meth:`predict` (MES's floor, Eq. A4)."""
+        return self._noise
+
     def predict(self, x: Array) -> tuple[Array, Array]:
         mean, std = self.gp.predict(np.asarray(x, dtype=np.float64), return_std=True)
         return mean.astype(np.float64), np.maximum(std.astype(np.float64) ** 2 - self._noise, 0.0)  # Eq. (L2)

@@ -11,6 +11,19 @@ With μ and σ the GP's posterior mean and standard deviation (:mod:`creps_gym.o
   with K samples y*_k of the maximum drawn from a Gumbel distribution fitted to
   P(y* < y) ≈ Π_i Φ((y − μ_i)/σ_i) over a candidate set at s (Wang & Jegelka's Gumbel sampling).   (A3)
 
+The sampled maxima are raised to a floor, the least value the model allows the maximum at s:
+
+      y*_k ≥ max(m + 10⁻⁶(1 + |m|), max_{j<i} μ(s, θ_j) + 5 σ_n),   m = max_i μ_i,                  (A4)
+
+over the candidates and the rows θ_j chosen before row i of a batch, which the kriging believer holds as
+observed with their posterior means as returns (σ_n: the observation noise's standard deviation in μ's
+units). The second term matters at a context asked twice in a batch: row j's maximiser beats every random
+candidate (L-BFGS-B improved on them), so the first term lies below μ(s, θ_j), where σ has shrunk to the
+noise; there γ is very negative, α largest, and every later row returns to θ_j. Five noise deviations above
+it, γ there is about 5 and MES leaves it (``mes_floor="believed"``, the default; ``"candidates"``: the
+first term alone, the rule before 2026-11-30). A batch's first row, and every row at a context far from the
+earlier ones, keeps the first term.
+
 Each is maximised over θ in the parameter box (or a sub-box of it, e.g. the trust region of ``recommend``)
 with s fixed: the acquisition is evaluated on many candidates (random draws and the observed θ) and
 L-BFGS-B, with the analytic gradient, starts from the best few.
@@ -21,6 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,8 +44,11 @@ from creps_gym.optimizers.gp_model import GPModel
 
 __all__ = [
     "ACQUISITIONS",
+    "MES_FLOORS",
     "AcquisitionMaximiser",
+    "acquisition_at",
     "gumbel_max_values",
+    "max_value_floor",
     "mes",
     "ucb",
 ]
@@ -40,6 +57,8 @@ Array = NDArray[np.float64]
 #: An acquisition: (mean (m,), variance (m,)) -> (value (m,), ∂value/∂mean (m,), ∂value/∂variance (m,)).
 Acquisition = Callable[[Array, Array], tuple[Array, Array, Array]]
 ACQUISITIONS = ("ucb", "mes")
+#: The rules of MES's floor (``mes_floor``): Eq. (A4) or the former one over the candidates alone.
+MES_FLOORS = ("believed", "candidates")
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 
 
@@ -67,13 +86,20 @@ def mes(mean: Array, variance: Array, max_values: Array) -> tuple[Array, Array, 
     return value, dmean, dvariance
 
 
-def gumbel_max_values(mean: Array, variance: Array, n_samples: int, rng: np.random.Generator) -> Array:
+def gumbel_max_values(
+    mean: Array,
+    variance: Array,
+    n_samples: int,
+    rng: np.random.Generator,
+    floor: float | None = None,
+) -> Array:
     """K samples of max_θ f(s, θ), Eq. (A3): a Gumbel fitted to the quartiles of Π_i Φ((y − μ_i)/σ_i)
-    over the candidates (m,), found by bisection; samples below max μ_i + 1e-6·(1 + |max μ_i|) are raised
-    to it (the maximum is at least the best mean's value, up to noise)."""
+    over the candidates (m,), found by bisection, and raised to ``floor`` (Eq. A4, :func:`max_value_floor`;
+    None: max μ_i + 1e-6·(1 + |max μ_i|), the maximum is at least the best mean's value, up to noise)."""
     std = np.sqrt(variance)
-    floor = float(mean.max())
-    low = floor - 1e-9
+    top = float(mean.max())
+    lowest = top + 1e-6 * (1.0 + abs(top)) if floor is None else floor
+    low = top - 1e-9
     high = float((mean + 6.0 * std).max()) + 1e-9
 
     def log_cdf(y: Array) -> Array:
@@ -90,7 +116,37 @@ def gumbel_max_values(mean: Array, variance: Array, n_samples: int, rng: np.rand
     location = q50 + scale * math.log(-math.log(0.5))
     uniform = rng.uniform(1e-12, 1.0 - 1e-12, n_samples)
     samples = location - scale * np.log(-np.log(uniform))
-    return np.maximum(samples, floor + 1e-6 * (1.0 + abs(floor)))
+    return np.maximum(samples, lowest)
+
+
+def acquisition_at(
+    name: str,
+    mean: Array,
+    variance: Array,
+    rng: np.random.Generator,
+    *,
+    beta: float,
+    samples: int,
+    floor: float | None = None,
+) -> Acquisition:
+    """The acquisition ``name`` at one context, from its candidates' posterior mean and variance (m,):
+    UCB, Eq. (A1), with ``beta``, or MES, Eq. (A2), over ``samples`` maxima drawn by Eq. (A3) (from
+    ``rng``) and raised to ``floor`` (:func:`gumbel_max_values`)."""
+    if name == "ucb":
+        return lambda m, v: ucb(m, v, beta)
+    maxima = gumbel_max_values(mean, variance, samples, rng, floor)
+    return lambda m, v: mes(m, v, maxima)
+
+
+def max_value_floor(model: Any, believed: Array, mean: Array) -> float:
+    """Eq. (A4)'s floor of the sampled maxima at a context: above the candidates' largest posterior mean
+    (``mean`` (m,)) by 1e-6 of it, and above that at the inputs ``believed`` (k, d) of the batch's earlier
+    rows by five standard deviations of ``model.observation_noise`` (a variance in μ's units)."""
+    best = float(mean.max())
+    floor = best + 1e-6 * (1.0 + abs(best))
+    if believed.shape[0]:
+        floor = max(floor, float(model.predict(believed)[0].max()) + 5.0 * math.sqrt(model.observation_noise))
+    return floor
 
 
 class AcquisitionMaximiser:

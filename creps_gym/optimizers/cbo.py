@@ -14,7 +14,8 @@ acquisitions of :mod:`creps_gym.optimizers.acquisitions`):
 2. After that, each row's θ maximises the acquisition at its context s (UCB, A1, or MES, A2–A3) over the
    parameter box: random candidates and the observed θ are scored, L-BFGS-B starts from the best few.
 3. Within a batch, each chosen (s, θ) is added to the model with its posterior mean as a fantasised return
-   (the kriging believer), so a batch of any size spreads out.
+   (the kriging believer), so a batch of any size spreads out; MES's sampled maxima stay above those
+   fantasies (Eq. A4 of :mod:`creps_gym.optimizers.acquisitions`), so it does at one context too.
 
 ``tell`` appends the episodes to the data; the hyperparameters (G3) are refitted by maximum likelihood when
 the data have grown by ``refit_growth`` since the last fit, and otherwise kept, so an ask costs one Cholesky
@@ -41,12 +42,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from creps_gym._validation import check_positive_int
-from creps_gym.optimizers.acquisitions import Acquisition, AcquisitionMaximiser, gumbel_max_values, mes, ucb
+from creps_gym.optimizers.acquisitions import AcquisitionMaximiser, acquisition_at, max_value_floor
 from creps_gym.optimizers.base import ContextualOptimizer
 from creps_gym.optimizers.cbo_config import MAX_COUNTS, CBOConfig, fold_contexts
 from creps_gym.optimizers.cbo_recommend import (
     RECOMMEND_SEED,
-    distillation_grid,
+    distillation_contexts,
+    least_squares_distillation,
     told_choice,
     trust_region,
     trust_region_maximiser,
@@ -242,14 +244,14 @@ class ContextualBO(ContextualOptimizer):
         n = contexts.shape[0]
         rows = np.empty((n, self.n_params))
         model, known = self.model, self.returns.shape[0]
-        scaled = self._scaled_contexts(contexts)
+        scaled, chosen = self._scaled_contexts(contexts), np.zeros((0, self.n_params))
         for i in range(n):
             if model is None or known + i < self.config.n_initial:
                 draw = self.config.initial_mean + self._chol_initial @ self.rng.standard_normal(self.n_params)
                 rows[i] = np.clip(draw, *self.config.param_box)
                 continue
-            unit = self._propose(model, scaled[i])
-            rows[i] = self._unscaled_params(unit)
+            unit = self._propose(model, scaled[i], chosen)
+            rows[i], chosen = self._unscaled_params(unit), np.vstack([chosen, unit])
             if i + 1 < n:  # the kriging believer: the chosen point's posterior mean as its return
                 x = np.concatenate([scaled[i], unit])
                 model = model.condition(x, float(model.predict(x[None, :])[0][0]))
@@ -266,17 +268,18 @@ class ContextualBO(ContextualOptimizer):
             nearest = np.argsort(distance, kind="stable")[:keep]
         return units[nearest], nearest
 
-    def _propose(self, model: GPModel, context: Array) -> Array:
+    def _propose(self, model: GPModel, context: Array, chosen: Array) -> Array:
+        """The acquisition's maximiser over θ's unit box at a scaled context (z,), after the batch's rows
+        ``chosen`` (k, p), unit θ (k = 0 for the first; their fantasised returns are in ``model``)."""
         random = self.rng.uniform(size=(self.config.candidates, self.n_params))
         candidates = np.vstack([random, self._observed_units(context)[0]])
         candidates = with_trend_maximiser(candidates, model.beta, context, (0.0, 1.0))
         mean, variance = model.predict(self._maximiser.inputs(context, candidates))
-        if self.config.acquisition == "ucb":
-            beta = self.config.beta
-            acquisition: Acquisition = lambda m, v: ucb(m, v, beta)  # noqa: E731
-        else:
-            maxima = gumbel_max_values(mean, variance, self.config.mes_samples, self.rng)
-            acquisition = lambda m, v: mes(m, v, maxima)  # noqa: E731
+        config, floor = self.config, None  # mes_floor="candidates": the former floor
+        if config.acquisition == "mes" and config.mes_floor == "believed":
+            floor = max_value_floor(model, self._maximiser.inputs(context, chosen), mean)  # Eq. (A4)
+        options = {"beta": config.beta, "samples": config.mes_samples, "floor": floor}
+        acquisition = acquisition_at(config.acquisition, mean, variance, self.rng, **options)
         maximiser = self._maximiser.maximise_scored
         return maximiser(model, context, candidates, mean, variance, acquisition)[0]
 
@@ -337,16 +340,9 @@ class ContextualBO(ContextualOptimizer):
         """The grid :meth:`mean_policy` fits on: ``grid_points`` per dimension over the configured context
         box, else over the told contexts' range, shape (g, z) (beyond 10,000 grid points, 1,000 uniform
         contexts from a fixed seed)."""
-        z = self.n_context_dims
-        if z == 0:  # one (empty) context: the policy is a constant
-            return np.zeros((1, 0))
-        if self.config.context_box is not None:
-            low, high = self.config.context_box
-        elif self.returns.shape[0]:
-            low, high = self.contexts.min(axis=0), self.contexts.max(axis=0)
-        else:
-            return np.zeros((1, z))
-        return distillation_grid(low, high, self.config.grid_points, MAX_COUNTS["grid"])
+        config = self.config
+        z, box, points = self.n_context_dims, config.context_box, config.grid_points
+        return distillation_contexts(z, box, self.contexts, points, MAX_COUNTS["grid"])
 
     def mean_policy(self) -> Policy:
         """``recommend`` distilled into a :class:`Policy` with the ``mean_features`` map: the least-squares
@@ -354,12 +350,8 @@ class ContextualBO(ContextualOptimizer):
         ``diagnostics``: ``distillation_rmse`` (root mean square over the grid and the parameters) and
         ``distillation_max_error``, in parameter units."""
         grid = self.distillation_contexts()
-        targets = self.recommend(grid)
-        features = self.config.mean_map(grid)
-        coefficients = np.linalg.lstsq(features, targets, rcond=None)[0]
-        residual = features @ coefficients - targets
-        self._diagnostics["distillation_rmse"] = float(np.sqrt(np.mean(residual**2)))
-        self._diagnostics["distillation_max_error"] = float(np.abs(residual).max())
+        coefficients, error = least_squares_distillation(self.config.mean_map(grid), self.recommend(grid))
+        self._diagnostics.update(error)
         source = {"optimizer": self.kind, "iteration": self.iteration}
         return Policy(self.config.mean_map, coefficients, source=source)
 

@@ -15,7 +15,7 @@ from creps_gym._validation import (
     check_real_in_range,
     check_seed,
 )
-from creps_gym.optimizers.acquisitions import ACQUISITIONS
+from creps_gym.optimizers.acquisitions import ACQUISITIONS, MES_FLOORS
 from creps_gym.optimizers.cbo_recommend import RECOMMEND_RULES
 from creps_gym.optimizers.features import AffineFeatures, FeatureMap, make_features
 from creps_gym.optimizers.gp_model import FIT_SUBSETS
@@ -47,6 +47,7 @@ _CHOICES = {
     "trend": TRENDS,
     "fit_subset": FIT_SUBSETS,
     "recommend_over": RECOMMEND_RULES,
+    "mes_floor": MES_FLOORS,
 }
 
 
@@ -156,6 +157,12 @@ class CBOConfig:
         None: max(4, 2(p + z)).
     candidates : int                random θ scored at each asked context (the observed θ are scored too).
     starts : int                    L-BFGS-B runs from the best candidates.
+    mes_floor : str                 the floor of MES's sampled maxima (Eq. A4 of
+        :mod:`~creps_gym.optimizers.acquisitions`): ``"believed"``, the largest posterior mean over the
+        candidates and the batch's earlier rows, plus five noise standard deviations (a batch at one
+        context then spreads out), or ``"candidates"``, that over the candidates plus 1e-6 of it, under
+        which a batch at one context collapses onto its first row. ``"candidates"`` before 2026-11-30, as
+        a checkpoint that does not name it resumes. Default ``"believed"``.
     trust_share : float or None     q of ``recommend``'s trust region (Eq. R1 of
         :mod:`~creps_gym.optimizers.cbo`): the posterior mean is maximised over the box spanned by the θ of
         the best share q of the ``candidates // 4`` episodes with the nearest contexts; None: over the
@@ -208,6 +215,7 @@ class CBOConfig:
     prior_mean: str = "min"
     trend: str = "constant"
     mes_samples: int = 10
+    mes_floor: str = "believed"
     initial_samples: int | None = None
     candidates: int = 256
     starts: int = 3
@@ -330,6 +338,7 @@ class CBOConfig:
         document = dict(state["config"])
         document.setdefault("fit_subset", "recent")  # written before the options existed: their rules
         document.setdefault("log_quantile", 0.5)
+        document.setdefault("mes_floor", "candidates")
         has_param, has_context = document.pop("has_param_box", False), document.pop("has_context_box", False)
         arrays = {
             "initial_mean": np.asarray(state["initial_mean"]),

@@ -49,7 +49,8 @@ from creps_gym.optimizers.gp_trend import with_trend_maximiser
 __all__ = [
     "RECOMMEND_RULES",
     "RECOMMEND_SEED",
-    "distillation_grid",
+    "distillation_contexts",
+    "least_squares_distillation",
     "observed_maximiser",
     "told_choice",
     "trust_region",
@@ -63,16 +64,31 @@ RECOMMEND_RULES = ("trust_region", "observed", "neighbours")
 RECOMMEND_SEED = 20_150_901
 
 
-def distillation_grid(low: Array, high: Array, points: int, limit: int) -> Array:
+def distillation_contexts(
+    z: int, box: tuple[Array, Array] | None, told: Array, points: int, limit: int
+) -> Array:
     """The contexts ``mean_policy`` distils ``recommend`` on, shape (g, z): ``points`` per dimension of the
-    box [low, high] (z,); where that grid would exceed ``limit`` contexts, ``limit // 10`` uniform ones from
-    a fixed seed."""
-    z = low.shape[0]
+    context ``box`` (low (z,), high (z,)), else of the ``told`` contexts' (n, z) range; where that grid
+    would exceed ``limit`` contexts, ``limit // 10`` uniform ones from a fixed seed. One context (zeros)
+    when z = 0 (the policy is a constant) or when there is neither a box nor a told context."""
+    if z == 0 or (box is None and not told.shape[0]):
+        return np.zeros((1, z))
+    low, high = box if box is not None else (told.min(axis=0), told.max(axis=0))
     if points**z > limit:  # many context dimensions: a fixed random design
         unit = np.random.default_rng(RECOMMEND_SEED).uniform(size=(limit // 10, z))
         return low + unit * (high - low)
     axes = [np.linspace(a, b, points) for a, b in zip(low, high, strict=True)]
     return np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1).reshape(-1, z)
+
+
+def least_squares_distillation(features: Array, targets: Array) -> tuple[Array, dict[str, float]]:
+    """The coefficients (k, p) of the features (g, k) that fit the targets (g, p) in least squares, and the
+    fit's error on them in the targets' units: ``distillation_rmse`` (root mean square over the grid and
+    the parameters) and ``distillation_max_error``."""
+    coefficients = np.linalg.lstsq(features, targets, rcond=None)[0]
+    residual = features @ coefficients - targets
+    error = {"distillation_rmse": float(np.sqrt(np.mean(residual**2)))}
+    return coefficients, error | {"distillation_max_error": float(np.abs(residual).max())}
 
 
 def trust_region(

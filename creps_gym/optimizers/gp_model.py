@@ -154,6 +154,11 @@ class GPModel:
         """σ_n²."""
         return float(np.exp(self.log_hyper[-1]))
 
+    @property
+    def observation_noise(self) -> float:
+        """σ_n² in the units of :meth:`predict` (σ_r² σ_n² with a trend)."""
+        return self.scale**2 * self.noise
+
     def predict(self, x: Array) -> tuple[Array, Array]:
         """Posterior mean and latent variance at x (m, d), Eq. (G2) (and G4): two arrays of shape (m,)."""
         cross, variance = self._latent(x)

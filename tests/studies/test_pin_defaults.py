@@ -10,7 +10,7 @@ import pytest
 
 from benchmarks import pin_defaults
 from benchmarks.contextual_bbo.protocol import ProtocolSpec
-from benchmarks.study_options import C3_PIN, CBO_FIT_PIN, CBO_LOG_PIN, CBO_PINS, pin_c3
+from benchmarks.study_options import C3_PIN, CBO_FIT_PIN, CBO_FLOOR_PIN, CBO_LOG_PIN, CBO_PINS, pin_c3
 from benchmarks.study_tools import RunSpec
 
 
@@ -52,10 +52,10 @@ def test_a_labelled_or_recorded_document_keeps_its_key_and_file_name(tmp_path):
         pin_defaults.pinned("reacher", tmp_path / "d.json", {})
 
 
-def test_a_low_budget_c_bo_run_gets_the_refit_and_log_pins_and_keeps_the_options_it_chose(tmp_path):
-    """c-bo's pins (its refit data and its log scale) are added to every c-bo column's document (the
-    library columns' too), beside the options the column sets; an option the run set itself keeps its
-    value; a document with both pins is left alone, one pinned before the log pin gets it."""
+def test_a_low_budget_c_bo_run_gets_c_bos_pins_and_keeps_the_options_it_chose(tmp_path):
+    """c-bo's pins (its refit data, its log scale and MES's floor) are added to every c-bo column's
+    document (the library columns' too), beside the options the column sets; an option the run set itself
+    keeps its value; a document with every pin is left alone, one pinned before the later pins gets them."""
 
     def low(options: dict, factory: str | None = None) -> dict:
         method = {"optimizer": "c-bo", "options": options, "selector": None}
@@ -67,10 +67,16 @@ def test_a_low_budget_c_bo_run_gets_the_refit_and_log_pins_and_keeps_the_options
     library = pin_defaults.pinned("low_budget", path, low({}, "benchmarks.low_budget.sklearn_cbo:SklearnCBO"))
     assert library[1]["method"]["options"] == dict(CBO_PINS)
     chosen = pin_defaults.pinned("low_budget", path, low({"fit_subset": "spread"}))[1]["method"]["options"]
-    assert chosen == {"fit_points": 256, "fit_subset": "spread", "log_quantile": 0.5}
+    assert chosen == {
+        "fit_points": 256,
+        "fit_subset": "spread",
+        "log_quantile": 0.5,
+        "mes_floor": "candidates",
+    }
     assert pin_defaults.pinned("low_budget", path, low(dict(CBO_PINS))) is None
     earlier = pin_defaults.pinned("low_budget", path, low(dict(CBO_FIT_PIN)))[1]["method"]["options"]
     assert earlier == dict(CBO_PINS) and dict(CBO_LOG_PIN) == {"log_quantile": 0.5}
+    assert dict(CBO_FLOOR_PIN) == {"mes_floor": "candidates"}
     creps = {"method": {"optimizer": "creps", "options": {"epsilon": 1.0}, "selector": None}}
     assert pin_defaults.pinned("low_budget", path, creps) is None
 

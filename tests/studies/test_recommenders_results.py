@@ -14,7 +14,7 @@ from helpers import EXTRAS, driven_cbo, skip_unless_stack_of
 
 from benchmarks.low_budget import recommenders, replay_results_path
 from benchmarks.low_budget.columns import method_by_name
-from benchmarks.study_options import CBO_LOG_PIN, CBO_PINS
+from benchmarks.study_options import CBO_KEPT_PINS, CBO_PINS
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
 #: The committed measurements: the v1 kicks, with the quadratic prior mean, the functions, the v2 kicks (on
@@ -129,8 +129,8 @@ def test_unpinned_and_options_reach_the_run_as_the_column_they_describe(monkeypa
     for flag, options in ((True, None), (False, None), (True, {"symmetric_contexts": [1]})):
         with pytest.raises(RuntimeError, match="stop here"):
             recommenders.one_run("Sphere-p2-z1", "c-bo", 0, 50, flag, options)
-    assert started[1] is None and dict(started[0].options) == dict(CBO_LOG_PIN)
-    assert dict(started[2].options) == {**dict(CBO_LOG_PIN), "symmetric_contexts": (1,)}
+    assert started[1] is None and dict(started[0].options) == dict(CBO_KEPT_PINS)
+    assert dict(started[2].options) == {**dict(CBO_KEPT_PINS), "symmetric_contexts": (1,)}
     assert dict(method_by_name("c-bo").options) == dict(CBO_PINS)
 
 

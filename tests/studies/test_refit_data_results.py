@@ -13,7 +13,7 @@ from helpers import EXTRAS, skip_unless_stack_of
 
 from benchmarks.low_budget import refit_data
 from benchmarks.low_budget.columns import method_by_name, unpinned
-from benchmarks.study_options import CBO_FIT_PIN, CBO_LOG_PIN
+from benchmarks.study_options import CBO_FIT_PIN, CBO_KEPT_PINS
 from creps_gym.optimizers import make_optimizer
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "results"
@@ -21,9 +21,9 @@ RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "low_budget" / "r
 NAMES = ["refit_data", "refit_data_functions", "refit_data_columns"]
 
 
-def test_unpinned_is_the_column_with_c_bos_own_refit_defaults_and_the_former_log_scale():
+def test_unpinned_is_the_column_with_c_bos_own_refit_defaults_and_the_former_log_scale_and_floor():
     ucb = unpinned(method_by_name("c-bo-ucb"))
-    assert ucb.options == (("acquisition", "ucb"), *CBO_LOG_PIN) and ucb.name == "c-bo-ucb"
+    assert ucb.options == (("acquisition", "ucb"), *CBO_KEPT_PINS) and ucb.name == "c-bo-ucb"
     config = make_optimizer("c-bo", 2, 1, 0, **dict(unpinned(method_by_name("c-bo")).options)).config
     assert (config.fit_points, config.fit_subset) != tuple(dict(CBO_FIT_PIN).values())  # not the pin's
     with pytest.raises(ValueError, match=r"method: expected a c-bo column pinned to .* got 'creps'"):
@@ -37,11 +37,11 @@ def test_unpinned_is_the_column_with_c_bos_own_refit_defaults_and_the_former_log
 def test_a_run_is_the_study_runs_column_without_the_pin_and_shares_its_first_episodes():
     """Sphere p = 2, z = 1, seed 0, to 50 episodes: no refit has seen more than 256 episodes, so the value
     is the committed study run's at 50 bit for bit; the run records c-bo's own refit defaults (no options
-    but the log pin)."""
+    but the kept pins)."""
     study = refit_data.study_document("Sphere-p2-z1", "c-bo", 0, 4)
     skip_unless_stack_of(study["provenance"])
     run = refit_data.one("Sphere-p2-z1", "c-bo", 0, 50)
-    assert run["options"] == dict(CBO_LOG_PIN) and run["budgets"] == [50] and run["samples"] == 4
+    assert run["options"] == dict(CBO_KEPT_PINS) and run["budgets"] == [50] and run["samples"] == 4
     assert run["values"] == study["values"][:1]
     assert refit_data.study_document("Sphere-p2-z1", "c-bo", 99, 4) is None
 
@@ -78,14 +78,16 @@ def test_the_committed_table_is_the_rendering_of_the_committed_results(tmp_path,
 def test_every_committed_run_shares_the_study_runs_first_episodes_and_uses_the_new_default(name):
     """10 seeds per task and column, each with c-bo's own refit defaults, each agreeing with the study's
     committed document of its task, column and seed at 50, 100 and 200 episodes bit for bit. The runs were
-    measured before c-bo's log scale changed (2026-11-30), so their options do not name the log pin that
-    the unpinned column now carries: they ran with it."""
+    measured before c-bo's log scale and MES's floor changed (2026-11-30), so their options do not name
+    the pins that the unpinned column now carries: they ran with them."""
     document = json.loads((RESULTS / f"{name}.json").read_text(encoding="utf-8"))
     assert document["provenance"]["recorded"] is True
     runs = document["runs"]
     for run in runs:
         study = refit_data.study_document(run["task"], run["method"], run["seed"], run["samples"])
         column = dict(unpinned(method_by_name(run["method"])).options)
-        assert {**dict(CBO_LOG_PIN), **run["options"]} == column and run["values"][:3] == study["values"][:3]
+        assert {**dict(CBO_KEPT_PINS), **run["options"]} == column and run["values"][:3] == study["values"][
+            :3
+        ]
     for cell in {(run["task"], run["method"]) for run in runs}:
         assert sorted(run["seed"] for run in runs if (run["task"], run["method"]) == cell) == list(range(10))

@@ -20,9 +20,9 @@ observed with their posterior means as returns (σ_n: the observation noise's st
 units). The second term matters at a context asked twice in a batch: row j's maximiser beats every random
 candidate (L-BFGS-B improved on them), so the first term lies below μ(s, θ_j), where σ has shrunk to the
 noise; there γ is very negative, α largest, and every later row returns to θ_j. Five noise deviations above
-it, γ there is about 5 and MES leaves it (``mes_floor="believed"``, the default; ``"candidates"``: the
-first term alone, the rule before 2026-11-30). A batch's first row, and every row at a context far from the
-earlier ones, keeps the first term.
+it, γ there is at least 5 (σ ≤ σ_n) and MES leaves it (``mes_floor="believed"``, the default;
+``"candidates"``: the first term alone, the rule before 2026-11-30). A batch's first row keeps the first
+term, and so does every row at a context where the earlier rows' means plus the margin stay below m.
 
 Each is maximised over θ in the parameter box (or a sub-box of it, e.g. the trust region of ``recommend``)
 with s fixed: the acquisition is evaluated on many candidates (random draws and the observed θ) and

@@ -14,6 +14,7 @@ Protocol rules (enforced by :class:`ContextualOptimizer`, documented for users):
   accepts injected solutions. External rows are counted in the diagnostics.
 * A rejected call raises before anything changes, so the optimiser is left exactly as it was.
 * A second ``ask`` before ``tell`` replaces the pending batch: only the latest asked rows can be told.
+  ``ask_more`` adds rows to it instead, so a batch may be asked a row at a time and told at once.
 
 Checkpoints are ``.npz`` files holding the arrays plus one JSON document (``__state__.json``), never
 pickle (:mod:`creps_gym.optimizers.state_files`). A restored optimiser continues with bit-identical asks.
@@ -128,16 +129,42 @@ class ContextualOptimizer(ABC):
         ndarray, shape (n, p)
         """
         contexts = self._check_contexts(contexts, "contexts")
+        params = self._checked_sample(contexts, None)
+        self._set_pending(contexts.copy(), params.copy())
+        return params
+
+    def ask_more(self, contexts: Any) -> Array:
+        """Sample parameters for more contexts of the pending batch (``ask`` when none is pending).
+
+        The rows join the pending batch, which one ``tell`` then takes: a batch may be asked a few rows at
+        a time (a real robot's episodes, :mod:`creps_gym.runner.manual`). An optimiser whose rows depend
+        on the batch's others (c-bo's kriging believer) chooses them after the pending rows; the others
+        sample them as ``ask`` does. Contexts (n, z) in, parameters (n, p) out, as for :meth:`ask`.
+        """
+        if self._pending is None:
+            return self.ask(contexts)
+        contexts = self._check_contexts(contexts, "contexts")
+        earlier_contexts, earlier_params = self._pending
+        params = self._checked_sample(contexts, self._pending)
+        self._set_pending(np.vstack([earlier_contexts, contexts]), np.vstack([earlier_params, params]))
+        return params
+
+    def _checked_sample(self, contexts: Array, earlier: tuple[Array, Array] | None) -> Array:
+        """:meth:`_sample` (``earlier`` None) or :meth:`_sample_after`, refused when not finite."""
         generator = getattr(self, "rng", None)
         state = None if generator is None else generator.bit_generator.state
         with np.errstate(over="ignore", invalid="ignore"):
-            params = self._sample(contexts)
+            params = self._sample(contexts) if earlier is None else self._sample_after(contexts, *earlier)
         if not np.isfinite(params).all():  # e.g. a high-degree polynomial of contexts near 1e100
             if state is not None:
                 generator.bit_generator.state = state  # a rejected ask changes nothing
             raise overflowing_contexts(contexts, "the sampled parameters")
-        self._set_pending(contexts.copy(), params.copy())
         return params
+
+    def _sample_after(self, contexts: Array, earlier_contexts: Array, earlier_params: Array) -> Array:
+        """:meth:`_sample` for rows that join a pending batch of ``earlier_contexts`` (k, z) and
+        ``earlier_params`` (k, p); by default a row does not depend on the batch's others."""
+        return self._sample(contexts)
 
     def _set_pending(self, contexts: Array, params: Array) -> None:
         """Remember an asked batch; a second ``ask`` before ``tell`` replaces the first."""

@@ -233,29 +233,33 @@ class ContextualBO(ContextualOptimizer):
 
     # -- ask -----------------------------------------------------------------------------------------------
     def _sample(self, contexts: Array) -> Array:
+        return self._sample_after(contexts, np.zeros((0, self.n_context_dims)), np.zeros((0, self.n_params)))
+
+    def _sample_after(self, contexts: Array, earlier_contexts: Array, earlier_params: Array) -> Array:
         state = self.rng.bit_generator.state
         try:
-            return self._choose(contexts)
+            return self._choose(np.vstack([earlier_contexts, contexts]), self._scaled_params(earlier_params))
         except BaseException:
             self.rng.bit_generator.state = state  # a rejected ask changes nothing
             raise
 
-    def _choose(self, contexts: Array) -> Array:
-        n = contexts.shape[0]
-        rows = np.empty((n, self.n_params))
-        model, known = self.model, self.returns.shape[0]
-        scaled, chosen = self._scaled_contexts(contexts), np.zeros((0, self.n_params))
+    def _choose(self, contexts: Array, given: Array) -> Array:
+        """The rows (n − k, p) for ``contexts`` (n, z) after the first k, whose θ are ``given`` (k, p), in
+        θ's unit box: those of the pending batch for ``ask_more`` (k = 0 for ``ask``)."""
+        model, known, k, n = self.model, self.returns.shape[0], given.shape[0], contexts.shape[0]
+        scaled, rows, chosen = self._scaled_contexts(contexts), np.empty((n, self.n_params)), given[:0]
         for i in range(n):
             if model is None or known + i < self.config.n_initial:
-                draw = self.config.initial_mean + self._chol_initial @ self.rng.standard_normal(self.n_params)
-                rows[i] = np.clip(draw, *self.config.param_box)
+                if i >= k:
+                    draw = self._chol_initial @ self.rng.standard_normal(self.n_params)
+                    rows[i] = np.clip(self.config.initial_mean + draw, *self.config.param_box)
                 continue
-            unit = self._propose(model, scaled[i], chosen)
+            unit = given[i] if i < k else self._propose(model, scaled[i], chosen)
             rows[i], chosen = self._unscaled_params(unit), np.vstack([chosen, unit])
             if i + 1 < n:  # the kriging believer: the chosen point's posterior mean as its return
                 x = np.concatenate([scaled[i], unit])
                 model = model.condition(x, float(model.predict(x[None, :])[0][0]))
-        return rows
+        return rows[k:]
 
     def _observed_units(self, context: Array) -> tuple[Array, Array]:
         """The observed θ (scaled, clipped to the box) of the ``candidates // 4`` episodes whose scaled

@@ -7,7 +7,9 @@ on; its ``meta``'s ``"ask_tell"``: the parameter and context boxes), ``checkpoin
 (the mean policy after the last batch) and, once finished, ``history.json``/``.csv``.
 
 **Episodes.** :meth:`AskTellRun.ask` asks the optimiser for one context and keeps the episode pending,
-with an id (1, 2, ... over the run); up to ``samples`` of a batch may be pending at once.
+with an id (1, 2, ... over the run); up to ``samples`` of a batch may be pending at once. It asks with
+``ask_more``, as one more row of the batch asked so far: c-bo chooses it after the batch's episodes (its
+kriging believer), so episodes asked at one context spread out instead of repeating one θ.
 :meth:`AskTellRun.tell` records one's return (or drops it as failed: another episode takes its place).
 At ``samples`` returns the optimiser's ``tell`` gets the batch, the iteration is logged and checkpointed
 and ``policy.npz`` rewritten. The asked rows are kept as the optimiser's pending batch (its
@@ -303,7 +305,7 @@ class AskTellRun:
                 f"ask: expected a batch with room, got {self.config.samples} episodes asked and episodes "
                 f"{ids} pending: tell their returns (or that they failed) first"
             )
-        asked = protocol.real_params(self.optimizer.ask(row[None, :]), "ask", (1, self.p))[0]
+        asked = protocol.real_params(self.optimizer.ask_more(row[None, :]), "ask", (1, self.p))[0]
         params = np.clip(asked, self.spaces.param_low, self.spaces.param_high)
         episode = Episode(self.next_episode, row.copy(), asked, params)
         entry = {"event": "ask", "episode": episode.episode, "iteration": self.iteration + 1}

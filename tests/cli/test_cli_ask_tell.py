@@ -188,6 +188,47 @@ class Crash(BaseException):
     """A process killed between two writes."""
 
 
+def _batch_run(path: Path, reopen: bool) -> np.ndarray:
+    """Three batches of 4 at fresh contexts, then 4 episodes at s = 0.5, asked one at a time and told in
+    one open run (``reopen`` False: a Python user) or reopening it for every step (as the shell does);
+    the last batch's parameters (4, 2)."""
+    config = RunConfig(env=None, optimizer="c-bo", iterations=5, samples=4, seed=3)
+    spaces = Spaces.of(param_low=[-1, -1], param_high=[1, 1], context_low=[0], context_high=[1])
+    AskTellRun.create(path, config, spaces).close()
+    run, rng = AskTellRun.open(path), np.random.default_rng(0)
+
+    def next_step(run: AskTellRun) -> AskTellRun:
+        if not reopen:
+            return run
+        run.close()
+        return AskTellRun.open(path)
+
+    try:
+        for batch in range(4):
+            episodes = []
+            for _ in range(4):
+                episodes.append(run.ask([0.5] if batch == 3 else [float(rng.uniform())]))
+                run = next_step(run)
+            for episode in episodes:
+                run.tell(returns_of(episode.params.tolist(), float(episode.context[0])), episode.episode)
+                run = next_step(run)
+    finally:
+        run.close()
+    return np.array([episode.params for episode in episodes])
+
+
+def test_a_batch_asked_a_row_at_a_time_is_told_in_one_open_run_and_spreads_at_one_context(
+    tmp_path: Path,
+) -> None:
+    """Each ask is one more row of the batch (``ask_more``): told in the same open run (before, its tell
+    refused the batch's earlier rows as never asked), the same bits as reopening the run for every step,
+    and c-bo's kriging believer spreads the four episodes asked at one context."""
+    in_one = _batch_run(tmp_path / "one", reopen=False)
+    assert in_one.tobytes() == _batch_run(tmp_path / "shell", reopen=True).tobytes()
+    distances = np.linalg.norm(in_one[:, None] - in_one[None, :], axis=2)[np.triu_indices(4, 1)]
+    assert distances.min() > 1e-3
+
+
 def _steps() -> list[tuple[str, float]]:
     """Ask two episodes, tell them (one batch), twice: the run finishes (iterations=2)."""
     steps = []

@@ -203,6 +203,14 @@ class MinimizerAdapter(ContextualOptimizer):
         y = self._raw_ask(n)
         return self.initial_mean + self.initial_std * y
 
+    def _sample_after(self, contexts: Array, earlier_contexts: Array, earlier_params: Array) -> Array:
+        """Refused: the wrapped library asks and tells whole populations (``ask_more`` is ``ask`` only
+        while no batch is pending)."""
+        raise RuntimeError(
+            f"ask_more: expected no pending batch ({self.kind} asks and tells whole populations), got "
+            f"{earlier_contexts.shape[0]} pending rows: tell them first, or ask the whole batch at once"
+        )
+
     def _raw_ask(self, n: int) -> Array:
         if self._lib is None:
             self._lib = self._create(n)

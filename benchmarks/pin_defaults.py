@@ -1,7 +1,7 @@
 r"""Carry the committed runs over four default changes: issue 45's ``ridge_centre`` "zero" → "old" of
 ``c-cma-es``, c-bo's refit data (2026-11-30: ``fit_points`` 256 → 1024, ``fit_subset`` "recent" →
 "spread"), c-bo's log transform scale (2026-11-30: ``log_quantile`` 0.5 → 0.25) and MES's floor
-(2026-11-30: ``mes_floor`` "candidates" → "believed").
+(2026-11-30: ``mes_floor`` "candidates" → "observed").
 
 Every committed run of ``c-cma-es`` or ``c-cma-es-surrogate`` that does not set ``ridge_centre`` was
 computed with C3, the default until issue 45. The studies pin those columns to ``ridge_centre="zero"``

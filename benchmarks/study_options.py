@@ -50,8 +50,9 @@ CBO_FIT_PIN = (("fit_points", 256), ("fit_subset", "recent"))
 #: (:data:`CBO_PINS`); ``benchmarks/low_budget/recommenders.py --options`` measures the new default.
 CBO_LOG_PIN = (("log_quantile", 0.5),)
 #: The committed ``c-bo`` runs were computed with MES's sampled maxima floored at the candidates' largest
-#: posterior mean, c-bo's rule until 2026-11-30 (now with the batch's fantasies and five noise standard
-#: deviations above them: ``mes_floor``, Eq. A4 of ``creps_gym/optimizers/acquisitions.py``). Every c-bo
+#: posterior mean, c-bo's rule until 2026-11-30 (now also five noise standard deviations above the inputs
+#: the model holds at the asked context: ``mes_floor``, Eq. A4 of ``creps_gym/optimizers/acquisitions.py``;
+#: the same bits where no context repeats, as in the study's continuous draws). Every c-bo
 #: column carries it too; ``benchmarks/low_budget/recommenders.py --options`` measures the new default.
 CBO_FLOOR_PIN = (("mes_floor", "candidates"),)
 #: The pins of every c-bo column.

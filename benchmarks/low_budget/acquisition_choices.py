@@ -54,8 +54,7 @@ def proposals(optimizer: Any, context: np.ndarray) -> dict[str, np.ndarray]:
         for acquisition in ACQUISITIONS:
             optimizer.rng.bit_generator.state = state
             optimizer.config = dataclasses.replace(config, acquisition=acquisition)
-            first = np.zeros((0, optimizer.n_params))  # the first row of a batch
-            chosen[acquisition] = optimizer._propose(optimizer.model, context, first)
+            chosen[acquisition] = optimizer._propose(optimizer.model, context)
     finally:
         optimizer.config, optimizer.rng.bit_generator.state = config, state
     return chosen

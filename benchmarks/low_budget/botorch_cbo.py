@@ -207,10 +207,9 @@ class BoTorchCBO(LibraryGPCBO):
         return np.concatenate([np.log(lengthscales), [signal, np.log(noise)]]).astype(np.float64)
 
     # -- ask -----------------------------------------------------------------------------------------------
-    def _propose(self, model: Any, context: Array, chosen: Array) -> Array:
-        """The acquisition's maximiser over θ's unit box at a scaled context (z,), by ``optimize_acqf``;
-        ``chosen``, the batch's earlier rows, and ``mes_floor`` play no part: BoTorch's MES samples its
-        maxima over its own candidate set."""
+    def _propose(self, model: Any, context: Array) -> Array:
+        """The acquisition's maximiser over θ's unit box at a scaled context (z,), by ``optimize_acqf``
+        (``mes_floor`` plays no part: BoTorch's MES samples its maxima over its own candidate set)."""
         lib, p, z = self._lib, self.n_params, self.n_context_dims
         seed = int(self.rng.integers(SEEDS))
         torch, fixed = lib["torch"], self._tensor(context[None, :])

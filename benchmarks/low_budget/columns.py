@@ -112,7 +112,7 @@ PINNED_FIT_POINTS = dict(CBO_FIT_PIN)["fit_points"]
 def unpinned(method: Method) -> Method:
     """The c-bo column ``method`` without :data:`~benchmarks.study_options.CBO_FIT_PIN`: c-bo's refit
     defaults. The log and floor pins stay (``CBO_KEPT_PINS``): the replays of the unpinned columns were
-    measured before those defaults changed; ``--options '{"log_quantile": 0.25, "mes_floor": "believed"}'``
+    measured before those defaults changed; ``--options '{"log_quantile": 0.25, "mes_floor": "observed"}'``
     adds the new ones."""
     if method.optimizer != "c-bo" or not set(CBO_FIT_PIN) <= set(method.options):
         raise ValueError(f"method: expected a c-bo column pinned to {CBO_FIT_PIN}, got {method.name!r}")

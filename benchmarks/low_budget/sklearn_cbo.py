@@ -105,6 +105,11 @@ class SklearnGP:
         self._noise = float(gp.kernel_.k2.noise_level) * scale**2
 
     @property
+    def inputs(self) -> Array:
+        """The inputs (n, d) the model holds: the told episodes' and the kriging believer's fantasies."""
+        return self._inputs
+
+    @property
     def observation_noise(self) -> float:
         """The ``WhiteKernel``'s noise variance in the units of :meth:`predict` (MES's floor, Eq. A4)."""
         return self._noise

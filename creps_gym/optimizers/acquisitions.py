@@ -13,16 +13,18 @@ With μ and σ the GP's posterior mean and standard deviation (:mod:`creps_gym.o
 
 The sampled maxima are raised to a floor, the least value the model allows the maximum at s:
 
-      y*_k ≥ max(m + 10⁻⁶(1 + |m|), max_{j<i} μ(s, θ_j) + 5 σ_n),   m = max_i μ_i,                  (A4)
+      y*_k ≥ max(m + 10⁻⁶(1 + |m|), max_{x_j ∈ H(s)} μ(x_j) + 5 σ_n),   m = max_i μ_i,               (A4)
 
-over the candidates and the rows θ_j chosen before row i of a batch, which the kriging believer holds as
-observed with their posterior means as returns (σ_n: the observation noise's standard deviation in μ's
-units). The second term matters at a context asked twice in a batch: row j's maximiser beats every random
-candidate (L-BFGS-B improved on them), so the first term lies below μ(s, θ_j), where σ has shrunk to the
-noise; there γ is very negative, α largest, and every later row returns to θ_j. Five noise deviations above
-it, γ there is at least 5 (σ ≤ σ_n) and MES leaves it (``mes_floor="believed"``, the default;
-``"candidates"``: the first term alone, the rule before 2026-11-30). A batch's first row keeps the first
-term, and so does every row at a context where the earlier rows' means plus the margin stay below m.
+m over the candidates, H(s) the inputs the model holds at exactly the context s: the told episodes at s
+and, in a batch, the earlier rows at s, which the kriging believer holds as observed with their posterior
+means as returns (σ_n: the observation noise's standard deviation in μ's units). The maximum at s is at
+least what was observed there, as in plain BO's rule (Wang & Jegelka's y* above the observations). The
+second term matters at a context asked twice: a row's maximiser beats every random candidate (L-BFGS-B
+improved on them), so the first term lies below its fantasy, where σ has shrunk to the noise; there γ is
+very negative, α largest, and every later row at s returns to it. Five noise deviations above it, γ there
+is at least 5 (σ ≤ σ_n) and MES leaves it (``mes_floor="observed"``, the default; ``"candidates"``: the
+first term alone, the rule before 2026-11-30). Where no input is held at s (contexts drawn from a
+continuous distribution never repeat), the floor is the first term, the former one bit for bit.
 
 Each is maximised over θ in the parameter box (or a sub-box of it, e.g. the trust region of ``recommend``)
 with s fixed: the acquisition is evaluated on many candidates (random draws and the observed θ) and
@@ -58,7 +60,7 @@ Array = NDArray[np.float64]
 Acquisition = Callable[[Array, Array], tuple[Array, Array, Array]]
 ACQUISITIONS = ("ucb", "mes")
 #: The rules of MES's floor (``mes_floor``): Eq. (A4) or the former one over the candidates alone.
-MES_FLOORS = ("believed", "candidates")
+MES_FLOORS = ("observed", "candidates")
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 
 
@@ -138,14 +140,15 @@ def acquisition_at(
     return lambda m, v: mes(m, v, maxima)
 
 
-def max_value_floor(model: Any, believed: Array, mean: Array) -> float:
+def max_value_floor(model: Any, held: Array, mean: Array) -> float:
     """Eq. (A4)'s floor of the sampled maxima at a context: above the candidates' largest posterior mean
-    (``mean`` (m,)) by 1e-6 of it, and above that at the inputs ``believed`` (k, d) of the batch's earlier
-    rows by five standard deviations of ``model.observation_noise`` (a variance in μ's units)."""
+    (``mean`` (m,)) by 1e-6 of it, and above the posterior mean at the inputs ``held`` (k, d) that the model
+    holds at that context by five standard deviations of ``model.observation_noise`` (a variance in μ's
+    units)."""
     best = float(mean.max())
     floor = best + 1e-6 * (1.0 + abs(best))
-    if believed.shape[0]:
-        floor = max(floor, float(model.predict(believed)[0].max()) + 5.0 * math.sqrt(model.observation_noise))
+    if held.shape[0]:
+        floor = max(floor, float(model.predict(held)[0].max()) + 5.0 * math.sqrt(model.observation_noise))
     return floor
 
 

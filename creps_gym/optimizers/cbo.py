@@ -16,6 +16,8 @@ acquisitions of :mod:`creps_gym.optimizers.acquisitions`):
 3. Within a batch, each chosen (s, θ) is added to the model with its posterior mean as a fantasised return
    (the kriging believer), so a batch of any size spreads out; MES's sampled maxima stay above those
    fantasies (Eq. A4 of :mod:`creps_gym.optimizers.acquisitions`), so it does at one context too.
+   ``ask_more(contexts)`` chooses rows after the pending batch's in the same way (a batch asked a row at a
+   time, as the real-robot loop does).
 
 ``tell`` appends the episodes to the data; the hyperparameters (G3) are refitted by maximum likelihood when
 the data have grown by ``refit_growth`` since the last fit, and otherwise kept, so an ask costs one Cholesky
@@ -247,15 +249,15 @@ class ContextualBO(ContextualOptimizer):
         """The rows (n − k, p) for ``contexts`` (n, z) after the first k, whose θ are ``given`` (k, p), in
         θ's unit box: those of the pending batch for ``ask_more`` (k = 0 for ``ask``)."""
         model, known, k, n = self.model, self.returns.shape[0], given.shape[0], contexts.shape[0]
-        scaled, rows, chosen = self._scaled_contexts(contexts), np.empty((n, self.n_params)), given[:0]
+        scaled, rows = self._scaled_contexts(contexts), np.empty((n, self.n_params))
         for i in range(n):
             if model is None or known + i < self.config.n_initial:
                 if i >= k:
                     draw = self._chol_initial @ self.rng.standard_normal(self.n_params)
                     rows[i] = np.clip(self.config.initial_mean + draw, *self.config.param_box)
                 continue
-            unit = given[i] if i < k else self._propose(model, scaled[i], chosen)
-            rows[i], chosen = self._unscaled_params(unit), np.vstack([chosen, unit])
+            unit = given[i] if i < k else self._propose(model, scaled[i])
+            rows[i] = self._unscaled_params(unit)
             if i + 1 < n:  # the kriging believer: the chosen point's posterior mean as its return
                 x = np.concatenate([scaled[i], unit])
                 model = model.condition(x, float(model.predict(x[None, :])[0][0]))
@@ -272,16 +274,17 @@ class ContextualBO(ContextualOptimizer):
             nearest = np.argsort(distance, kind="stable")[:keep]
         return units[nearest], nearest
 
-    def _propose(self, model: GPModel, context: Array, chosen: Array) -> Array:
-        """The acquisition's maximiser over θ's unit box at a scaled context (z,), after the batch's rows
-        ``chosen`` (k, p), unit θ (k = 0 for the first; their fantasised returns are in ``model``)."""
+    def _propose(self, model: GPModel, context: Array) -> Array:
+        """The acquisition's maximiser over θ's unit box at a scaled context (z,), from ``model`` (with the
+        batch's earlier rows as the kriging believer's fantasies)."""
         random = self.rng.uniform(size=(self.config.candidates, self.n_params))
         candidates = np.vstack([random, self._observed_units(context)[0]])
         candidates = with_trend_maximiser(candidates, model.beta, context, (0.0, 1.0))
         mean, variance = model.predict(self._maximiser.inputs(context, candidates))
         config, floor = self.config, None  # mes_floor="candidates": the former floor
-        if config.acquisition == "mes" and config.mes_floor == "believed":
-            floor = max_value_floor(model, self._maximiser.inputs(context, chosen), mean)  # Eq. (A4)
+        if config.acquisition == "mes" and config.mes_floor == "observed":
+            held = model.inputs[(model.inputs[:, : context.shape[0]] == context).all(axis=1)]
+            floor = max_value_floor(model, held, mean)  # Eq. (A4): the inputs the model holds at s
         options = {"beta": config.beta, "samples": config.mes_samples, "floor": floor}
         acquisition = acquisition_at(config.acquisition, mean, variance, self.rng, **options)
         maximiser = self._maximiser.maximise_scored

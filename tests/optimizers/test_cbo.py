@@ -349,11 +349,11 @@ def _believer_spread(optimizer: ContextualBO, n: int) -> np.ndarray:
 @pytest.mark.slow
 @pytest.mark.parametrize("log_quantile", [0.25, 0.5])
 def test_a_batch_at_one_context_spreads_where_the_believer_is_unsure(log_quantile):
-    """Eq. (A4): MES's maxima stay five noise deviations above the batch's fantasies, so each later row of
-    a batch of 6 at one context goes where σ given the earlier rows is at least 3 σ_n (σ_n = 1e-3 on this
-    toy, a sphere after 20 episodes). Under the former floor (``mes_floor="candidates"``) the sampled
-    maxima fall below the first row's fantasy and at least four of the five later rows return to the rows
-    before them: σ there is the noise's."""
+    """Eq. (A4): MES's maxima stay five noise deviations above the inputs the model holds at the asked
+    context (here the batch's fantasies), so each later row of a batch of 6 at one context goes where σ
+    given the earlier rows is at least 3 σ_n (σ_n = 1e-3 on this toy, a sphere after 20 episodes). Under
+    the former floor (``mes_floor="candidates"``) the sampled maxima fall below the first row's fantasy and
+    at least four of the five later rows return to the rows before them: σ there is the noise's."""
     optimizer = _trained(log_quantile=log_quantile)
     noise = math.sqrt(optimizer.model.noise)
     assert noise == pytest.approx(1e-3) and (_believer_spread(optimizer, 6)[1:] > 3.0 * noise).all()

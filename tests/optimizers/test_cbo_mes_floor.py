@@ -1,6 +1,7 @@
 """MES's floor of the sampled maxima, Eq. (A4) of :mod:`creps_gym.optimizers.acquisitions` (``mes_floor``):
-the former floor bit for bit where no batch row came before, five noise deviations above the believer's
-fantasies after one, and the option's validation and checkpoints. The batch's spread is in ``test_cbo``."""
+the former floor bit for bit where the model holds no input at the asked context, five noise deviations
+above those it holds there (told episodes, the believer's fantasies), and the option's validation and
+checkpoints. The spread of a batch at one context is in ``test_cbo``."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ def _candidates(optimizer: ContextualBO, context: float) -> tuple[np.ndarray, np
     return (inputs, *optimizer.model.predict(inputs))
 
 
-def test_without_earlier_rows_the_floor_is_the_former_one_bit_for_bit():
+def test_without_inputs_held_at_the_context_the_floor_is_the_former_one_bit_for_bit():
     optimizer = _taught()
     _, mean, variance = _candidates(optimizer, 0.4)
     floor = max_value_floor(optimizer.model, np.zeros((0, 3)), mean)
@@ -38,18 +39,29 @@ def test_without_earlier_rows_the_floor_is_the_former_one_bit_for_bit():
     assert floored.tobytes() == former.tobytes()
 
 
-def test_after_earlier_rows_the_floor_is_five_noise_deviations_above_their_fantasies():
+def test_the_floor_is_five_noise_deviations_above_the_inputs_held_at_the_context():
     optimizer = _taught()
     model = optimizer.model
     inputs, mean, variance = _candidates(optimizer, 0.4)
-    believed = inputs[np.argsort(mean)[-2:]]  # the two best candidates, as if chosen before
-    floor = max_value_floor(model, believed, mean)
-    assert floor == float(model.predict(believed)[0].max()) + 5.0 * math.sqrt(model.observation_noise)
+    held = inputs[np.argsort(mean)[-2:]]  # the two best candidates, as if told or believed at s = 0.4
+    floor = max_value_floor(model, held, mean)
+    assert floor == float(model.predict(held)[0].max()) + 5.0 * math.sqrt(model.observation_noise)
     assert floor > mean.max() + 1e-6 * (1.0 + abs(mean.max()))
     assert (gumbel_max_values(mean, variance, 200, np.random.default_rng(2), floor) >= floor).all()
-    worst = inputs[np.argsort(mean)[:2]]  # rows the model rates far below the best: the first term stays
+    worst = inputs[np.argsort(mean)[:2]]  # inputs the model rates far below the best: the first term stays
     assert float(model.predict(worst)[0].max()) + 5.0 * math.sqrt(model.observation_noise) < mean.max()
     assert max_value_floor(model, worst, mean) == max_value_floor(model, worst[:0], mean)
+
+
+@pytest.mark.parametrize("acquisition", ["mes", "ucb"])
+def test_where_no_context_repeats_both_floors_ask_the_same_bits(acquisition):
+    """The floor's second term needs an input held at exactly the asked context: runs whose contexts are
+    drawn from a continuous distribution (the studies') ask the same θ under both floors."""
+    new = _taught(acquisition=acquisition)
+    former = _taught(acquisition=acquisition, mes_floor="candidates")
+    assert new.state_dict()["data_params"].tobytes() == former.state_dict()["data_params"].tobytes()
+    contexts = np.array([[0.2], [0.6], [0.7]])
+    assert new.ask(contexts).tobytes() == former.ask(contexts).tobytes()
 
 
 def test_the_observation_noise_is_in_the_posteriors_units_with_a_trend_too():
@@ -59,9 +71,9 @@ def test_the_observation_noise_is_in_the_posteriors_units_with_a_trend_too():
 
 
 @pytest.mark.parametrize("acquisition", ["mes", "ucb"])
-def test_a_first_row_and_every_ucb_row_are_the_former_rules_bit_for_bit(acquisition):
-    """A batch's first row has no fantasies to floor on, and UCB samples no maxima: both floors ask the
-    same θ from the same state."""
+def test_at_a_repeated_context_only_mes_rows_after_the_first_change(acquisition):
+    """A batch's first row at a fresh context holds nothing there, and UCB samples no maxima: both floors
+    ask the same θ; MES's later rows at the repeated context differ."""
     contexts = np.array([[0.2], [0.2], [0.7]])
     new = _taught(acquisition=acquisition)
     state = copy.deepcopy(new.state_dict())
@@ -69,6 +81,7 @@ def test_a_first_row_and_every_ucb_row_are_the_former_rules_bit_for_bit(acquisit
     former = ContextualBO.from_state_dict(state)
     assert new.ask(contexts[:1]).tobytes() == former.ask(contexts[:1]).tobytes()
     rows, former_rows = new.ask(contexts), former.ask(contexts)
+    assert rows[0].tobytes() == former_rows[0].tobytes()
     assert (rows.tobytes() == former_rows.tobytes()) == (acquisition == "ucb")
 
 
@@ -76,7 +89,7 @@ def test_a_first_row_and_every_ucb_row_are_the_former_rules_bit_for_bit(acquisit
     ("value", "error"), [("fantasies", ValueError), (None, ValueError), (True, ValueError)]
 )
 def test_an_unknown_floor_is_refused_naming_it_in_options_and_in_a_checkpoint(value, error):
-    with pytest.raises(error, match=r"mes_floor: expected one of \('believed', 'candidates'\)"):
+    with pytest.raises(error, match=r"mes_floor: expected one of \('observed', 'candidates'\)"):
         make_optimizer("c-bo", 2, 1, 0, mes_floor=value)
     state = make_optimizer("c-bo", 2, 1, 0).state_dict()
     state["config"] = {**state["config"], "mes_floor": value}
@@ -84,7 +97,7 @@ def test_an_unknown_floor_is_refused_naming_it_in_options_and_in_a_checkpoint(va
         ContextualBO.from_state_dict(state)
 
 
-@pytest.mark.parametrize("written", [{}, {"mes_floor": "believed"}, {"mes_floor": "candidates"}])
+@pytest.mark.parametrize("written", [{}, {"mes_floor": "observed"}, {"mes_floor": "candidates"}])
 def test_a_checkpoint_resumes_bit_for_bit_and_one_written_before_the_option_with_the_former_floor(written):
     """A checkpoint keeps the option; one that names none (written before 2026-11-30) resumes with
     ``"candidates"``, the floor its run used, bit for bit through batches at repeated contexts."""

@@ -159,11 +159,12 @@ class CBOConfig:
     starts : int                    L-BFGS-B runs from the best candidates.
     mes_floor : str                 the floor of MES's sampled maxima (Eq. A4 of
         :mod:`~creps_gym.optimizers.acquisitions`): ``"observed"``, the candidates' largest posterior mean
-        and five noise standard deviations above that at every input the model holds at the asked context
-        (told episodes there, and a batch's earlier rows: episodes asked at one context then spread out),
-        or ``"candidates"``, the first alone, under which a batch at one context collapses onto its first
-        row. The two differ only at a context already held. ``"candidates"`` before 2026-11-30, as a
-        checkpoint that does not name it resumes. Default ``"observed"``.
+        and five noise standard deviations above the posterior mean at every input the model holds at the
+        asked context (told episodes there, and a batch's earlier rows: episodes asked at one context then
+        spread out), or ``"candidates"``, the first alone, under which a batch at one context collapses
+        onto its first row. The two differ only at a context the model already holds an input at.
+        ``"candidates"`` before 2026-11-30, as a checkpoint that does not name it resumes. Default
+        ``"observed"``.
     trust_share : float or None     q of ``recommend``'s trust region (Eq. R1 of
         :mod:`~creps_gym.optimizers.cbo`): the posterior mean is maximised over the box spanned by the θ of
         the best share q of the ``candidates // 4`` episodes with the nearest contexts; None: over the

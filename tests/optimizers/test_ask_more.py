@@ -41,7 +41,7 @@ def test_the_rows_join_the_pending_batch_and_one_tell_takes_them_all(name):
     np.testing.assert_array_equal(state["pending_contexts"], contexts)
     np.testing.assert_array_equal(state["pending_params"], params)
     optimizer.tell(contexts[::-1], params[::-1], -(params**2).sum(axis=1)[::-1])  # asked rows: no external
-    assert optimizer.iteration == 1 and optimizer.diagnostics.get("external_samples", 0.0) == 0.0
+    assert optimizer.iteration == 1 and optimizer.diagnostics["external_samples"] == 0.0
 
 
 @pytest.mark.parametrize("name", NATIVE)

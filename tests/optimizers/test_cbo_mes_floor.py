@@ -65,9 +65,13 @@ def test_where_no_context_repeats_both_floors_ask_the_same_bits(acquisition):
 
 
 def test_the_observation_noise_is_in_the_posteriors_units_with_a_trend_too():
+    """σ_n² scales as ``predict``'s variance does against the GP's own (σ_r² with a trend, 1 without)."""
     for trend in ("constant", "quadratic"):
         model = _taught(trend=trend).model
-        assert model.observation_noise == pytest.approx(model.scale**2 * model.noise, rel=1e-15)
+        assert (model.beta is not None) == (trend == "quadratic")
+        x = model.inputs[:3]
+        units = model.predict(x)[1] / model.latent_variance(x)
+        np.testing.assert_allclose(units, model.observation_noise / model.noise, rtol=1e-12)
 
 
 @pytest.mark.parametrize("acquisition", ["mes", "ucb"])

@@ -58,7 +58,7 @@ def recommend_with(optimizer: Any, rule: str, contexts: np.ndarray) -> np.ndarra
         optimizer.config = config
 
 
-def _column(method_name: str, unpinned_column: bool, options: dict[str, Any]) -> Method | None:
+def variant_column(method_name: str, unpinned_column: bool, options: dict[str, Any]) -> Method | None:
     """The c-bo column ``method_name``, unpinned and with ``options`` added where asked; None: the study's
     column as it is."""
     method = method_by_name(method_name)
@@ -87,7 +87,7 @@ def one_run(
     the kicks) on the test contexts."""
     options = dict(options or {})
     spec = LowBudgetSpec(task_name, method_name, seed, budget)
-    run = start_run(spec, _column(method_name, unpinned_column, options))  # None: the study's column
+    run = start_run(spec, variant_column(method_name, unpinned_column, options))  # None: the study's column
     values: dict[str, list[float]] = {rule: [] for rule in RULES}
     falls: dict[str, list[int | None]] = {rule: [] for rule in RULES}
     for target in run.spec.budgets:

@@ -4,7 +4,8 @@ GP's cost against scikit-learn's), ``active_contexts.py`` (active context choice
 ``reach.py`` (what the low-dimensional kicks can reach at all), ``strong_kicks.py`` (the v1 kicks'
 columns), ``recommenders.py`` (c-bo's recommendation rules on the same runs), ``acquisition_choices.py``
 (both acquisitions' choices from the same model), ``rastrigin_ripples.py`` (where c-bo's
-recommendations land on Rastrigin), ``refit_data.py`` (c-bo's refit default of 2026-11-30
+recommendations land on Rastrigin), ``stop_signal.py`` (when c-bo's ``no_signal`` stop fires),
+``refit_data.py`` (c-bo's refit default of 2026-11-30
 beside the study's runs) and ``botorch_cbo.py`` (the study's BoTorch column)."""
 
 from __future__ import annotations

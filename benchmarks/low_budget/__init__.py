@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -66,6 +67,12 @@ def run_and_write(
     document = {"command": sys.argv, "runs": runs, "provenance": provenance(), **(extra or {})}
     out.write_text(json.dumps(document, indent=1) + "\n")
     print(render(out))
+
+
+def replay_command(module: str, document: dict[str, Any]) -> str:
+    """The command that wrote ``document`` (its ``command``: ``sys.argv``), as ``python -m
+    benchmarks.low_budget.<module> ...`` with its arguments quoted for a shell."""
+    return shlex.join(["python", "-m", f"benchmarks.low_budget.{module}", *document["command"][1:]])
 
 
 def replay_results_path(text: str) -> Path:

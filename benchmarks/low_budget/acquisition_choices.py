@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.low_budget import parse_runs_arguments, run_and_write
+from benchmarks.low_budget import parse_runs_arguments, replay_command, run_and_write
 from benchmarks.low_budget.recommenders import check_against_study
 from benchmarks.low_budget.study import ROBOT_TASKS, LowBudgetSpec, Run, policy_metric, run_until, start_run
 
@@ -120,7 +120,7 @@ def summary(runs: list[dict[str, Any]]) -> str:
 def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text())
-    command = " ".join(["python -m benchmarks.low_budget.acquisition_choices", *document["command"][1:]])
+    command = replay_command("acquisition_choices", document)
     checked = [check_against_study(run) for run in document["runs"]]
     seeds = sorted({run["seed"] for run in document["runs"]})
     agree = f"{sum(c is True for c in checked)} of {sum(c is not None for c in checked)}"

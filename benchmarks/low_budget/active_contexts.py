@@ -32,7 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 import creps_gym  # noqa: F401  (registers the ids)
-from benchmarks.low_budget import parse_runs_arguments, run_and_write
+from benchmarks.low_budget import parse_runs_arguments, replay_command, run_and_write
 from creps_gym.envs.evaluation import test_contexts
 from creps_gym.optimizers import make_optimizer, recommended_samples
 from creps_gym.selectors import make_selector
@@ -123,7 +123,7 @@ def summary(runs: list[dict[str, Any]]) -> str:
 def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text())
-    command = " ".join(["python -m benchmarks.low_budget.active_contexts", *document["command"][1:]])
+    command = replay_command("active_contexts", document)
     text = f"{summary(document['runs'])}\n\nCommand: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
     path.with_suffix(".md").write_text(text)
     return text

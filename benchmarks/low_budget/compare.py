@@ -29,7 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 import creps_gym  # noqa: F401  (registers the ids)
-from benchmarks.low_budget import add_output_arguments
+from benchmarks.low_budget import add_output_arguments, replay_command
 from benchmarks.provenance import provenance
 from creps_gym.envs.evaluation import test_contexts
 from creps_gym.optimizers import make_optimizer, recommended_samples
@@ -133,7 +133,7 @@ def main(argv: list[str] | None = None) -> None:
 def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text())
-    command = " ".join(["python -m benchmarks.low_budget.compare", *document["command"][1:]])
+    command = replay_command("compare", document)
     text = f"{summary(document['runs'])}\n\nCommand: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
     path.with_suffix(".md").write_text(text)
     return text

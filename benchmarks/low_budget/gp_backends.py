@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.low_budget import add_output_arguments
+from benchmarks.low_budget import add_output_arguments, replay_command
 from benchmarks.provenance import provenance
 from creps_gym.optimizers import make_optimizer
 from creps_gym.optimizers.gp_model import default_start, fit_gp, fit_hyperparameters
@@ -190,7 +190,7 @@ def render(path: Path) -> str:
                 f"| {n} | {name} | {times['fit']:.3g} | {times['predict']:.3g} | "
                 f"{times['gradient_eval']:.3g} | {ask} |"
             )
-    command = " ".join(["python -m benchmarks.low_budget.gp_backends", *document["command"][1:]])
+    command = replay_command("gp_backends", document)
     text = "\n".join(lines) + f"\n\nMedians of the repeats. Command: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
     path.with_suffix(".md").write_text(text)
     return text

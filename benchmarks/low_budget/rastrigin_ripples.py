@@ -36,14 +36,13 @@ if not __package__:  # run by path: the repository root first on sys.path, as `p
 
 import json
 import math
-import shlex
 from typing import Any
 
 import numpy as np
 
-from benchmarks.low_budget import column_replay_main, replay_results_path
-from benchmarks.low_budget.recommenders import variant_column
-from benchmarks.low_budget.study import LowBudgetSpec, policy_metric, run_until, start_run
+from benchmarks.low_budget import column_replay_main, replay_command, replay_results_path
+from benchmarks.low_budget.recommenders import start_variant, variant_fields
+from benchmarks.low_budget.study import policy_metric, run_until
 
 __all__ = ["landing", "main", "one_run", "render", "summary"]
 
@@ -89,8 +88,7 @@ def one_run(
     if not task_name.startswith("Rastrigin-"):
         raise ValueError(f"task_name: expected a Rastrigin task of the study, got {task_name!r}")
     options = dict(options or {})
-    spec = LowBudgetSpec(task_name, method_name, seed, budget)
-    run = start_run(spec, variant_column(method_name, unpinned_column, options))
+    run = start_variant(task_name, method_name, seed, budget, unpinned_column, options)
     records = []
     for target in run.spec.budgets:
         run_until(run, target)
@@ -99,11 +97,10 @@ def one_run(
         record = landing(params - run.model.optimal_params(run.test))
         if not math.isclose(record["regret"], value, rel_tol=1e-9, abs_tol=1e-9):
             message = f"Rastrigin's regret {record['regret']} is not the study's {value}"
-            raise RuntimeError(f"{spec.key}: {message}")
+            raise RuntimeError(f"{run.spec.key}: {message}")
         records.append({"episodes": target, "value": value, **record, **_model_record(run.optimizer)})
-    document = {"task": task_name, "method": method_name, "seed": seed, "key": spec.key}
-    document |= {"unpinned": True} if unpinned_column else {}
-    document |= {"options": options} if options else {}
+    document = {"task": task_name, "method": method_name, "seed": seed, "key": run.spec.key}
+    document |= variant_fields(unpinned_column, options)
     return {**document, "budgets": list(run.spec.budgets), "records": records}
 
 
@@ -156,8 +153,7 @@ def _agreement(document: dict[str, Any]) -> str:
 def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text())
-    module = ["python", "-m", "benchmarks.low_budget.rastrigin_ripples"]
-    command = shlex.join([*module, *document["command"][1:]])
+    command = replay_command("rastrigin_ripples", document)
     seeds = sorted({run["seed"] for run in document["runs"]})
     text = (
         f"{summary(document['runs'])}\n\nMedians over seeds {seeds[0]}–{seeds[-1]} of the `c-bo` column's "

@@ -41,7 +41,7 @@ import numpy as np
 
 import creps_gym  # noqa: F401  (registers the ids)
 from benchmarks.kick.study import episode_metric
-from benchmarks.low_budget import add_output_arguments
+from benchmarks.low_budget import add_output_arguments, replay_command
 from benchmarks.low_budget.study import evaluation_contexts, task_by_name
 from benchmarks.provenance import provenance
 
@@ -141,7 +141,7 @@ def summary(document: dict[str, Any]) -> str:
 def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text(encoding="utf-8"))
-    command = " ".join(["python -m benchmarks.low_budget.reach", *document["command"][1:]])
+    command = replay_command("reach", document)
     text = f"{summary(document)}\nCommand: `OPENBLAS_NUM_THREADS=1 {command}`.\n"
     path.with_suffix(".md").write_text(text, encoding="utf-8")
     return text

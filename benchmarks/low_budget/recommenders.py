@@ -32,15 +32,21 @@ if not __package__:  # run by path: the repository root first on sys.path, as `p
 
 import dataclasses
 import json
-import shlex
 from typing import Any
 
 import numpy as np
 
-from benchmarks.low_budget import column_replay_main, replay_results_path
+from benchmarks.low_budget import column_replay_main, replay_command, replay_results_path
 from benchmarks.low_budget.columns import PINNED_FIT_POINTS, Method, method_by_name, unpinned
 from benchmarks.low_budget.report import cells, median_at, median_range, ratio_text, values_by_seed
-from benchmarks.low_budget.study import LowBudgetSpec, policy_evaluation, run_until, start_run, task_by_name
+from benchmarks.low_budget.study import (
+    LowBudgetSpec,
+    Run,
+    policy_evaluation,
+    run_until,
+    start_run,
+    task_by_name,
+)
 
 RULES = ("trust_region", "observed", "neighbours")
 #: The budget of issue 44's function target (c-bo ≤ 0.5 × the best other method's regret).
@@ -72,6 +78,21 @@ def variant_column(method_name: str, unpinned_column: bool, options: dict[str, A
     return dataclasses.replace(method, options=kept + tuple(sorted(added.items())))
 
 
+def start_variant(
+    task_name: str, method_name: str, seed: int, budget: int, unpinned_column: bool, options: dict[str, Any]
+) -> Run:
+    """The study's run of the c-bo column ``method_name`` before its first batch, as
+    :func:`variant_column` varies it (the study's column as it is without ``unpinned_column`` or
+    ``options``)."""
+    spec = LowBudgetSpec(task_name, method_name, seed, budget)
+    return start_run(spec, variant_column(method_name, unpinned_column, options))
+
+
+def variant_fields(unpinned_column: bool, options: dict[str, Any]) -> dict[str, Any]:
+    """What a replay's document records of the variant: ``unpinned`` and ``options``, each where set."""
+    return ({"unpinned": True} if unpinned_column else {}) | ({"options": options} if options else {})
+
+
 def one_run(
     task_name: str,
     method_name: str,
@@ -86,8 +107,7 @@ def one_run(
     e.g. ``{"symmetric_contexts": [1]}``); at each of its budgets, each rule's metric and falls (None off
     the kicks) on the test contexts."""
     options = dict(options or {})
-    spec = LowBudgetSpec(task_name, method_name, seed, budget)
-    run = start_run(spec, variant_column(method_name, unpinned_column, options))  # None: the study's column
+    run = start_variant(task_name, method_name, seed, budget, unpinned_column, options)
     values: dict[str, list[float]] = {rule: [] for rule in RULES}
     falls: dict[str, list[int | None]] = {rule: [] for rule in RULES}
     for target in run.spec.budgets:
@@ -98,9 +118,8 @@ def one_run(
             values[rule].append(value)
             falls[rule].append(int(np.sum(info["fell"])) if "fell" in info else None)
     document = {"task": task_name, "method": method_name, "seed": seed, "budgets": list(run.spec.budgets)}
-    document |= {"unpinned": True} if unpinned_column else {}
-    document |= {"options": options} if options else {}
-    return {**document, "key": spec.key, "values": values, "falls": falls, "test_contexts": len(run.test)}
+    document |= variant_fields(unpinned_column, options)
+    return {**document, "key": run.spec.key, "values": values, "falls": falls, "test_contexts": len(run.test)}
 
 
 def committed_run(key: str, runs: Path = RUNS) -> dict[str, Any] | None:
@@ -317,7 +336,7 @@ def targets(runs: list[dict[str, Any]], budget: int = TARGET_BUDGET, study: Path
 def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text())
-    command = "python -m benchmarks.low_budget.recommenders " + shlex.join(document["command"][1:])
+    command = replay_command("recommenders", document)
     text = (
         f"{summary(document['runs'])}\n\nThe metric is the study's: the mean regret on a function and the "
         "kick precision's mean error in m (lower is better), the kick flexibility's mean distance in m "

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.low_budget import column_replay_main
+from benchmarks.low_budget import column_replay_main, replay_command
 from benchmarks.low_budget.columns import PINNED_FIT_POINTS, method_by_name, unpinned
 from benchmarks.low_budget.recommenders import RUNS, committed_run
 from benchmarks.low_budget.report import median_range
@@ -144,7 +144,7 @@ def worse_later(method: str = "c-bo", runs: Path = RUNS) -> tuple[list[str], int
 def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text())
-    command = " ".join(["python -m benchmarks.low_budget.refit_data", *document["command"][1:]])
+    command = replay_command("refit_data", document)
     table, agree, compared = summary(document["runs"])
     worse, tasks = worse_later()
     text = (

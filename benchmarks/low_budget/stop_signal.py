@@ -37,15 +37,14 @@ if not __package__:  # run by path: the repository root first on sys.path, as `p
 import argparse
 import json
 import math
-import shlex
 from typing import Any
 
 import numpy as np
 from scipy import linalg
 
-from benchmarks.low_budget import parse_runs_arguments, run_and_write
-from benchmarks.low_budget.recommenders import variant_column
-from benchmarks.low_budget.study import FUNCTIONS, ROBOT_TASKS, LowBudgetSpec, Run, run_until, start_run
+from benchmarks.low_budget import parse_runs_arguments, replay_command, run_and_write
+from benchmarks.low_budget.recommenders import start_variant
+from benchmarks.low_budget.study import FUNCTIONS, ROBOT_TASKS, Run, run_until
 from creps_gym.optimizers.gp_trend import residual_share
 
 __all__ = [
@@ -111,8 +110,7 @@ def statistics(optimizer: Any) -> tuple[float, float, float]:
 def one_run(task_name: str, method_name: str, seed: int, budget: int, noise: bool = False) -> dict[str, Any]:
     """The c-bo column ``method_name`` with c-bo's current defaults on ``task_name`` (its returns white noise
     with ``noise``), both statistics before every batch from :data:`FIRST` episodes and at the end."""
-    spec = LowBudgetSpec(task_name, method_name, seed, budget)
-    run = start_run(spec, variant_column(method_name, True, CURRENT))
+    run = start_variant(task_name, method_name, seed, budget, True, CURRENT)
     if noise:
         run.model = _WhiteNoise(run.model, seed)
     records: list[list[float]] = []
@@ -123,7 +121,7 @@ def one_run(task_name: str, method_name: str, seed: int, budget: int, noise: boo
 
     run_until(run, budget, record)
     record(run)
-    document = {"task": task_name, "method": method_name, "seed": seed, "key": spec.key, "noise": noise}
+    document = {"task": task_name, "method": method_name, "seed": seed, "key": run.spec.key, "noise": noise}
     return {**document, "options": CURRENT, "records": records}
 
 
@@ -165,7 +163,7 @@ def render(path: Path) -> str:
     """Write the table of the results at ``path`` (JSON) to the same name with ``.md``; returns it."""
     document = json.loads(path.read_text())
     runs = document["runs"]
-    command = shlex.join(["python", "-m", "benchmarks.low_budget.stop_signal", *document["command"][1:]])
+    command = replay_command("stop_signal", document)
     seeds = sorted({run["seed"] for run in runs})
     returns = "standard normal returns instead of the task's" if runs[0]["noise"] else "the task's returns"
     text = (
